@@ -1,0 +1,210 @@
+//! The `vkterrain` command line: argument parsing, commands, JSON output.
+//! Errors reach `main` as `anyhow` chains that name the file and the problem.
+
+pub mod args;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand};
+use glam::DVec2;
+use serde::Serialize;
+
+use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::{Heightmap, PatchId, Terrain, TerrainInfo, DEFAULT_CELLS_PER_PATCH};
+use args::{parse_point, HeightmapArgs};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "vkterrain",
+    version,
+    about = "Heightmap terrain renderer on Vulkan"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Surface heights at points, as a JSON array in input order.
+    Height(HeightCmd),
+    /// Size, height range and patch grid of a heightmap, as JSON.
+    Inspect(InspectCmd),
+}
+
+#[derive(clap::Args, Debug)]
+pub struct HeightCmd {
+    #[command(flatten)]
+    pub heightmap: HeightmapArgs,
+
+    /// A world point X,Z to query; repeat for more.
+    #[arg(long = "at", value_name = "X,Z", value_parser = parse_point, allow_hyphen_values = true,
+          required_unless_present = "points", conflicts_with = "points")]
+    pub at: Vec<DVec2>,
+
+    /// A file with one "x z" pair per line (blank lines and lines starting
+    /// with '#' are skipped).
+    #[arg(long, value_name = "FILE")]
+    pub points: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct InspectCmd {
+    #[command(flatten)]
+    pub heightmap: HeightmapArgs,
+
+    /// Cells per patch side: a power of two from 2 to 64.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CELLS_PER_PATCH)]
+    pub cells_per_patch: u32,
+
+    /// List every patch with its extent and Y bounds.
+    #[arg(long)]
+    pub patches: bool,
+}
+
+/// Runs a parsed command, writing its output to `out`.
+pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
+    match cli.command {
+        Command::Height(cmd) => height(cmd, out),
+        Command::Inspect(cmd) => inspect(cmd, out),
+    }
+}
+
+/// Loads the heightmap the arguments name and places it in the world.
+pub fn load_terrain_info(args: &HeightmapArgs, cells_per_patch: u32) -> Result<TerrainInfo> {
+    // Checked first: a bad patch size shouldn't wait for a large file to load.
+    validate_cells_per_patch(cells_per_patch)?;
+    let heightmap = Heightmap::load(&args.heightmap, &args.load_options())?;
+    Ok(TerrainInfo::new(
+        heightmap,
+        args.cell_spacing,
+        cells_per_patch,
+        args.origin,
+    )?)
+}
+
+#[derive(Serialize)]
+struct HeightAnswer {
+    x: f64,
+    z: f64,
+    height: Option<f32>,
+}
+
+fn height(cmd: HeightCmd, out: &mut dyn Write) -> Result<()> {
+    let points = match &cmd.points {
+        Some(path) => read_points(path)?,
+        None => cmd.at.clone(),
+    };
+    let info = load_terrain_info(&cmd.heightmap, DEFAULT_CELLS_PER_PATCH)?;
+    let answers: Vec<HeightAnswer> = points
+        .iter()
+        .map(|p| HeightAnswer {
+            x: p.x,
+            z: p.y,
+            height: info.height_at(p.x, p.y),
+        })
+        .collect();
+    serde_json::to_writer_pretty(&mut *out, &answers)?;
+    writeln!(out)?;
+    Ok(())
+}
+
+/// Reads "x z" pairs, one per line.
+fn read_points(path: &Path) -> Result<Vec<DVec2>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read points file", path.display()))?;
+    let mut points = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let fields: Vec<&str> = line.split_whitespace().collect();
+        let parsed = match fields[..] {
+            [x, z] => args::parse_finite(x).and_then(|x| Ok(DVec2::new(x, args::parse_finite(z)?))),
+            _ => Err(format!("expected two numbers \"x z\", found {line:?}")),
+        };
+        let p = parsed.map_err(|e| anyhow::anyhow!("{}:{}: {e}", path.display(), n + 1))?;
+        points.push(p);
+    }
+    Ok(points)
+}
+
+#[derive(Serialize)]
+struct InspectReport {
+    width: usize,
+    depth: usize,
+    min_height: f32,
+    max_height: f32,
+    cell_spacing: [f64; 2],
+    world_width: f64,
+    world_depth: f64,
+    cells_per_patch: u32,
+    patch_rows: usize,
+    patch_cols: usize,
+    control_points: usize,
+    indices: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    patches: Option<Vec<PatchReport>>,
+}
+
+#[derive(Serialize)]
+struct PatchReport {
+    row: usize,
+    col: usize,
+    x_min: f64,
+    x_max: f64,
+    z_min: f64,
+    z_max: f64,
+    min_y: f32,
+    max_y: f32,
+}
+
+fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
+    let info = load_terrain_info(&cmd.heightmap, cmd.cells_per_patch)?;
+    let (min_height, max_height) = info.heightmap().min_max();
+    let terrain = Terrain::new(info, 0.0)?;
+    let info = terrain.info();
+    let grid = terrain.grid();
+    let patches = cmd.patches.then(|| {
+        (0..grid.patch_count())
+            .map(|p| {
+                let id: PatchId = grid.patch_id(p);
+                let rect = grid.sample_rect(id);
+                let upper_left = info.sample_position(rect.row0, rect.col0);
+                let lower_right = info.sample_position(rect.row1, rect.col1);
+                let [min_y, max_y] = terrain.y_bounds()[p];
+                PatchReport {
+                    row: id.row,
+                    col: id.col,
+                    x_min: upper_left.x,
+                    x_max: lower_right.x,
+                    z_min: lower_right.y,
+                    z_max: upper_left.y,
+                    min_y,
+                    max_y,
+                }
+            })
+            .collect()
+    });
+    let report = InspectReport {
+        width: info.cols(),
+        depth: info.rows(),
+        min_height,
+        max_height,
+        cell_spacing: info.spacing().to_array(),
+        world_width: info.world_width(),
+        world_depth: info.world_depth(),
+        cells_per_patch: info.cells_per_patch(),
+        patch_rows: grid.patch_rows(),
+        patch_cols: grid.patch_cols(),
+        control_points: terrain.control_points().len(),
+        indices: terrain.indices().len(),
+        patches,
+    };
+    serde_json::to_writer_pretty(&mut *out, &report)?;
+    writeln!(out)?;
+    Ok(())
+}

@@ -1,0 +1,113 @@
+//! Typed errors of the terrain model. Every variant names the input it is
+//! about (a file path, or the parameter) and what is wrong with it.
+
+use std::path::PathBuf;
+
+/// Why a heightmap could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum HeightmapError {
+    #[error("{path}: file not found")]
+    Missing { path: PathBuf },
+
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: file is empty")]
+    Empty { path: PathBuf },
+
+    #[error("{path}: unknown heightmap format {name:?} (expected raw8, raw16, raw16be, png, hgt or f32)")]
+    UnknownFormat { path: PathBuf, name: String },
+
+    #[error("{path}: size {width}x{depth} is too small; a heightmap needs at least 2x2 samples")]
+    TooSmall {
+        path: PathBuf,
+        width: u64,
+        depth: u64,
+    },
+
+    #[error("{path}: size {width}x{depth} overflows the sample count")]
+    SizeOverflow {
+        path: PathBuf,
+        width: u64,
+        depth: u64,
+    },
+
+    #[error("{path}: size {width}x{depth} is {samples} samples, over the limit of {limit}")]
+    TooManySamples {
+        path: PathBuf,
+        width: u64,
+        depth: u64,
+        samples: u64,
+        limit: u64,
+    },
+
+    #[error(
+        "{path}: {format} data of {width}x{depth} samples needs {expected} bytes, but the file has {actual} ({})",
+        if actual < expected { "too short" } else { "too long" }
+    )]
+    LengthMismatch {
+        path: PathBuf,
+        format: &'static str,
+        width: u64,
+        depth: u64,
+        expected: u64,
+        actual: u64,
+    },
+
+    #[error("{path}: cannot infer the size of {actual} bytes of {format} data: not a square number of samples; give the size (--size WxD)")]
+    CannotInferSize {
+        path: PathBuf,
+        format: &'static str,
+        actual: u64,
+    },
+
+    #[error("{path}: an SRTM .hgt file must be 1201x1201 or 3601x3601 samples, but it has {actual} bytes")]
+    HgtSize { path: PathBuf, actual: u64 },
+
+    #[error("{path}: every sample is a void (-32768); nothing to fill them from")]
+    AllVoid { path: PathBuf },
+
+    #[error("{path}: sample at row {row}, column {col} is {value}, not a finite number")]
+    NonFinite {
+        path: PathBuf,
+        row: u64,
+        col: u64,
+        value: f32,
+    },
+
+    #[error("{path}: not a valid PNG: {reason}")]
+    NotPng { path: PathBuf, reason: String },
+
+    #[error("{path}: PNG colour type {color} is not grayscale; ask for luminance conversion (--luminance) to use it")]
+    ColorPng { path: PathBuf, color: String },
+
+    #[error("{path}: PNG colour type {color} is not supported (use 8- or 16-bit grayscale)")]
+    UnsupportedPng { path: PathBuf, color: String },
+
+    #[error("{path}: height scale {scale} and offset {offset} must be finite")]
+    BadMapping {
+        path: PathBuf,
+        scale: f64,
+        offset: f64,
+    },
+}
+
+/// Why terrain parameters are unusable.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum TerrainError {
+    #[error("cells per patch must be a power of two from 2 to 64, got {0}")]
+    CellsPerPatch(u32),
+
+    #[error("cell spacing must be positive and finite, got x={x}, z={z}")]
+    CellSpacing { x: f64, z: f64 },
+
+    #[error("world origin must be finite, got ({x}, {z})")]
+    Origin { x: f64, z: f64 },
+
+    #[error("Y-bounds margin must be finite and not negative, got {0}")]
+    Margin(f32),
+}

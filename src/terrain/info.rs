@@ -1,0 +1,133 @@
+//! `TerrainInfo`: a heightmap placed in the world.
+//!
+//! The terrain is centred on its origin. With `W = (cols - 1) * dx` and
+//! `D = (rows - 1) * dz`, sample (row, col) sits at local
+//! `x = -W/2 + col * dx`, `z = +D/2 - row * dz`: row 0 is the far (+z) edge,
+//! column 0 the left (-x) edge. World coordinates add the origin.
+//!
+//! World positions are f64 so a terrain can sit far from the world origin
+//! without losing precision; local positions (relative to the terrain's own
+//! origin) are small and are what reaches the GPU as f32.
+
+use glam::DVec2;
+
+use super::error::TerrainError;
+use super::heightmap::Heightmap;
+
+/// Cells per patch when the caller does not choose.
+pub const DEFAULT_CELLS_PER_PATCH: u32 = 32;
+/// Largest cells per patch: one patch at the maximum tessellation factor
+/// (64) then still has a vertex at every sample.
+pub const MAX_CELLS_PER_PATCH: u32 = 64;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct TerrainInfo {
+    heightmap: Heightmap,
+    spacing: DVec2,
+    cells_per_patch: u32,
+    origin: DVec2,
+}
+
+impl TerrainInfo {
+    /// `spacing` is (dx, dz) (glam's `y` holds dz), the world distance between neighbouring samples
+    /// along x and z; `origin` is the world (x, z) of the terrain's centre.
+    pub fn new(
+        heightmap: Heightmap,
+        spacing: DVec2,
+        cells_per_patch: u32,
+        origin: DVec2,
+    ) -> Result<Self, TerrainError> {
+        validate_cells_per_patch(cells_per_patch)?;
+        if !(spacing.x > 0.0 && spacing.y > 0.0 && spacing.is_finite()) {
+            return Err(TerrainError::CellSpacing {
+                x: spacing.x,
+                z: spacing.y,
+            });
+        }
+        if !origin.is_finite() {
+            return Err(TerrainError::Origin {
+                x: origin.x,
+                z: origin.y,
+            });
+        }
+        Ok(TerrainInfo {
+            heightmap,
+            spacing,
+            cells_per_patch,
+            origin,
+        })
+    }
+
+    pub fn heightmap(&self) -> &Heightmap {
+        &self.heightmap
+    }
+
+    /// Number of sample columns.
+    pub fn cols(&self) -> usize {
+        self.heightmap.width()
+    }
+
+    /// Number of sample rows.
+    pub fn rows(&self) -> usize {
+        self.heightmap.depth()
+    }
+
+    /// (dx, dz).
+    pub fn spacing(&self) -> DVec2 {
+        self.spacing
+    }
+
+    pub fn cells_per_patch(&self) -> u32 {
+        self.cells_per_patch
+    }
+
+    /// World (x, z) of the terrain's centre.
+    pub fn origin(&self) -> DVec2 {
+        self.origin
+    }
+
+    /// World extent along x: (cols - 1) * dx.
+    pub fn world_width(&self) -> f64 {
+        (self.cols() - 1) as f64 * self.spacing.x
+    }
+
+    /// World extent along z: (rows - 1) * dz.
+    pub fn world_depth(&self) -> f64 {
+        (self.rows() - 1) as f64 * self.spacing.y
+    }
+
+    /// Local x of a sample column (relative to the terrain's centre).
+    pub fn local_x(&self, col: usize) -> f64 {
+        -0.5 * self.world_width() + col as f64 * self.spacing.x
+    }
+
+    /// Local z of a sample row (relative to the terrain's centre).
+    pub fn local_z(&self, row: usize) -> f64 {
+        0.5 * self.world_depth() - row as f64 * self.spacing.y
+    }
+
+    /// World (x, z) of sample (row, col).
+    pub fn sample_position(&self, row: usize, col: usize) -> DVec2 {
+        self.origin + DVec2::new(self.local_x(col), self.local_z(row))
+    }
+
+    /// Converts a world (x, z) to continuous sample coordinates
+    /// (column, row): sample (r, c) is at exactly (c, r).
+    #[inline]
+    pub fn world_to_grid(&self, x: f64, z: f64) -> DVec2 {
+        let local = DVec2::new(x, z) - self.origin;
+        DVec2::new(
+            (local.x + 0.5 * self.world_width()) / self.spacing.x,
+            (0.5 * self.world_depth() - local.y) / self.spacing.y,
+        )
+    }
+}
+
+/// Cells per patch must be a power of two in 2..=64.
+pub fn validate_cells_per_patch(n: u32) -> Result<(), TerrainError> {
+    if n.is_power_of_two() && (2..=MAX_CELLS_PER_PATCH).contains(&n) {
+        Ok(())
+    } else {
+        Err(TerrainError::CellsPerPatch(n))
+    }
+}

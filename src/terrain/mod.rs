@@ -1,0 +1,98 @@
+//! The CPU terrain model: heightmaps, the patch grid, Y bounds, the error
+//! table, height queries, and the camera and LOD maths the shaders mirror.
+//!
+//! Nothing here knows about Vulkan; everything is testable on any machine.
+
+pub mod camera;
+pub mod error;
+pub mod error_table;
+pub mod grid;
+pub mod heightmap;
+pub mod info;
+pub mod lod;
+mod query;
+
+pub use camera::{look_at, perspective, Frustum};
+pub use error::{HeightmapError, TerrainError};
+pub use error_table::{ErrorTable, ERROR_LEVELS};
+pub use grid::{PatchGrid, PatchId, SampleRect};
+pub use heightmap::{Heightmap, HeightmapFormat, LoadOptions};
+pub use info::{TerrainInfo, DEFAULT_CELLS_PER_PATCH};
+pub use lod::{DistanceLod, DistanceMode, PatchTessFactors};
+
+use glam::Vec3;
+
+/// A terrain ready to feed the GPU: its parameters, patch grid, Y bounds,
+/// control points and indices.
+#[derive(Clone, Debug)]
+pub struct Terrain {
+    info: TerrainInfo,
+    grid: PatchGrid,
+    y_bounds: Vec<[f32; 2]>,
+    control_points: Vec<[f32; 4]>,
+    indices: Vec<u32>,
+}
+
+impl Terrain {
+    /// Builds the patch grid; each patch's Y bounds are widened by
+    /// `y_margin` (for displacement the heightmap doesn't account for).
+    pub fn new(info: TerrainInfo, y_margin: f32) -> Result<Self, TerrainError> {
+        if !(y_margin >= 0.0 && y_margin.is_finite()) {
+            return Err(TerrainError::Margin(y_margin));
+        }
+        let grid = PatchGrid::new(&info);
+        let y_bounds = grid::patch_y_bounds(info.heightmap(), &grid, y_margin);
+        let control_points = grid::control_points(&info, &grid, &y_bounds);
+        let indices = grid.indices();
+        Ok(Terrain {
+            info,
+            grid,
+            y_bounds,
+            control_points,
+            indices,
+        })
+    }
+
+    pub fn info(&self) -> &TerrainInfo {
+        &self.info
+    }
+
+    pub fn grid(&self) -> &PatchGrid {
+        &self.grid
+    }
+
+    /// `[min, max]` height per patch, row-major.
+    pub fn y_bounds(&self) -> &[[f32; 2]] {
+        &self.y_bounds
+    }
+
+    /// `(x, z, minY, maxY)` per control point, local coordinates.
+    pub fn control_points(&self) -> &[[f32; 4]] {
+        &self.control_points
+    }
+
+    /// Four control point indices per patch.
+    pub fn indices(&self) -> &[u32] {
+        &self.indices
+    }
+
+    /// The per-patch error table (computed on each call; it is the expensive
+    /// part of preparing a terrain).
+    pub fn error_table(&self) -> ErrorTable {
+        ErrorTable::compute(self.info.heightmap(), &self.grid)
+    }
+
+    /// A patch's corners in local coordinates at their sample heights.
+    pub fn patch_corners(&self, id: PatchId) -> [Vec3; 4] {
+        grid::patch_corners(&self.info, &self.grid, id)
+    }
+
+    /// A patch's bounding box in local coordinates as (centre, half extents).
+    pub fn patch_aabb(&self, id: PatchId) -> (Vec3, Vec3) {
+        let [ul, _, _, lr] = self.patch_corners(id);
+        let [min_y, max_y] = self.y_bounds[self.grid.patch_index(id)];
+        let lo = Vec3::new(ul.x, min_y, lr.z);
+        let hi = Vec3::new(lr.x, max_y, ul.z);
+        (0.5 * (lo + hi), 0.5 * (hi - lo))
+    }
+}
