@@ -1,1 +1,107 @@
-fn main() {}
+//! CPU terrain model on a 4097x4097 heightmap: Y bounds and the error table
+//! (all cores), height_at (one core), and a memcpy of the heightmap's bytes
+//! in the same run so the figures read as ratios to memory bandwidth.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
+use glam::DVec2;
+use vkterrain::terrain::grid::patch_y_bounds;
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, TerrainInfo};
+
+const SIZE: usize = 4097;
+
+fn heightmap() -> Heightmap {
+    // Rolling hills plus hashed noise: realistic spread, no constant runs.
+    Heightmap::from_fn(SIZE, SIZE, |r, c| {
+        let (x, z) = (c as f32 * 0.01, r as f32 * 0.013);
+        let mut h = (r as u64 * 0x9E37_79B9 + c as u64 * 0x85EB_CA6B) as u32;
+        h ^= h >> 15;
+        100.0 * x.sin() * z.cos() + (h % 1000) as f32 * 0.01
+    })
+    .expect("valid size")
+}
+
+/// xorshift points spread over the whole terrain.
+fn random_points(info: &TerrainInfo, n: usize) -> Vec<DVec2> {
+    let mut s = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..n)
+        .map(|_| {
+            DVec2::new(
+                (next() - 0.5) * info.world_width(),
+                (next() - 0.5) * info.world_depth(),
+            )
+        })
+        .collect()
+}
+
+fn bench(c: &mut Criterion) {
+    let map = heightmap();
+    let bytes = (map.heights().len() * 4) as u64;
+    let info = TerrainInfo::new(map, DVec2::new(1.0, 1.0), 32, DVec2::ZERO).unwrap();
+    let grid = PatchGrid::new(&info);
+
+    let mut group = c.benchmark_group("4097x4097");
+    group.sample_size(10);
+
+    group.throughput(Throughput::Bytes(bytes));
+    let mut dst = vec![0.0f32; info.heightmap().heights().len()];
+    group.bench_function("memcpy_heightmap_bytes", |b| {
+        b.iter(|| {
+            dst.copy_from_slice(black_box(info.heightmap().heights()));
+            black_box(&dst);
+        })
+    });
+    group.bench_function("y_bounds", |b| {
+        b.iter(|| black_box(patch_y_bounds(black_box(info.heightmap()), &grid, 0.0)))
+    });
+
+    group.throughput(Throughput::Elements(grid.patch_count() as u64));
+    group.bench_function("error_table", |b| {
+        b.iter(|| black_box(ErrorTable::compute(black_box(info.heightmap()), &grid)))
+    });
+
+    const QUERIES: usize = 1 << 20;
+    group.throughput(Throughput::Elements(QUERIES as u64));
+    let scattered = random_points(&info, QUERIES);
+    group.bench_function("height_at_random_points", |b| {
+        b.iter(|| {
+            let mut sum = 0.0f32;
+            for p in &scattered {
+                sum += info.height_at(p.x, p.y).unwrap_or(0.0);
+            }
+            black_box(sum)
+        })
+    });
+    // A walk: consecutive queries a fraction of a cell apart, as a camera or
+    // object placement produces.
+    let mut walk: Vec<DVec2> = Vec::with_capacity(QUERIES);
+    let start = DVec2::new(-0.45 * info.world_width(), 0.45 * info.world_depth());
+    for i in 0..QUERIES {
+        let t = i as f64 * 0.37;
+        walk.push(start + DVec2::new(t % 3600.0, -(t / 3600.0).floor() * 3.0 - (t * 0.01).sin()));
+    }
+    group.bench_function("height_at_walk", |b| {
+        b.iter_batched(
+            || (),
+            |_| {
+                let mut sum = 0.0f32;
+                for p in &walk {
+                    sum += info.height_at(p.x, p.y).unwrap_or(0.0);
+                }
+                black_box(sum)
+            },
+            BatchSize::SmallInput,
+        )
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,8 +1,18 @@
 //! vkterrain: heightmap terrain rendering with hardware tessellation.
 //!
+//! Layers, each using only those below it:
+//! - [`cli`]: the command line.
+//! - [`render`]: the terrain renderer, drawing into a target it is given.
+//! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
+//! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
 //!   table, height queries, frustum and LOD maths). No GPU types.
-//! - [`cli`]: the command line.
+//! - [`shader_constants`]: constants shared with GLSL.
 
 pub mod cli;
+pub mod render;
+pub mod scene;
+/// Constants shared with GLSL, passed to the shader compiler by build.rs.
+pub mod shader_constants;
 pub mod terrain;
+pub mod vk;

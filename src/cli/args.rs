@@ -5,9 +5,10 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 
-use crate::terrain::heightmap::DEFAULT_MAX_SAMPLES;
+use crate::scene::{HeightmapSource, Scene};
+
 use crate::terrain::{HeightmapFormat, LoadOptions};
 
 fn parse_f64(s: &str, what: &str) -> Result<f64, String> {
@@ -62,13 +63,75 @@ pub fn parse_spacing(s: &str) -> Result<DVec2, String> {
     }
 }
 
-/// Where the heightmap comes from and how it maps to world units; shared by
-/// every command that loads a terrain.
-#[derive(Args, Clone, Debug)]
-pub struct HeightmapArgs {
-    /// Heightmap file.
+/// `X,Y,Z`: a point in space.
+pub fn parse_dvec3(s: &str) -> Result<DVec3, String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let [x, y, z] = parts[..] else {
+        return Err(format!("{s:?} is not of the form X,Y,Z"));
+    };
+    Ok(DVec3::new(
+        parse_f64(x, "x")?,
+        parse_f64(y, "y")?,
+        parse_f64(z, "z")?,
+    ))
+}
+
+/// `A,B`: two finite numbers with A <= B.
+pub fn parse_range(s: &str) -> Result<(f32, f32), String> {
+    let (a, b) = s
+        .split_once(',')
+        .ok_or_else(|| format!("{s:?} is not of the form MIN,MAX"))?;
+    let (a, b) = (parse_f64(a, "min")? as f32, parse_f64(b, "max")? as f32);
+    if a <= b {
+        Ok((a, b))
+    } else {
+        Err(format!("{s:?}: MIN must not exceed MAX"))
+    }
+}
+
+/// `R,G,B` with each in [0, 1].
+pub fn parse_color(s: &str) -> Result<[f32; 3], String> {
+    let v = parse_dvec3(s)?;
+    if v.min_element() >= 0.0 && v.max_element() <= 1.0 {
+        Ok(v.as_vec3().to_array())
+    } else {
+        Err(format!("colour {s:?}: components must be in [0, 1]"))
+    }
+}
+
+/// A field of view in degrees, strictly between 0 and 180.
+pub fn parse_fov(s: &str) -> Result<f32, String> {
+    let v = parse_f64(s, "field of view")?;
+    if v > 0.0 && v < 180.0 {
+        Ok(v as f32)
+    } else {
+        Err(format!(
+            "field of view {s:?} must be between 0 and 180 degrees"
+        ))
+    }
+}
+
+/// An image dimension: 1 to 16384 pixels.
+pub fn parse_pixels(s: &str) -> Result<u32, String> {
+    let v: u32 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("{s:?} is not a whole number of pixels"))?;
+    if (1..=16384).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} pixels is outside 1..=16384"))
+    }
+}
+
+/// Which terrain to use: the built-in default scene, or a heightmap file.
+/// Options left out keep the scene's values (for a file: scale 1, offset 0,
+/// spacing 1, origin 0).
+#[derive(Args, Clone, Debug, Default)]
+pub struct TerrainArgs {
+    /// Heightmap file; without it, the built-in default scene.
     #[arg(long, value_name = "PATH")]
-    pub heightmap: PathBuf,
+    pub heightmap: Option<PathBuf>,
 
     /// File format; inferred from the extension when omitted
     /// (.r8 .r16/.raw .png .hgt .f32).
@@ -82,20 +145,20 @@ pub struct HeightmapArgs {
 
     /// Height of the format's largest value (255, 65535, or 32767 for .hgt);
     /// for float input, the factor applied to each sample.
-    #[arg(long, value_name = "S", default_value_t = 1.0, value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_scale: f64,
+    #[arg(long, value_name = "S", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_scale: Option<f64>,
 
     /// Added to every height after scaling.
-    #[arg(long, value_name = "O", default_value_t = 0.0, value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_offset: f64,
+    #[arg(long, value_name = "O", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_offset: Option<f64>,
 
     /// World distance between samples along x and z (one number for both).
-    #[arg(long, value_name = "X[,Z]", default_value = "1", value_parser = parse_spacing)]
-    pub cell_spacing: DVec2,
+    #[arg(long, value_name = "X[,Z]", value_parser = parse_spacing)]
+    pub cell_spacing: Option<DVec2>,
 
     /// World (x, z) of the terrain's centre.
-    #[arg(long, value_name = "X,Z", default_value = "0,0", value_parser = parse_point, allow_hyphen_values = true)]
-    pub origin: DVec2,
+    #[arg(long, value_name = "X,Z", value_parser = parse_point, allow_hyphen_values = true)]
+    pub origin: Option<DVec2>,
 
     /// Average each sample with its 3x3 neighbourhood after loading.
     #[arg(long)]
@@ -107,8 +170,8 @@ pub struct HeightmapArgs {
 
     /// Refuse heightmaps with more samples than this (checked before
     /// allocating).
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SAMPLES)]
-    pub max_samples: u64,
+    #[arg(long, value_name = "N")]
+    pub max_samples: Option<u64>,
 }
 
 fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
@@ -116,16 +179,27 @@ fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
         .map_err(|e: crate::terrain::heightmap::UnknownFormatName| e.to_string())
 }
 
-impl HeightmapArgs {
-    pub fn load_options(&self) -> LoadOptions {
-        LoadOptions {
-            format: self.format,
-            size: self.size,
-            height_scale: self.height_scale,
-            height_offset: self.height_offset,
-            smooth: self.smooth,
-            luminance: self.luminance,
-            max_samples: self.max_samples,
+impl TerrainArgs {
+    /// The scene these arguments describe: the default scene with the
+    /// options given applied, or a heightmap file with them.
+    pub fn scene(&self) -> Scene {
+        let mut scene = Scene::default_scene();
+        if let Some(path) = &self.heightmap {
+            scene.heightmap = HeightmapSource::File(path.clone());
+            scene.load = LoadOptions::default();
+            scene.cell_spacing = DVec2::ONE;
+            scene.origin = DVec2::ZERO;
         }
+        let load = &mut scene.load;
+        load.format = self.format.or(load.format);
+        load.size = self.size.or(load.size);
+        load.height_scale = self.height_scale.unwrap_or(load.height_scale);
+        load.height_offset = self.height_offset.unwrap_or(load.height_offset);
+        load.smooth |= self.smooth;
+        load.luminance |= self.luminance;
+        load.max_samples = self.max_samples.unwrap_or(load.max_samples);
+        scene.cell_spacing = self.cell_spacing.unwrap_or(scene.cell_spacing);
+        scene.origin = self.origin.unwrap_or(scene.origin);
+        scene
     }
 }

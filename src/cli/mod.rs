@@ -12,8 +12,10 @@ use glam::DVec2;
 use serde::Serialize;
 
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{Heightmap, PatchId, Terrain, TerrainInfo, DEFAULT_CELLS_PER_PATCH};
-use args::{parse_point, HeightmapArgs};
+use crate::terrain::{PatchId, Terrain, TerrainInfo};
+use args::{parse_point, TerrainArgs};
+
+pub mod render;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -22,22 +24,31 @@ use args::{parse_point, HeightmapArgs};
     about = "Heightmap terrain renderer on Vulkan"
 )]
 pub struct Cli {
+    /// Without a command: render the default scene headless to
+    /// vkterrain-default.png in the current directory.
     #[command(subcommand)]
-    pub command: Command,
+    pub command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Render one frame headless to a PNG (and optionally stats as JSON).
+    Render(render::RenderCmd),
+    /// The Vulkan device and driver, and which optional features are used.
+    Info(render::InfoCmd),
     /// Surface heights at points, as a JSON array in input order.
     Height(HeightCmd),
     /// Size, height range and patch grid of a heightmap, as JSON.
     Inspect(InspectCmd),
+    /// Generate a fractal, eroded heightmap as a 16-bit PNG (the default
+    /// scene's heightmap is `generate --out assets/heightmaps/default.png`).
+    Generate(render::GenerateCmd),
 }
 
 #[derive(clap::Args, Debug)]
 pub struct HeightCmd {
     #[command(flatten)]
-    pub heightmap: HeightmapArgs,
+    pub terrain: TerrainArgs,
 
     /// A world point X,Z to query; repeat for more.
     #[arg(long = "at", value_name = "X,Z", value_parser = parse_point, allow_hyphen_values = true,
@@ -53,11 +64,12 @@ pub struct HeightCmd {
 #[derive(clap::Args, Debug)]
 pub struct InspectCmd {
     #[command(flatten)]
-    pub heightmap: HeightmapArgs,
+    pub terrain: TerrainArgs,
 
-    /// Cells per patch side: a power of two from 2 to 64.
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_CELLS_PER_PATCH)]
-    pub cells_per_patch: u32,
+    /// Cells per patch side: a power of two from 2 to 64 (default: the
+    /// scene's, 32).
+    #[arg(long, value_name = "N")]
+    pub cells_per_patch: Option<u32>,
 
     /// List every patch with its extent and Y bounds.
     #[arg(long)]
@@ -67,22 +79,24 @@ pub struct InspectCmd {
 /// Runs a parsed command, writing its output to `out`.
 pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
     match cli.command {
-        Command::Height(cmd) => height(cmd, out),
-        Command::Inspect(cmd) => inspect(cmd, out),
+        None => render::render_default(out),
+        Some(Command::Render(cmd)) => render::render(cmd, out),
+        Some(Command::Info(cmd)) => render::info(cmd, out),
+        Some(Command::Height(cmd)) => height(cmd, out),
+        Some(Command::Inspect(cmd)) => inspect(cmd, out),
+        Some(Command::Generate(cmd)) => render::generate(cmd, out),
     }
 }
 
-/// Loads the heightmap the arguments name and places it in the world.
-pub fn load_terrain_info(args: &HeightmapArgs, cells_per_patch: u32) -> Result<TerrainInfo> {
-    // Checked first: a bad patch size shouldn't wait for a large file to load.
-    validate_cells_per_patch(cells_per_patch)?;
-    let heightmap = Heightmap::load(&args.heightmap, &args.load_options())?;
-    Ok(TerrainInfo::new(
-        heightmap,
-        args.cell_spacing,
-        cells_per_patch,
-        args.origin,
-    )?)
+/// Loads the terrain the arguments name and places it in the world.
+pub fn load_terrain_info(args: &TerrainArgs, cells_per_patch: Option<u32>) -> Result<TerrainInfo> {
+    let mut scene = args.scene();
+    if let Some(n) = cells_per_patch {
+        // Checked first: a bad patch size shouldn't wait for a large file.
+        validate_cells_per_patch(n)?;
+        scene.cells_per_patch = n;
+    }
+    Ok(scene.terrain_info()?)
 }
 
 #[derive(Serialize)]
@@ -97,7 +111,7 @@ fn height(cmd: HeightCmd, out: &mut dyn Write) -> Result<()> {
         Some(path) => read_points(path)?,
         None => cmd.at.clone(),
     };
-    let info = load_terrain_info(&cmd.heightmap, DEFAULT_CELLS_PER_PATCH)?;
+    let info = load_terrain_info(&cmd.terrain, None)?;
     let answers: Vec<HeightAnswer> = points
         .iter()
         .map(|p| HeightAnswer {
@@ -163,7 +177,7 @@ struct PatchReport {
 }
 
 fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
-    let info = load_terrain_info(&cmd.heightmap, cmd.cells_per_patch)?;
+    let info = load_terrain_info(&cmd.terrain, cmd.cells_per_patch)?;
     let (min_height, max_height) = info.heightmap().min_max();
     let terrain = Terrain::new(info, 0.0)?;
     let info = terrain.info();

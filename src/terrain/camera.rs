@@ -94,3 +94,54 @@ pub fn aabb_outside_frustum(center: Vec3, extents: Vec3, planes: &[Vec4; 6]) -> 
         .iter()
         .fold(false, |out, &p| out | aabb_behind_plane(center, extents, p))
 }
+
+/// A perspective camera in world coordinates (f64, so it can sit far from
+/// the world origin). Everything that reaches the GPU is relative to the eye.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: glam::DVec3,
+    pub target: glam::DVec3,
+    /// Vertical field of view in degrees.
+    pub fov_y_deg: f32,
+}
+
+/// Near and far planes that enclose a box of the given half extents around
+/// `centre`, seen from `eye`: far reaches the farthest corner, near is a
+/// small fraction of it (reversed Z keeps depth precise all the same).
+pub fn clip_planes_for_box(eye: glam::DVec3, centre: glam::DVec3, half: glam::DVec3) -> (f32, f32) {
+    let mut far = 0.0f64;
+    for corner in 0..8 {
+        let sign = glam::DVec3::new(
+            if corner & 1 == 0 { -1.0 } else { 1.0 },
+            if corner & 2 == 0 { -1.0 } else { 1.0 },
+            if corner & 4 == 0 { -1.0 } else { 1.0 },
+        );
+        far = far.max((centre + sign * half - eye).length());
+    }
+    let far = (far * 1.01).max(1.0);
+    let near = (far * 1e-5).max(0.01);
+    (near as f32, far as f32)
+}
+
+impl Camera {
+    /// The view's rotation only: the eye is the origin of camera-relative
+    /// coordinates.
+    pub fn relative_view(&self) -> Mat4 {
+        let dir = (self.target - self.eye).as_vec3();
+        look_at(Vec3::ZERO, dir, Vec3::Y)
+    }
+
+    /// Projection times the rotation-only view, with reversed Z: depth 1 at
+    /// `near`, 0 at `far`.
+    pub fn relative_view_proj(&self, aspect: f32, near: f32, far: f32) -> Mat4 {
+        let fov = self.fov_y_deg.to_radians();
+        perspective_reversed(fov, aspect, near, far) * self.relative_view()
+    }
+}
+
+/// Perspective projection into Vulkan clip space with reversed Z: depth 1 at
+/// `near` and 0 at `far`, y pointing down. Floating-point depth then has
+/// nearly even relative precision over the whole range.
+pub fn perspective_reversed(fov_y: f32, aspect: f32, near: f32, far: f32) -> Mat4 {
+    perspective(fov_y, aspect, far, near)
+}

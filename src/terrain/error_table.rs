@@ -1,12 +1,16 @@
 //! Per-patch geometric error of each power-of-two tessellation level.
 //!
-//! At level L a patch is cut into L x L equal quads whose vertices take the
-//! heightmap's bilinear height at their position (what the displacement in the
-//! evaluation shader does). Between vertices the surface is the bilinear
-//! interpolation of the four vertex heights. The error of a level is the
-//! largest vertical distance, over every sample the patch covers, between the
-//! sample's height and that surface: the height of the seed article's
-//! "max-error vertex".
+//! At level L a patch is cut into L x L equal quads (the evaluation shader's
+//! bilinear interpolation of the patch corners) whose vertices take the
+//! surface height at their position (`Heightmap::interpolate`, what the
+//! displacement in the evaluation shader samples). Between vertices the
+//! surface is taken as the bilinear interpolation of the four vertex heights:
+//! how the tessellator splits each quad into triangles is up to the driver,
+//! and bilinear is the symmetric choice between its two diagonals.
+//!
+//! The error of a level is the largest vertical distance, over every sample
+//! the patch covers, between the sample's height and that surface: the
+//! height of the seed article's "max-error vertex".
 //!
 //! A coarser level can measure less than a finer one on some data (a sample
 //! may happen to sit near a coarse interpolation and away from a finer one),
@@ -71,28 +75,6 @@ impl ErrorTable {
     }
 }
 
-/// Bilinear height of the heightmap at sample column `col_int + col_num /
-/// den` and row `row_int + row_num / den` (fractions in [0, 1)).
-#[inline]
-fn bilinear_rational(
-    map: &Heightmap,
-    (row_int, row_num): (usize, usize),
-    (col_int, col_num): (usize, usize),
-    den: usize,
-) -> f64 {
-    let fr = row_num as f64 / den as f64;
-    let fc = col_num as f64 / den as f64;
-    let r1 = (row_int + 1).min(map.depth() - 1);
-    let c1 = (col_int + 1).min(map.width() - 1);
-    let a = f64::from(map.get(row_int, col_int));
-    let b = f64::from(map.get(row_int, c1));
-    let c = f64::from(map.get(r1, col_int));
-    let d = f64::from(map.get(r1, c1));
-    let top = a + fc * (b - a);
-    let bottom = c + fc * (d - c);
-    top + fr * (bottom - top)
-}
-
 /// Splits `k * cells / level` into its integer part and numerator over
 /// `level`.
 #[inline]
@@ -115,12 +97,9 @@ fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
         let (ri, rn) = split(i, nz, level);
         for j in 0..=level {
             let (ci, cn) = split(j, nx, level);
-            vertices.push(bilinear_rational(
-                map,
-                (rect.row0 + ri, rn),
-                (rect.col0 + ci, cn),
-                level,
-            ));
+            let col = (rect.col0 + ci) as f64 + cn as f64 / level as f64;
+            let row = (rect.row0 + ri) as f64 + rn as f64 / level as f64;
+            vertices.push(map.interpolate(col, row));
         }
     }
     let mut worst = 0.0f64;

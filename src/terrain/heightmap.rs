@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use image::codecs::png::PngDecoder;
-use image::{ExtendedColorType, ImageDecoder};
+use image::ImageDecoder;
 use rayon::prelude::*;
 
 use super::error::HeightmapError;
@@ -316,6 +316,48 @@ impl Heightmap {
         &self.heights[row * self.width..(row + 1) * self.width]
     }
 
+    /// Height at continuous sample coordinates (`col`, `row`) on the
+    /// triangulated surface (see `terrain::query` for the split), clamped to
+    /// the grid. Sample (r, c) is at exactly (c, r) and returns that sample.
+    ///
+    /// This is the height sampling the shaders mirror (`sample_height` in
+    /// `glsl/terrain_common.glsl`). f64 keeps the weights exact enough that
+    /// the f32 result at a sample is the sample itself.
+    #[inline]
+    pub fn interpolate(&self, col: f64, row: f64) -> f64 {
+        let max_c = (self.width - 1) as f64;
+        let max_r = (self.depth - 1) as f64;
+        let (c, r) = (col.clamp(0.0, max_c), row.clamp(0.0, max_r));
+        // The last row/column has no cell of its own: a point on it belongs
+        // to the cell before, at s or t = 1.
+        let c0 = (c as usize).min(self.width - 2);
+        let r0 = (r as usize).min(self.depth - 2);
+        let s = c - c0 as f64;
+        let t = r - r0 as f64;
+        let upper = self.row(r0);
+        let lower = self.row(r0 + 1);
+        let a = f64::from(upper[c0]);
+        let b = f64::from(upper[c0 + 1]);
+        let cc = f64::from(lower[c0]);
+        let d = f64::from(lower[c0 + 1]);
+        // Triangle ABC weighs A, B, C by (1 - s - t, s, t); triangle DCB
+        // weighs D, C, B by (1 - u - v, u, v) with u = 1 - s, v = 1 - t. The
+        // choice is a select rather than a branch: which side of the
+        // diagonal a query falls on is unpredictable.
+        let lower_triangle = s + t > 1.0;
+        let (p, q, w) = if lower_triangle {
+            (d, cc, b)
+        } else {
+            (a, b, cc)
+        };
+        let (u, v) = if lower_triangle {
+            (1.0 - s, 1.0 - t)
+        } else {
+            (s, t)
+        };
+        (1.0 - u - v) * p + u * q + v * w
+    }
+
     /// Smallest and largest height.
     pub fn min_max(&self) -> (f32, f32) {
         self.heights.par_chunks(1 << 16).map(min_max_of).reduce(
@@ -569,38 +611,34 @@ fn decode_png(
     let decoder = PngDecoder::new(std::io::Cursor::new(bytes)).map_err(not_png)?;
     let (w, h) = decoder.dimensions();
     check_size(path, u64::from(w), u64::from(h), opts.max_samples)?;
-    let original = decoder.original_color_type();
-    let color_name = format!("{original:?}");
-    let is_gray = match original {
-        ExtendedColorType::L8 | ExtendedColorType::L16 => true,
-        ExtendedColorType::Rgb8
-        | ExtendedColorType::Rgba8
-        | ExtendedColorType::Rgb16
-        | ExtendedColorType::Rgba16
-        | ExtendedColorType::La8
-        | ExtendedColorType::La16 => false,
-        // Sub-byte grayscale, palettes and anything else: the sample values
-        // would not mean heights on a known scale.
-        _ => {
-            return Err(HeightmapError::UnsupportedPng {
-                path: path.to_path_buf(),
-                color: color_name,
-            })
-        }
+    // The decoder expands sub-byte and palette images to 8 bits, so their
+    // original layout is read from the IHDR chunk (validated by the decoder
+    // above): bit depth at byte 24, colour type at byte 25.
+    let (bit_depth, color_type) = (bytes[24], bytes[25]);
+    let color_name = match color_type {
+        0 => "grayscale",
+        2 => "RGB",
+        3 => "indexed (palette)",
+        4 => "grayscale+alpha",
+        6 => "RGBA",
+        _ => "unknown",
     };
-    if !is_gray && !opts.luminance {
+    let color_name = format!("{bit_depth}-bit {color_name}");
+    if !matches!(bit_depth, 8 | 16) || !matches!(color_type, 0 | 2 | 4 | 6) {
+        // Sub-byte grayscale and palettes: the sample values would not mean
+        // heights on a known scale.
+        return Err(HeightmapError::UnsupportedPng {
+            path: path.to_path_buf(),
+            color: color_name,
+        });
+    }
+    if color_type != 0 && !opts.luminance {
         return Err(HeightmapError::ColorPng {
             path: path.to_path_buf(),
             color: color_name,
         });
     }
-    let sixteen = matches!(
-        original,
-        ExtendedColorType::L16
-            | ExtendedColorType::La16
-            | ExtendedColorType::Rgb16
-            | ExtendedColorType::Rgba16
-    );
+    let sixteen = bit_depth == 16;
     let image = image::DynamicImage::from_decoder(decoder).map_err(not_png)?;
     let heights = if sixteen {
         image

@@ -26,6 +26,10 @@ pub struct TerrainInfo {
     spacing: DVec2,
     cells_per_patch: u32,
     origin: DVec2,
+    /// Derived once for `world_to_grid`, the hot path of height queries:
+    /// world position of sample (0, 0) and 1 / spacing.
+    grid_origin: DVec2,
+    inv_spacing: DVec2,
 }
 
 impl TerrainInfo {
@@ -50,11 +54,17 @@ impl TerrainInfo {
                 z: origin.y,
             });
         }
+        let half = DVec2::new(
+            0.5 * (heightmap.width() - 1) as f64 * spacing.x,
+            0.5 * (heightmap.depth() - 1) as f64 * spacing.y,
+        );
         Ok(TerrainInfo {
             heightmap,
             spacing,
             cells_per_patch,
             origin,
+            grid_origin: DVec2::new(origin.x - half.x, origin.y + half.y),
+            inv_spacing: spacing.recip(),
         })
     }
 
@@ -114,11 +124,14 @@ impl TerrainInfo {
     /// Converts a world (x, z) to continuous sample coordinates
     /// (column, row): sample (r, c) is at exactly (c, r).
     #[inline]
+    ///
+    /// Multiplies by the reciprocal spacing rather than dividing: the result
+    /// may differ from the quotient in its last bit, which moves a query on a
+    /// sample by ~1e-16 cells, far below what the f32 height can show.
     pub fn world_to_grid(&self, x: f64, z: f64) -> DVec2 {
-        let local = DVec2::new(x, z) - self.origin;
         DVec2::new(
-            (local.x + 0.5 * self.world_width()) / self.spacing.x,
-            (0.5 * self.world_depth() - local.y) / self.spacing.y,
+            (x - self.grid_origin.x) * self.inv_spacing.x,
+            (self.grid_origin.y - z) * self.inv_spacing.y,
         )
     }
 }

@@ -7,12 +7,7 @@
 
 use glam::Vec3;
 
-/// Smallest tessellation factor.
-pub const MIN_TESS_FACTOR: f32 = 1.0;
-/// Largest tessellation factor Vulkan guarantees (maxTessellationGenerationLevel >= 64).
-pub const MAX_TESS_FACTOR: f32 = 64.0;
-/// log2 of `MAX_TESS_FACTOR`.
-pub const MAX_TESS_EXPONENT: f32 = 6.0;
+pub use crate::shader_constants::{MAX_TESS_EXPONENT, MAX_TESS_FACTOR, MIN_TESS_FACTOR};
 
 /// Parameters of the distance formula `2^lerp(max_exp, min_exp, s)`,
 /// `s = saturate((d - min_dist) / (max_dist - min_dist))`: factor 2^max_exp

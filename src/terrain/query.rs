@@ -12,7 +12,8 @@
 //!  col c   col c + 1
 //! ```
 //!
-//! Heights are interpolated with barycentric weights, so a query on a sample
+//! The interpolation itself is `Heightmap::interpolate`, which the shaders
+//! mirror: heights are barycentric in the triangle, so a query on a sample
 //! returns that sample exactly (weights 1, 0, 0), and the cell lookup clamps
 //! to the last cell instead of reading past the last row or column.
 
@@ -38,34 +39,7 @@ impl TerrainInfo {
             && g.x <= max_c + EDGE_TOLERANCE_CELLS
             && g.y >= -EDGE_TOLERANCE_CELLS
             && g.y <= max_r + EDGE_TOLERANCE_CELLS;
-        inside.then(|| self.height_at_grid(g.x.clamp(0.0, max_c), g.y.clamp(0.0, max_r)))
-    }
-
-    /// Height at continuous grid coordinates already inside
-    /// `[0, cols-1] x [0, rows-1]`.
-    #[inline]
-    fn height_at_grid(&self, c: f64, r: f64) -> f32 {
-        // The last row/column has no cell of its own: a point on it belongs
-        // to the cell before, at s or t = 1.
-        let col = (c.floor() as usize).min(self.cols() - 2);
-        let row = (r.floor() as usize).min(self.rows() - 2);
-        let s = c - col as f64;
-        let t = r - row as f64;
-        let map = self.heightmap();
-        let upper = map.row(row);
-        let lower = map.row(row + 1);
-        let a = f64::from(upper[col]);
-        let b = f64::from(upper[col + 1]);
-        let cc = f64::from(lower[col]);
-        let d = f64::from(lower[col + 1]);
-        let h = if s + t <= 1.0 {
-            // Triangle ABC.
-            (1.0 - s - t) * a + s * b + t * cc
-        } else {
-            // Triangle DCB.
-            (s + t - 1.0) * d + (1.0 - s) * cc + (1.0 - t) * b
-        };
-        h as f32
+        inside.then(|| self.heightmap().interpolate(g.x, g.y) as f32)
     }
 
     /// Height at the point of the terrain nearest to world (x, z): the
@@ -75,9 +49,7 @@ impl TerrainInfo {
     pub fn clamped_height_at(&self, x: f64, z: f64) -> f32 {
         let p = self.clamp_to_terrain(DVec2::new(x, z));
         let g = self.world_to_grid(p.x, p.y);
-        let max_c = (self.cols() - 1) as f64;
-        let max_r = (self.rows() - 1) as f64;
-        self.height_at_grid(g.x.clamp(0.0, max_c), g.y.clamp(0.0, max_r))
+        self.heightmap().interpolate(g.x, g.y) as f32
     }
 
     /// World (x, z) clamped into the terrain's rectangle; non-finite

@@ -1,0 +1,53 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#include "terrain_common.glsl"
+
+// One quad patch: control points 0 upper-left, 1 upper-right, 2 lower-left,
+// 3 lower-right.
+layout(vertices = 4) out;
+
+layout(location = 0) in vec3 in_rel[];
+layout(location = 1) in vec2 in_grid[];
+layout(location = 2) in vec2 in_bounds_y[];
+
+layout(location = 0) out vec3 out_rel[];
+layout(location = 1) out vec2 out_grid[];
+layout(location = 2) patch out float out_inside_factor;
+
+void main() {
+    out_rel[gl_InvocationID] = in_rel[gl_InvocationID];
+    out_grid[gl_InvocationID] = in_grid[gl_InvocationID];
+    if (gl_InvocationID != 0) {
+        return;
+    }
+
+    // Cull the patch's box: x and z from its corners, y from the bounds in
+    // control point 0, all camera-relative.
+    vec3 box_min = vec3(in_rel[2].x, in_bounds_y[0].x - frame.eye_local.y, in_rel[2].z);
+    vec3 box_max = vec3(in_rel[1].x, in_bounds_y[0].y - frame.eye_local.y, in_rel[1].z);
+    vec3 center = 0.5 * (box_min + box_max);
+    vec3 extents = 0.5 * (box_max - box_min);
+    if (frame.height_range.z != 0.0 && aabb_outside_frustum(center, extents)) {
+        gl_TessLevelOuter[0] = 0.0;
+        gl_TessLevelOuter[1] = 0.0;
+        gl_TessLevelOuter[2] = 0.0;
+        gl_TessLevelOuter[3] = 0.0;
+        gl_TessLevelInner[0] = 0.0;
+        gl_TessLevelInner[1] = 0.0;
+        out_inside_factor = 0.0;
+        return;
+    }
+
+    // Edge factors from edge midpoints, so both patches sharing an edge
+    // compute the same value; inside factors from the centre. Vulkan's quad
+    // edges are u=0 (left, 0-2), v=0 (top, 0-1), u=1 (right, 1-3) and v=1
+    // (bottom, 2-3). Mirror: terrain::lod::patch_tess_factors.
+    gl_TessLevelOuter[0] = tess_factor(0.5 * (in_rel[0] + in_rel[2]));
+    gl_TessLevelOuter[1] = tess_factor(0.5 * (in_rel[0] + in_rel[1]));
+    gl_TessLevelOuter[2] = tess_factor(0.5 * (in_rel[1] + in_rel[3]));
+    gl_TessLevelOuter[3] = tess_factor(0.5 * (in_rel[2] + in_rel[3]));
+    float inside = tess_factor(0.25 * (in_rel[0] + in_rel[1] + in_rel[2] + in_rel[3]));
+    gl_TessLevelInner[0] = inside;
+    gl_TessLevelInner[1] = inside;
+    out_inside_factor = inside;
+}

@@ -1,0 +1,103 @@
+// Shared by every terrain stage: the per-frame uniform block, the heightmap,
+// and the formulas the CPU model mirrors in Rust (each names its mirror).
+// Constants (BINDING_*, *_TESS_*, LOD_MODE_*, SHADE_*) come from
+// src/shader_constants.rs through build.rs.
+
+// Per-frame values. Positions are camera-relative: the terrain's local
+// coordinates minus the eye's, so precision does not depend on where the
+// terrain sits in the world. Mirrors `render::uniforms::FrameUniforms`.
+layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
+    // Projection times the view's rotation (the eye is the origin).
+    mat4 view_proj;
+    // Normalised frustum planes in camera-relative coordinates, inside where
+    // dot(n, p) + w >= 0.
+    vec4 frustum[6];
+    // xyz: the eye in terrain-local coordinates.
+    vec4 eye_local;
+    // min_dist, max_dist, min_exp, max_exp of the distance LOD.
+    vec4 lod;
+    // x: local x of sample column 0, y: local z of sample row 0,
+    // z: 1 / dx, w: 1 / dz.
+    vec4 grid;
+    // dx, dz, columns, rows.
+    vec4 spacing_size;
+    // xyz: unit direction towards the light; w: ambient intensity.
+    vec4 light;
+    // x, y: lowest and highest height (colour ramp); z: 1 when frustum
+    // culling is on.
+    vec4 height_range;
+    // x: LOD mode, y: shading mode.
+    uvec4 modes;
+} frame;
+
+// Heights, one texel per sample, row 0 first: R32_SFLOAT read with
+// texelFetch (linear filtering of R32_SFLOAT is optional in Vulkan, and
+// the surface between samples is triangles, not bilinear).
+layout(set = 0, binding = BINDING_HEIGHTMAP) uniform sampler2D heightmap;
+
+// Local (x, z) to continuous sample coordinates (column, row).
+// Mirror: TerrainInfo::world_to_grid (there with the world origin added).
+vec2 local_to_grid(vec2 xz) {
+    return vec2((xz.x - frame.grid.x) * frame.grid.z, (frame.grid.y - xz.y) * frame.grid.w);
+}
+
+// Height on the triangulated surface at continuous sample coordinates,
+// clamped to the grid. Each cell splits along the diagonal from its
+// upper-right sample B to its lower-left sample C: triangles ABC and DCB.
+// Texel-centre addressing: sample (r, c) is texel (c, r) and returns its
+// value exactly. Mirror: Heightmap::interpolate.
+float sample_height(vec2 g) {
+    vec2 size = frame.spacing_size.zw;
+    vec2 p = clamp(g, vec2(0.0), size - 1.0);
+    ivec2 cell = min(ivec2(p), ivec2(size) - 2);
+    vec2 st = p - vec2(cell);
+    float a = texelFetch(heightmap, cell, 0).r;
+    float b = texelFetch(heightmap, cell + ivec2(1, 0), 0).r;
+    float c = texelFetch(heightmap, cell + ivec2(0, 1), 0).r;
+    float d = texelFetch(heightmap, cell + ivec2(1, 1), 0).r;
+    bool lower = st.x + st.y > 1.0;
+    vec3 h = lower ? vec3(d, c, b) : vec3(a, b, c);
+    vec2 uv = lower ? 1.0 - st : st;
+    return (1.0 - uv.x - uv.y) * h.x + uv.x * h.y + uv.y * h.z;
+}
+
+// True when the box lies entirely behind one of the frustum planes; the
+// per-plane tests are or-ed without an early exit.
+// Mirror: terrain::camera::aabb_outside_frustum.
+bool aabb_outside_frustum(vec3 center, vec3 extents) {
+    bool outside = false;
+    for (int i = 0; i < 6; ++i) {
+        vec4 plane = frame.frustum[i];
+        float radius = dot(extents, abs(plane.xyz));
+        float distance = dot(plane.xyz, center) + plane.w;
+        outside = outside || (distance + radius < 0.0);
+    }
+    return outside;
+}
+
+// Clamp to [0, 1] with NaN going to 1. Mirror: terrain::lod::saturate.
+float lod_saturate(float x) {
+    return x < 1.0 ? (x > 0.0 ? x : 0.0) : 1.0;
+}
+
+// Clamp to [1, 64] with NaN going to 1. Mirror: terrain::lod::clamp_tess_factor.
+float clamp_tess_factor(float f) {
+    return f > MIN_TESS_FACTOR ? (f < MAX_TESS_FACTOR ? f : MAX_TESS_FACTOR) : MIN_TESS_FACTOR;
+}
+
+// Distance tessellation factor at a camera-relative position:
+// 2^mix(max_exp, min_exp, s), s = saturate((d - min_dist) / (max_dist - min_dist)).
+// The debug mode measures the xz max-norm and rounds the exponent with
+// floor(x + 0.5) (round() may go either way at .5).
+// Mirror: terrain::lod::tess_factor.
+float tess_factor(vec3 rel) {
+    bool debug_mode = frame.modes.x == LOD_MODE_DEBUG;
+    float d = debug_mode ? max(abs(rel.x), abs(rel.z)) : length(rel);
+    float range = max(frame.lod.y - frame.lod.x, 1.17549435e-38);
+    float s = lod_saturate((d - frame.lod.x) / range);
+    float exponent = frame.lod.w + s * (frame.lod.z - frame.lod.w);
+    if (debug_mode) {
+        exponent = floor(exponent + 0.5);
+    }
+    return clamp_tess_factor(exp2(exponent));
+}

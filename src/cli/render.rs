@@ -1,0 +1,436 @@
+//! `render`, `info` and `generate`.
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
+use glam::DVec3;
+use serde::Serialize;
+
+use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
+use crate::render::{Headless, HeadlessFrame, RenderSettings, Shading, TessRenderer};
+use crate::scene::Scene;
+use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
+use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::{DistanceMode, Terrain};
+use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
+use crate::vk::{Capabilities, Gpu};
+
+/// Which way the terrain is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RenderPath {
+    /// Hardware tessellation.
+    #[default]
+    Tess,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum LodModeArg {
+    /// Euclidean distance, continuous factors.
+    #[default]
+    Smooth,
+    /// xz max-norm distance, power-of-two factors only.
+    Debug,
+}
+
+/// Camera, LOD and look: what the window demo and `render` share.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct ViewArgs {
+    /// Cells per patch side: a power of two from 2 to 64.
+    #[arg(long, value_name = "N")]
+    pub cells_per_patch: Option<u32>,
+
+    /// Full tessellation up to MIN from the eye, falling to the lowest at MAX.
+    #[arg(long, value_name = "MIN,MAX", value_parser = parse_range)]
+    pub lod_distance: Option<(f32, f32)>,
+
+    /// Exponents of the factor range: 2^MINEXP far away, 2^MAXEXP near (0..=6).
+    #[arg(long, value_name = "MINEXP,MAXEXP", value_parser = parse_range)]
+    pub lod_levels: Option<(f32, f32)>,
+
+    /// How distance becomes a factor.
+    #[arg(long, value_enum, default_value_t = LodModeArg::Smooth)]
+    pub lod_mode: LodModeArg,
+
+    /// Eye position in world coordinates.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_dvec3, allow_hyphen_values = true)]
+    pub eye: Option<DVec3>,
+
+    /// Point the camera looks at.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_dvec3, allow_hyphen_values = true)]
+    pub target: Option<DVec3>,
+
+    /// Vertical field of view in degrees.
+    #[arg(long, value_name = "DEG", value_parser = parse_fov)]
+    pub fov: Option<f32>,
+
+    /// Render path.
+    #[arg(long, value_enum, default_value_t = RenderPath::Tess)]
+    pub path: RenderPath,
+
+    /// Draw triangle edges only (needs fillModeNonSolid).
+    #[arg(long)]
+    pub wireframe: bool,
+
+    /// Colour by tessellation factor.
+    #[arg(long, conflicts_with = "flat")]
+    pub lod_colors: bool,
+
+    /// Constant white, unlit (for crack inspection).
+    #[arg(long)]
+    pub flat: bool,
+
+    /// Background colour, components in [0, 1].
+    #[arg(long, value_name = "R,G,B", value_parser = parse_color)]
+    pub clear_color: Option<[f32; 3]>,
+
+    /// Turn GPU frustum culling of patches off.
+    #[arg(long)]
+    pub no_cull: bool,
+}
+
+impl ViewArgs {
+    /// Applies the camera and patch options to a scene.
+    pub fn apply_to_scene(&self, scene: &mut Scene) -> Result<()> {
+        if let Some(n) = self.cells_per_patch {
+            validate_cells_per_patch(n)?;
+            scene.cells_per_patch = n;
+        }
+        if let Some((min, max)) = self.lod_distance {
+            scene.lod.min_dist = min;
+            scene.lod.max_dist = max;
+        }
+        if let Some((min, max)) = self.lod_levels {
+            scene.lod.min_exp = min;
+            scene.lod.max_exp = max;
+        }
+        scene.lod.validate()?;
+        scene.camera.eye = self.eye.unwrap_or(scene.camera.eye);
+        scene.camera.target = self.target.unwrap_or(scene.camera.target);
+        scene.camera.fov_y_deg = self.fov.unwrap_or(scene.camera.fov_y_deg);
+        Ok(())
+    }
+
+    pub fn settings(&self, scene: &Scene) -> RenderSettings {
+        let defaults = RenderSettings::default();
+        RenderSettings {
+            lod: scene.lod,
+            lod_mode: match self.lod_mode {
+                LodModeArg::Smooth => DistanceMode::Smooth,
+                LodModeArg::Debug => DistanceMode::Debug,
+            },
+            shading: if self.flat {
+                Shading::Flat
+            } else if self.lod_colors {
+                Shading::LodColors
+            } else {
+                Shading::Lit
+            },
+            wireframe: self.wireframe,
+            clear_color: self.clear_color.unwrap_or(if self.flat {
+                [0.0; 3]
+            } else {
+                defaults.clear_color
+            }),
+            cull: !self.no_cull,
+            ..defaults
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderCmd {
+    #[command(flatten)]
+    pub terrain: TerrainArgs,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    /// Image width in pixels.
+    #[arg(long, value_name = "W", default_value = "1280", value_parser = parse_pixels)]
+    pub width: u32,
+
+    /// Image height in pixels.
+    #[arg(long, value_name = "H", default_value = "720", value_parser = parse_pixels)]
+    pub height: u32,
+
+    /// Where to write the PNG.
+    #[arg(long, value_name = "PATH")]
+    pub out: PathBuf,
+
+    /// Where to write frame statistics as JSON.
+    #[arg(long, value_name = "PATH")]
+    pub stats: Option<PathBuf>,
+
+    /// Turn on the Vulkan validation layer (also VKTERRAIN_VALIDATE=1).
+    #[arg(long)]
+    pub validate: bool,
+}
+
+/// stats.json: what a frame cost and what it drew. Figures a device cannot
+/// measure are null, never zero.
+#[derive(Serialize, Debug, Clone, PartialEq)]
+pub struct FrameStats {
+    pub device: String,
+    pub driver: String,
+    pub path: RenderPath,
+    pub width: u32,
+    pub height: u32,
+    pub patches_total: usize,
+    pub patches_in_frustum: usize,
+    pub tcs_patches: Option<u64>,
+    pub tes_invocations: Option<u64>,
+    pub triangles: Option<u64>,
+    pub vertex_invocations: Option<u64>,
+    pub clipping_invocations: Option<u64>,
+    pub gpu_ms: Option<f64>,
+    pub cpu_ms: f64,
+    pub gpu_memory_bytes: u64,
+    pub gpu_memory: BTreeMap<String, u64>,
+    pub validation_enabled: bool,
+    pub validation_messages: u32,
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    pub fov_deg: f32,
+}
+
+/// Everything one headless render produces.
+pub struct RenderOutput {
+    pub frame: HeadlessFrame,
+    pub stats: FrameStats,
+    pub validation_log: Vec<String>,
+}
+
+/// Renders one frame of `scene` headless: builds the GPU objects, draws,
+/// reads back, and tears everything down again.
+pub fn render_scene(
+    scene: &Scene,
+    settings: &RenderSettings,
+    width: u32,
+    height: u32,
+    validate: bool,
+) -> Result<RenderOutput> {
+    let info = scene.terrain_info()?;
+    let terrain = Terrain::new(info, 0.0)?;
+    let gpu = Gpu::new(validate).context("starting Vulkan")?;
+    let mut renderer = TessRenderer::new(
+        &gpu,
+        &terrain,
+        OFFSCREEN_COLOR_FORMAT,
+        1,
+        settings.wireframe,
+    )
+    .context("preparing the terrain for the GPU")?;
+    let mut headless = match Headless::new(&gpu, width, height) {
+        Ok(h) => h,
+        Err(e) => {
+            renderer.destroy(&gpu.device);
+            return Err(e).context("creating the offscreen target");
+        }
+    };
+    let frame = headless.render(&gpu, &mut renderer, &terrain, &scene.camera, settings);
+    // Memory is reported while everything is still allocated.
+    let gpu_memory: BTreeMap<String, u64> = gpu.device.memory_report().into_iter().collect();
+    headless.destroy(&gpu);
+    renderer.destroy(&gpu.device);
+    let frame = frame.context("rendering")?;
+    let caps: &Capabilities = &gpu.device.caps;
+    let statistics = frame.measurements.statistics;
+    let stats = FrameStats {
+        device: caps.device_name.clone(),
+        driver: format!("{} ({})", caps.driver_name, caps.driver_info),
+        path: RenderPath::Tess,
+        width,
+        height,
+        patches_total: terrain.grid().patch_count(),
+        patches_in_frustum: frame.patches_in_frustum,
+        tcs_patches: statistics.map(|s| s.tcs_patches),
+        tes_invocations: statistics.map(|s| s.tes_invocations),
+        triangles: statistics.map(|s| s.clipping_primitives),
+        vertex_invocations: statistics.map(|s| s.vertex_invocations),
+        clipping_invocations: statistics.map(|s| s.clipping_invocations),
+        gpu_ms: frame.measurements.gpu_ms,
+        cpu_ms: frame.cpu_ms,
+        gpu_memory_bytes: gpu_memory.values().sum(),
+        gpu_memory,
+        validation_enabled: gpu.instance.validation_enabled(),
+        validation_messages: gpu.validation_messages(),
+        eye: scene.camera.eye.to_array(),
+        target: scene.camera.target.to_array(),
+        fov_deg: scene.camera.fov_y_deg,
+    };
+    let validation_log = gpu.instance.validation_log().messages();
+    Ok(RenderOutput {
+        frame,
+        stats,
+        validation_log,
+    })
+}
+
+/// Writes through a temporary file in the same directory, then renames, so
+/// a failure never leaves a half-written file under the final name.
+pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("{}: not a file path", path.display()))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(name);
+    tmp_name.push(".partial");
+    let tmp = path.with_file_name(tmp_name);
+    let result = write(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("{}: cannot move into place", path.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+pub fn save_png(image: &image::RgbaImage, path: &Path) -> Result<()> {
+    write_atomically(path, |tmp| {
+        image
+            .save_with_format(tmp, image::ImageFormat::Png)
+            .with_context(|| format!("{}: cannot write PNG", path.display()))
+    })
+}
+
+pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
+    let mut scene = cmd.terrain.scene();
+    cmd.view.apply_to_scene(&mut scene)?;
+    let settings = cmd.view.settings(&scene);
+    let output = render_scene(&scene, &settings, cmd.width, cmd.height, cmd.validate)?;
+    save_png(&output.frame.rgba_image(), &cmd.out)?;
+    if let Some(path) = &cmd.stats {
+        let json = serde_json::to_string_pretty(&output.stats)?;
+        write_atomically(path, |tmp| {
+            std::fs::write(tmp, json + "\n")
+                .with_context(|| format!("{}: cannot write stats", path.display()))
+        })?;
+    }
+    let s = &output.stats;
+    let figure = |v: Option<u64>| v.map_or("n/a".to_string(), |v| v.to_string());
+    writeln!(
+        out,
+        "wrote {} ({}x{}): {} triangles, {} of {} patches in view, GPU {}, CPU {:.2} ms, {} validation messages",
+        cmd.out.display(),
+        s.width,
+        s.height,
+        figure(s.triangles),
+        s.patches_in_frustum,
+        s.patches_total,
+        s.gpu_ms.map_or("n/a".into(), |ms| format!("{ms:.2} ms")),
+        s.cpu_ms,
+        s.validation_messages,
+    )?;
+    if s.validation_messages > 0 {
+        bail!(
+            "the validation layer reported {} messages, first: {}",
+            s.validation_messages,
+            output.validation_log.first().map_or("", String::as_str)
+        );
+    }
+    Ok(())
+}
+
+/// Where the bare command writes the default scene.
+pub const DEFAULT_OUTPUT: &str = "vkterrain-default.png";
+
+/// The bare command: the default scene from its own camera, at 1280x720.
+pub fn render_default(out: &mut dyn Write) -> Result<()> {
+    writeln!(
+        out,
+        "rendering the default scene headless (see --help for the other commands)"
+    )?;
+    let cmd = RenderCmd {
+        terrain: TerrainArgs::default(),
+        view: ViewArgs::default(),
+        width: 1280,
+        height: 720,
+        out: PathBuf::from(DEFAULT_OUTPUT),
+        stats: None,
+        validate: false,
+    };
+    render(cmd, out)
+}
+
+#[derive(clap::Args, Debug)]
+pub struct InfoCmd {
+    /// Turn on the Vulkan validation layer.
+    #[arg(long)]
+    pub validate: bool,
+}
+
+#[derive(Serialize)]
+struct InfoReport<'a> {
+    device: &'a Capabilities,
+    used: Vec<&'static str>,
+    missing: Vec<&'static str>,
+    validation: bool,
+}
+
+pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
+    let gpu = Gpu::new(cmd.validate).context("starting Vulkan")?;
+    let caps = &gpu.device.caps;
+    let optional = [
+        ("fillModeNonSolid (wireframe)", caps.fill_mode_non_solid),
+        (
+            "pipelineStatisticsQuery (triangle counts)",
+            caps.pipeline_statistics_query,
+        ),
+        ("timestamps (GPU time)", caps.timestamp_period_ns.is_some()),
+    ];
+    let mut used = vec!["tessellationShader", "dynamicRendering", "synchronization2"];
+    used.extend(optional.iter().filter(|o| o.1).map(|o| o.0));
+    let missing = optional.iter().filter(|o| !o.1).map(|o| o.0).collect();
+    let report = InfoReport {
+        device: caps,
+        used,
+        missing,
+        validation: gpu.instance.validation_enabled(),
+    };
+    serde_json::to_writer_pretty(&mut *out, &report)?;
+    writeln!(out)?;
+    Ok(())
+}
+
+#[derive(clap::Args, Debug)]
+pub struct GenerateCmd {
+    /// Samples per side.
+    #[arg(long, default_value_t = GeneratorParams::default().size)]
+    pub size: usize,
+    /// Noise seed.
+    #[arg(long, default_value_t = GeneratorParams::default().seed)]
+    pub seed: u64,
+    /// Raindrops simulated by the erosion pass.
+    #[arg(long, default_value_t = GeneratorParams::default().droplets)]
+    pub droplets: u32,
+    /// Where to write the 16-bit PNG.
+    #[arg(long, value_name = "PATH")]
+    pub out: PathBuf,
+}
+
+pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
+    if !(2..=16385).contains(&cmd.size) {
+        bail!("--size {} is outside 2..=16385", cmd.size);
+    }
+    let map = generate_heightmap(&GeneratorParams {
+        size: cmd.size,
+        seed: cmd.seed,
+        droplets: cmd.droplets,
+    })?;
+    write_atomically(&cmd.out, |tmp| {
+        write_png16(&map, tmp).with_context(|| format!("{}: cannot write PNG", cmd.out.display()))
+    })?;
+    writeln!(
+        out,
+        "wrote {} ({}x{})",
+        cmd.out.display(),
+        cmd.size,
+        cmd.size
+    )?;
+    Ok(())
+}

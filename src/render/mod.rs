@@ -1,0 +1,11 @@
+//! The terrain renderer: pipelines, descriptor sets, per-frame uniforms, and
+//! draw recording into a target it is given. Knows nothing of windows.
+
+pub mod headless;
+pub mod shaders;
+pub mod tess;
+pub mod uniforms;
+
+pub use headless::{Headless, HeadlessFrame};
+pub use tess::{FrameMeasurements, TessRenderer};
+pub use uniforms::{FrameUniforms, FrameView, RenderSettings, Shading};

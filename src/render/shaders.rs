@@ -1,0 +1,12 @@
+//! SPIR-V compiled by build.rs from glsl/, embedded in the binary.
+
+macro_rules! spirv {
+    ($name:literal) => {
+        include_bytes!(concat!(env!("OUT_DIR"), "/", $name, ".spv"))
+    };
+}
+
+pub const TERRAIN_VERT: &[u8] = spirv!("terrain.vert");
+pub const TERRAIN_TESC: &[u8] = spirv!("terrain.tesc");
+pub const TERRAIN_TESE: &[u8] = spirv!("terrain.tese");
+pub const TERRAIN_FRAG: &[u8] = spirv!("terrain.frag");

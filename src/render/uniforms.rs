@@ -1,0 +1,181 @@
+//! The per-frame uniform block shared with GLSL (`Frame` in
+//! glsl/terrain_common.glsl), std140, with its layout checked at compile time.
+
+use std::mem::{offset_of, size_of};
+
+use glam::{DVec3, Mat4, Vec3, Vec4};
+
+use crate::shader_constants::{
+    LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
+};
+use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
+use crate::terrain::{DistanceLod, DistanceMode, Terrain};
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FrameUniforms {
+    pub view_proj: [[f32; 4]; 4],
+    pub frustum: [[f32; 4]; 6],
+    pub eye_local: [f32; 4],
+    pub lod: [f32; 4],
+    pub grid: [f32; 4],
+    pub spacing_size: [f32; 4],
+    pub light: [f32; 4],
+    pub height_range: [f32; 4],
+    pub modes: [u32; 4],
+}
+
+// std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
+const _: () = assert!(size_of::<FrameUniforms>() == 272);
+const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
+const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
+const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
+const _: () = assert!(offset_of!(FrameUniforms, grid) == 192);
+const _: () = assert!(offset_of!(FrameUniforms, spacing_size) == 208);
+const _: () = assert!(offset_of!(FrameUniforms, light) == 224);
+const _: () = assert!(offset_of!(FrameUniforms, height_range) == 240);
+const _: () = assert!(offset_of!(FrameUniforms, modes) == 256);
+
+/// How the fragment shader colours the terrain.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shading {
+    /// Height colours, one directional light plus ambient.
+    #[default]
+    Lit,
+    /// Colour by tessellation factor.
+    LodColors,
+    /// Constant white, unlit.
+    Flat,
+}
+
+/// What a frame looks like, apart from the camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    pub lod: DistanceLod,
+    pub lod_mode: DistanceMode,
+    pub shading: Shading,
+    pub wireframe: bool,
+    pub clear_color: [f32; 3],
+    /// GPU frustum culling of patches.
+    pub cull: bool,
+    /// Direction towards the light (normalised when used).
+    pub light_dir: Vec3,
+    pub ambient: f32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            lod: DistanceLod::default(),
+            lod_mode: DistanceMode::Smooth,
+            shading: Shading::Lit,
+            wireframe: false,
+            clear_color: [0.52, 0.68, 0.86],
+            cull: true,
+            light_dir: Vec3::new(-0.4, 0.7, 0.45),
+            ambient: 0.3,
+        }
+    }
+}
+
+/// The matrices and planes of one frame, camera-relative.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameView {
+    pub view_proj: Mat4,
+    pub frustum: Frustum,
+    /// The eye relative to the terrain's centre.
+    pub eye_local: Vec3,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl FrameView {
+    /// Near and far enclose the whole terrain, from its Y bounds.
+    pub fn new(terrain: &Terrain, camera: &Camera, aspect: f32) -> Self {
+        let info = terrain.info();
+        let origin = info.origin();
+        let (lo, hi) = terrain
+            .y_bounds()
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), b| {
+                (lo.min(b[0]), hi.max(b[1]))
+            });
+        let centre = DVec3::new(origin.x, 0.5 * f64::from(lo + hi), origin.y);
+        let half = DVec3::new(
+            0.5 * info.world_width(),
+            0.5 * f64::from(hi - lo),
+            0.5 * info.world_depth(),
+        );
+        let (near, far) = clip_planes_for_box(camera.eye, centre, half);
+        let view_proj = camera.relative_view_proj(aspect, near, far);
+        // f64 subtraction first: the eye and the origin may both be far out.
+        let eye_local = DVec3::new(
+            camera.eye.x - origin.x,
+            camera.eye.y,
+            camera.eye.z - origin.y,
+        )
+        .as_vec3();
+        FrameView {
+            view_proj,
+            frustum: Frustum::from_view_proj(view_proj),
+            eye_local,
+            near,
+            far,
+        }
+    }
+
+    /// Patches whose box is not outside the frustum: the CPU's version of
+    /// the test the control shader makes.
+    pub fn patches_in_frustum(&self, terrain: &Terrain) -> usize {
+        (0..terrain.grid().patch_count())
+            .filter(|&p| {
+                let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+                !self.frustum.aabb_outside(centre - self.eye_local, extents)
+            })
+            .count()
+    }
+}
+
+impl FrameUniforms {
+    pub fn new(terrain: &Terrain, view: &FrameView, settings: &RenderSettings) -> Self {
+        let info = terrain.info();
+        let (lo, hi) = info.heightmap().min_max();
+        let sp = info.spacing();
+        let light = settings.light_dir.try_normalize().unwrap_or(Vec3::Y);
+        let lod = settings.lod;
+        FrameUniforms {
+            view_proj: view.view_proj.to_cols_array_2d(),
+            frustum: view.frustum.planes.map(|p: Vec4| p.to_array()),
+            eye_local: view.eye_local.extend(0.0).to_array(),
+            lod: [lod.min_dist, lod.max_dist, lod.min_exp, lod.max_exp],
+            grid: [
+                info.local_x(0) as f32,
+                info.local_z(0) as f32,
+                (1.0 / sp.x) as f32,
+                (1.0 / sp.y) as f32,
+            ],
+            spacing_size: [
+                sp.x as f32,
+                sp.y as f32,
+                info.cols() as f32,
+                info.rows() as f32,
+            ],
+            light: light.extend(settings.ambient).to_array(),
+            height_range: [lo, hi, if settings.cull { 1.0 } else { 0.0 }, 0.0],
+            modes: [
+                match settings.lod_mode {
+                    DistanceMode::Smooth => LOD_MODE_SMOOTH,
+                    DistanceMode::Debug => LOD_MODE_DEBUG,
+                },
+                match settings.shading {
+                    Shading::Lit => SHADE_LIT,
+                    Shading::LodColors => SHADE_LOD_COLORS,
+                    Shading::Flat => SHADE_FLAT,
+                },
+                0,
+                0,
+            ],
+        }
+    }
+}

@@ -1,0 +1,46 @@
+// Constants shared by Rust and GLSL. `build.rs` includes this file and hands
+// every entry of `shader_defines()` to the shader compiler as a macro, so the
+// two sides cannot drift apart. Keep this file free of `use` and of anything
+// that needs the rest of the crate.
+
+/// Descriptor binding of the per-frame uniform block (set 0).
+pub const BINDING_FRAME: u32 = 0;
+/// Descriptor binding of the heightmap (set 0): R32_SFLOAT, read with texelFetch.
+pub const BINDING_HEIGHTMAP: u32 = 1;
+
+/// Smallest tessellation factor.
+pub const MIN_TESS_FACTOR: f32 = 1.0;
+/// Largest tessellation factor: the Vulkan minimum for maxTessellationGenerationLevel.
+pub const MAX_TESS_FACTOR: f32 = 64.0;
+/// log2(MAX_TESS_FACTOR).
+pub const MAX_TESS_EXPONENT: f32 = 6.0;
+
+/// LOD mode: Euclidean distance, continuous exponent.
+pub const LOD_MODE_SMOOTH: u32 = 0;
+/// LOD mode: xz max-norm distance, rounded exponent (debug view).
+pub const LOD_MODE_DEBUG: u32 = 1;
+
+/// Shading: height colours, one directional light plus ambient.
+pub const SHADE_LIT: u32 = 0;
+/// Shading: colour by tessellation factor.
+pub const SHADE_LOD_COLORS: u32 = 1;
+/// Shading: constant white, unlit (crack tests).
+pub const SHADE_FLAT: u32 = 2;
+
+/// Every constant above as (macro name, GLSL literal).
+pub fn shader_defines() -> Vec<(&'static str, String)> {
+    let uint = |v: u32| format!("{v}u");
+    let float = |v: f32| format!("{v:?}");
+    vec![
+        ("BINDING_FRAME", BINDING_FRAME.to_string()),
+        ("BINDING_HEIGHTMAP", BINDING_HEIGHTMAP.to_string()),
+        ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),
+        ("MAX_TESS_FACTOR", float(MAX_TESS_FACTOR)),
+        ("MAX_TESS_EXPONENT", float(MAX_TESS_EXPONENT)),
+        ("LOD_MODE_SMOOTH", uint(LOD_MODE_SMOOTH)),
+        ("LOD_MODE_DEBUG", uint(LOD_MODE_DEBUG)),
+        ("SHADE_LIT", uint(SHADE_LIT)),
+        ("SHADE_LOD_COLORS", uint(SHADE_LOD_COLORS)),
+        ("SHADE_FLAT", uint(SHADE_FLAT)),
+    ]
+}

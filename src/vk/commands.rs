@@ -1,0 +1,186 @@
+//! Command pools and buffers, and a recorder whose methods wrap the few
+//! commands the renderer records.
+
+use ash::vk;
+
+use super::device::Device;
+use super::error::{Result, VkResultExt};
+use super::target::TargetViews;
+
+impl Device {
+    /// A pool whose buffers can be reset one by one (one per frame in flight).
+    pub fn create_command_pool(&self, name: &str) -> Result<vk::CommandPool> {
+        let info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(self.queue_family)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: valid create info.
+        let pool = unsafe { self.raw.create_command_pool(&info, None) }
+            .context("creating a command pool")?;
+        self.set_name(pool, name);
+        Ok(pool)
+    }
+
+    pub fn allocate_command_buffers(
+        &self,
+        pool: vk::CommandPool,
+        count: u32,
+        name: &str,
+    ) -> Result<Vec<vk::CommandBuffer>> {
+        let info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(count);
+        // SAFETY: the pool belongs to this device.
+        let cmds = unsafe { self.raw.allocate_command_buffers(&info) }
+            .context("allocating command buffers")?;
+        for (i, &cmd) in cmds.iter().enumerate() {
+            self.set_name(cmd, &format!("{name}[{i}]"));
+        }
+        Ok(cmds)
+    }
+
+    /// Destroys the pool and the buffers allocated from it.
+    pub fn destroy_command_pool(&self, pool: vk::CommandPool) {
+        // SAFETY: none of its buffers is pending execution.
+        unsafe { self.raw.destroy_command_pool(pool, None) };
+    }
+
+    /// Resets `cmd` and starts recording a one-time submission.
+    pub fn begin_commands(&self, cmd: vk::CommandBuffer) -> Result<Recorder<'_>> {
+        let begin = vk::CommandBufferBeginInfo::default()
+            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+        // SAFETY: the caller has waited for the last submission of `cmd`.
+        unsafe {
+            self.raw
+                .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
+                .context("resetting a command buffer")?;
+            self.raw
+                .begin_command_buffer(cmd, &begin)
+                .context("beginning commands")?;
+        }
+        Ok(Recorder {
+            device: &self.raw,
+            cmd,
+        })
+    }
+
+    pub fn reset_fence(&self, fence: vk::Fence) -> Result<()> {
+        // SAFETY: the fence is not in use by a pending submission.
+        unsafe { self.raw.reset_fences(&[fence]) }.context("resetting a fence")
+    }
+
+    pub fn wait_fence(&self, fence: vk::Fence) -> Result<()> {
+        // SAFETY: a fence of this device.
+        unsafe { self.raw.wait_for_fences(&[fence], true, u64::MAX) }.context("waiting for the GPU")
+    }
+
+    pub fn destroy_fence(&self, fence: vk::Fence) {
+        // SAFETY: no pending submission signals it.
+        unsafe { self.raw.destroy_fence(fence, None) };
+    }
+}
+
+/// A command buffer being recorded.
+pub struct Recorder<'a> {
+    pub device: &'a ash::Device,
+    pub cmd: vk::CommandBuffer,
+}
+
+impl Recorder<'_> {
+    pub fn finish(self) -> Result<vk::CommandBuffer> {
+        // SAFETY: recording was begun by `begin_commands`.
+        unsafe { self.device.end_command_buffer(self.cmd) }.context("ending commands")?;
+        Ok(self.cmd)
+    }
+
+    /// Starts dynamic rendering into `target`, clearing colour and depth
+    /// (to 0: reversed Z puts the far plane at 0), with a full-size viewport.
+    pub fn begin_rendering(&self, target: &TargetViews, clear_color: [f32; 3]) {
+        let color = [vk::RenderingAttachmentInfo::default()
+            .image_view(target.color_view)
+            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(vk::ClearValue {
+                color: vk::ClearColorValue {
+                    float32: [clear_color[0], clear_color[1], clear_color[2], 1.0],
+                },
+            })];
+        let depth = vk::RenderingAttachmentInfo::default()
+            .image_view(target.depth_view)
+            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .clear_value(vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 0.0,
+                    stencil: 0,
+                },
+            });
+        let area = vk::Rect2D::default().extent(target.extent);
+        let info = vk::RenderingInfo::default()
+            .render_area(area)
+            .layer_count(1)
+            .color_attachments(&color)
+            .depth_attachment(&depth);
+        let viewport = vk::Viewport {
+            x: 0.0,
+            y: 0.0,
+            width: target.extent.width as f32,
+            height: target.extent.height as f32,
+            min_depth: 0.0,
+            max_depth: 1.0,
+        };
+        // SAFETY: the target's images are in the attachment layouts named
+        // above (the target's owner transitions them).
+        unsafe {
+            self.device.cmd_begin_rendering(self.cmd, &info);
+            self.device.cmd_set_viewport(self.cmd, 0, &[viewport]);
+            self.device.cmd_set_scissor(self.cmd, 0, &[area]);
+        }
+    }
+
+    pub fn end_rendering(&self) {
+        // SAFETY: matches `begin_rendering`.
+        unsafe { self.device.cmd_end_rendering(self.cmd) };
+    }
+
+    pub fn bind_graphics(
+        &self,
+        pipeline: vk::Pipeline,
+        layout: vk::PipelineLayout,
+        set: vk::DescriptorSet,
+    ) {
+        // SAFETY: pipeline, layout and set are compatible objects of this device.
+        unsafe {
+            self.device
+                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
+            self.device.cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                layout,
+                0,
+                &[set],
+                &[],
+            );
+        }
+    }
+
+    pub fn bind_geometry(&self, vertices: vk::Buffer, indices: vk::Buffer) {
+        // SAFETY: buffers with VERTEX_BUFFER / INDEX_BUFFER usage.
+        unsafe {
+            self.device
+                .cmd_bind_vertex_buffers(self.cmd, 0, &[vertices], &[0]);
+            self.device
+                .cmd_bind_index_buffer(self.cmd, indices, 0, vk::IndexType::UINT32);
+        }
+    }
+
+    pub fn draw_indexed(&self, index_count: u32) {
+        // SAFETY: geometry and pipeline are bound, inside rendering.
+        unsafe {
+            self.device
+                .cmd_draw_indexed(self.cmd, index_count, 1, 0, 0, 0)
+        };
+    }
+}

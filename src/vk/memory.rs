@@ -1,0 +1,467 @@
+//! Buffers and images with memory from gpu-allocator, and uploads through a
+//! staging buffer. Destroying takes the resource by value, so it cannot be
+//! used or freed twice.
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::device::Device;
+use super::error::{Result, VkError, VkResultExt};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BufferDesc {
+    pub size: u64,
+    pub usage: vk::BufferUsageFlags,
+    pub location: MemoryLocation,
+}
+
+pub struct Buffer {
+    pub raw: vk::Buffer,
+    pub desc: BufferDesc,
+    allocation: Allocation,
+    name: String,
+}
+
+impl Buffer {
+    /// The mapped bytes of a host-visible buffer.
+    pub fn mapped(&self) -> Option<&[u8]> {
+        self.allocation
+            .mapped_slice()
+            .map(|s| &s[..self.desc.size as usize])
+    }
+
+    pub fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+        let size = self.desc.size as usize;
+        self.allocation.mapped_slice_mut().map(|s| &mut s[..size])
+    }
+
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ImageDesc {
+    pub extent: vk::Extent2D,
+    pub format: vk::Format,
+    pub usage: vk::ImageUsageFlags,
+    pub aspect: vk::ImageAspectFlags,
+}
+
+pub struct Image {
+    pub raw: vk::Image,
+    pub view: vk::ImageView,
+    pub desc: ImageDesc,
+    allocation: Allocation,
+    name: String,
+}
+
+impl Device {
+    fn allocate(
+        &self,
+        name: &str,
+        requirements: vk::MemoryRequirements,
+        location: MemoryLocation,
+        linear: bool,
+    ) -> Result<Allocation> {
+        let allocation = self
+            .allocator
+            .lock()
+            .expect("allocator lock")
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|source| VkError::Allocation {
+                name: name.to_string(),
+                source,
+            })?;
+        *self
+            .memory
+            .lock()
+            .expect("memory lock")
+            .entry(name.to_string())
+            .or_default() += allocation.size();
+        Ok(allocation)
+    }
+
+    fn release(&self, name: &str, allocation: Allocation) {
+        let size = allocation.size();
+        if let Some(bytes) = self.memory.lock().expect("memory lock").get_mut(name) {
+            *bytes = bytes.saturating_sub(size);
+        }
+        // A failure here means the allocation wasn't from this allocator,
+        // which by construction cannot happen; there is nothing to recover.
+        let _ = self
+            .allocator
+            .lock()
+            .expect("allocator lock")
+            .free(allocation);
+    }
+
+    /// Bytes currently allocated, per resource name (zero entries dropped).
+    pub fn memory_report(&self) -> Vec<(String, u64)> {
+        self.memory
+            .lock()
+            .expect("memory lock")
+            .iter()
+            .filter(|(_, &b)| b > 0)
+            .map(|(n, &b)| (n.clone(), b))
+            .collect()
+    }
+
+    /// Bytes currently allocated in all.
+    pub fn memory_in_use(&self) -> u64 {
+        self.memory.lock().expect("memory lock").values().sum()
+    }
+
+    pub fn create_buffer(&self, desc: BufferDesc, name: &str) -> Result<Buffer> {
+        let info = vk::BufferCreateInfo::default()
+            .size(desc.size.max(1))
+            .usage(desc.usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid create info on a live device.
+        let raw = unsafe { self.raw.create_buffer(&info, None) }.context("creating a buffer")?;
+        // SAFETY: `raw` was just created from this device.
+        let requirements = unsafe { self.raw.get_buffer_memory_requirements(raw) };
+        let allocation = match self.allocate(name, requirements, desc.location, true) {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: unused buffer of this device.
+                unsafe { self.raw.destroy_buffer(raw, None) };
+                return Err(e);
+            }
+        };
+        // SAFETY: memory and offset come from the allocator for these requirements.
+        unsafe {
+            self.raw
+                .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
+        }
+        .context("binding buffer memory")?;
+        self.set_name(raw, name);
+        Ok(Buffer {
+            raw,
+            desc,
+            allocation,
+            name: name.to_string(),
+        })
+    }
+
+    pub fn destroy_buffer(&self, buffer: Buffer) {
+        // SAFETY: the caller guarantees the GPU no longer uses the buffer.
+        unsafe { self.raw.destroy_buffer(buffer.raw, None) };
+        self.release(&buffer.name, buffer.allocation);
+    }
+
+    /// A host-visible buffer filled with `bytes`.
+    pub fn create_host_buffer(
+        &self,
+        name: &str,
+        usage: vk::BufferUsageFlags,
+        bytes: &[u8],
+    ) -> Result<Buffer> {
+        let mut buffer = self.create_buffer(
+            BufferDesc {
+                size: bytes.len() as u64,
+                usage,
+                location: MemoryLocation::CpuToGpu,
+            },
+            name,
+        )?;
+        buffer
+            .mapped_mut()
+            .ok_or_else(|| {
+                VkError::Unsupported(format!("{name}: host-visible memory is not mapped"))
+            })?
+            .copy_from_slice(bytes);
+        Ok(buffer)
+    }
+
+    /// A device-local buffer with `bytes` copied in through a staging buffer.
+    pub fn upload_buffer(
+        &self,
+        name: &str,
+        usage: vk::BufferUsageFlags,
+        bytes: &[u8],
+    ) -> Result<Buffer> {
+        let staging = self.create_host_buffer(
+            &format!("{name}.staging"),
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            bytes,
+        )?;
+        let buffer = self.create_buffer(
+            BufferDesc {
+                size: bytes.len() as u64,
+                usage: usage | vk::BufferUsageFlags::TRANSFER_DST,
+                location: MemoryLocation::GpuOnly,
+            },
+            name,
+        )?;
+        let copied = self.one_shot(&format!("{name}.upload"), |cmd| {
+            let region = vk::BufferCopy::default().size(bytes.len() as u64);
+            // SAFETY: both buffers are large enough and not in use elsewhere.
+            unsafe {
+                self.raw
+                    .cmd_copy_buffer(cmd, staging.raw, buffer.raw, &[region])
+            };
+        });
+        self.destroy_buffer(staging);
+        copied.map(|_| buffer)
+    }
+
+    pub fn create_image(&self, desc: ImageDesc, name: &str) -> Result<Image> {
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(desc.format)
+            .extent(vk::Extent3D {
+                width: desc.extent.width,
+                height: desc.extent.height,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(desc.usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: valid create info.
+        let raw = unsafe { self.raw.create_image(&info, None) }.context("creating an image")?;
+        // SAFETY: `raw` was just created from this device.
+        let requirements = unsafe { self.raw.get_image_memory_requirements(raw) };
+        let allocation = match self.allocate(name, requirements, MemoryLocation::GpuOnly, false) {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: unused image of this device.
+                unsafe { self.raw.destroy_image(raw, None) };
+                return Err(e);
+            }
+        };
+        // SAFETY: memory from the allocator for these requirements.
+        unsafe {
+            self.raw
+                .bind_image_memory(raw, allocation.memory(), allocation.offset())
+        }
+        .context("binding image memory")?;
+        let view_info = vk::ImageViewCreateInfo::default()
+            .image(raw)
+            .view_type(vk::ImageViewType::TYPE_2D)
+            .format(desc.format)
+            .subresource_range(subresource_range(desc.aspect));
+        // SAFETY: the view matches the image's format and aspect.
+        let view = unsafe { self.raw.create_image_view(&view_info, None) }
+            .context("creating an image view")?;
+        self.set_name(raw, name);
+        self.set_name(view, &format!("{name}.view"));
+        Ok(Image {
+            raw,
+            view,
+            desc,
+            allocation,
+            name: name.to_string(),
+        })
+    }
+
+    pub fn destroy_image(&self, image: Image) {
+        // SAFETY: the caller guarantees the GPU no longer uses the image.
+        unsafe {
+            self.raw.destroy_image_view(image.view, None);
+            self.raw.destroy_image(image.raw, None);
+        }
+        self.release(&image.name, image.allocation);
+    }
+
+    /// Records `record` into a fresh command buffer, submits it and waits.
+    pub fn one_shot(&self, name: &str, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+        let info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.transient_pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool belongs to this device and is used from one thread.
+        let cmd = unsafe { self.raw.allocate_command_buffers(&info) }
+            .context("allocating a command buffer")?[0];
+        self.set_name(cmd, name);
+        let fence = self.create_fence(&format!("{name}.fence"), false)?;
+        let result = (|| {
+            let begin = vk::CommandBufferBeginInfo::default()
+                .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+            // SAFETY: a freshly allocated command buffer.
+            unsafe { self.raw.begin_command_buffer(cmd, &begin) }.context("beginning commands")?;
+            record(cmd);
+            // SAFETY: recording was begun above.
+            unsafe { self.raw.end_command_buffer(cmd) }.context("ending commands")?;
+            self.submit_and_wait(cmd, fence)
+        })();
+        // SAFETY: the submission finished (or never started), so both are idle.
+        unsafe {
+            self.raw.destroy_fence(fence, None);
+            self.raw.free_command_buffers(self.transient_pool, &[cmd]);
+        }
+        result
+    }
+
+    /// Submits one command buffer and blocks until it completes.
+    pub fn submit_and_wait(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
+        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
+        let submit = vk::SubmitInfo2::default().command_buffer_infos(&cmds);
+        // SAFETY: the command buffer is fully recorded; the fence is unsignalled.
+        unsafe {
+            self.raw
+                .queue_submit2(self.queue, &[submit], fence)
+                .context("submitting commands")?;
+            self.raw
+                .wait_for_fences(&[fence], true, u64::MAX)
+                .context("waiting for the GPU")
+        }
+    }
+
+    pub fn create_fence(&self, name: &str, signalled: bool) -> Result<vk::Fence> {
+        let flags = if signalled {
+            vk::FenceCreateFlags::SIGNALED
+        } else {
+            vk::FenceCreateFlags::empty()
+        };
+        // SAFETY: valid create info.
+        let fence = unsafe {
+            self.raw
+                .create_fence(&vk::FenceCreateInfo::default().flags(flags), None)
+        }
+        .context("creating a fence")?;
+        self.set_name(fence, name);
+        Ok(fence)
+    }
+}
+
+pub fn subresource_range(aspect: vk::ImageAspectFlags) -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange::default()
+        .aspect_mask(aspect)
+        .level_count(1)
+        .layer_count(1)
+}
+
+/// One image layout transition with synchronization2 scopes.
+#[derive(Clone, Copy, Debug)]
+pub struct Transition {
+    pub image: vk::Image,
+    pub aspect: vk::ImageAspectFlags,
+    pub from: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2),
+    pub to: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2),
+}
+
+/// Records a batch of image transitions as one barrier.
+pub fn transition_images(device: &ash::Device, cmd: vk::CommandBuffer, transitions: &[Transition]) {
+    let barriers: Vec<vk::ImageMemoryBarrier2> = transitions
+        .iter()
+        .map(|t| {
+            vk::ImageMemoryBarrier2::default()
+                .image(t.image)
+                .subresource_range(subresource_range(t.aspect))
+                .old_layout(t.from.0)
+                .src_stage_mask(t.from.1)
+                .src_access_mask(t.from.2)
+                .new_layout(t.to.0)
+                .dst_stage_mask(t.to.1)
+                .dst_access_mask(t.to.2)
+        })
+        .collect();
+    let dependency = vk::DependencyInfo::default().image_memory_barriers(&barriers);
+    // SAFETY: the images belong to `device` and `cmd` is recording.
+    unsafe { device.cmd_pipeline_barrier2(cmd, &dependency) };
+}
+
+impl Device {
+    /// A sampled R32_SFLOAT image holding `texels` (row-major, `width`
+    /// per row), uploaded through a staging buffer and left in
+    /// SHADER_READ_ONLY_OPTIMAL for vertex to fragment stages.
+    pub fn upload_r32f_image(
+        &self,
+        name: &str,
+        width: u32,
+        height: u32,
+        texels: &[f32],
+    ) -> Result<Image> {
+        let image = self.create_image(
+            ImageDesc {
+                extent: vk::Extent2D { width, height },
+                format: vk::Format::R32_SFLOAT,
+                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+                aspect: vk::ImageAspectFlags::COLOR,
+            },
+            name,
+        )?;
+        let staging = self.create_host_buffer(
+            &format!("{name}.staging"),
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            bytemuck::cast_slice(texels),
+        )?;
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        let uploaded = self.one_shot(&format!("{name}.upload"), |cmd| {
+            transition_images(
+                &self.raw,
+                cmd,
+                &[Transition {
+                    image: image.raw,
+                    aspect: vk::ImageAspectFlags::COLOR,
+                    from: (L::UNDEFINED, S::NONE, A::NONE),
+                    to: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
+                }],
+            );
+            let region = vk::BufferImageCopy::default()
+                .image_subresource(
+                    vk::ImageSubresourceLayers::default()
+                        .aspect_mask(vk::ImageAspectFlags::COLOR)
+                        .layer_count(1),
+                )
+                .image_extent(vk::Extent3D {
+                    width,
+                    height,
+                    depth: 1,
+                });
+            // SAFETY: the staging buffer holds width * height floats.
+            unsafe {
+                self.raw.cmd_copy_buffer_to_image(
+                    cmd,
+                    staging.raw,
+                    image.raw,
+                    L::TRANSFER_DST_OPTIMAL,
+                    &[region],
+                )
+            };
+            transition_images(
+                &self.raw,
+                cmd,
+                &[Transition {
+                    image: image.raw,
+                    aspect: vk::ImageAspectFlags::COLOR,
+                    from: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
+                    to: (
+                        L::SHADER_READ_ONLY_OPTIMAL,
+                        S::ALL_GRAPHICS,
+                        A::SHADER_SAMPLED_READ,
+                    ),
+                }],
+            );
+        });
+        self.destroy_buffer(staging);
+        match uploaded {
+            Ok(()) => Ok(image),
+            Err(e) => {
+                self.destroy_image(image);
+                Err(e)
+            }
+        }
+    }
+
+    /// Submits one recorded command buffer; `fence` signals when it is done.
+    pub fn submit(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
+        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
+        let submit = vk::SubmitInfo2::default().command_buffer_infos(&cmds);
+        // SAFETY: `cmd` is fully recorded and `fence` unsignalled.
+        unsafe { self.raw.queue_submit2(self.queue, &[submit], fence) }
+            .context("submitting commands")
+    }
+}

@@ -1,0 +1,54 @@
+//! Vulkan plumbing over ash: instance, device, memory, shaders, queries,
+//! render targets. Nothing here knows about terrains. All `unsafe` of the
+//! crate lives in this module.
+
+pub mod commands;
+pub mod debug;
+pub mod descriptors;
+pub mod device;
+pub mod error;
+pub mod instance;
+pub mod memory;
+pub mod pipeline;
+pub mod queries;
+pub mod shader;
+pub mod target;
+
+pub use device::{Capabilities, Device};
+pub use error::{Result, VkError};
+pub use instance::Instance;
+
+/// Environment variable that turns validation on for any command.
+pub const VALIDATE_ENV: &str = "VKTERRAIN_VALIDATE";
+
+/// The instance and device, torn down in the right order: wait for the GPU,
+/// then the device (which frees its allocator), then the instance (whose
+/// messenger goes last). Fields drop in declaration order.
+pub struct Gpu {
+    pub device: Device,
+    pub instance: Instance,
+}
+
+impl Gpu {
+    /// `validate`: VK_LAYER_KHRONOS_validation with synchronization
+    /// validation (also on when VKTERRAIN_VALIDATE=1).
+    pub fn new(validate: bool) -> Result<Self> {
+        let validate = validate || std::env::var(VALIDATE_ENV).is_ok_and(|v| v == "1");
+        let instance = Instance::new(validate, &[])?;
+        let device = Device::new(&instance, &[])?;
+        Ok(Gpu { device, instance })
+    }
+
+    /// Validation warnings and errors so far.
+    pub fn validation_messages(&self) -> u32 {
+        self.instance.validation_log().count()
+    }
+}
+
+impl Drop for Gpu {
+    fn drop(&mut self) {
+        // Nothing may be in flight when the device goes; an error here
+        // (device lost) leaves nothing better to do than tear down anyway.
+        let _ = self.device.wait_idle();
+    }
+}

@@ -1,0 +1,153 @@
+//! Graphics pipelines for dynamic rendering, and pipeline layouts.
+
+use ash::vk;
+
+use super::device::Device;
+use super::error::{Result, VkResultExt};
+
+/// Everything that varies between our graphics pipelines.
+#[derive(Clone, Debug)]
+pub struct GraphicsPipelineDesc<'a> {
+    pub name: &'a str,
+    /// Stage and SPIR-V of each shader.
+    pub stages: &'a [(vk::ShaderStageFlags, &'a [u8])],
+    pub vertex_stride: u32,
+    /// (location, format, offset) of each vertex attribute.
+    pub vertex_attributes: &'a [(u32, vk::Format, u32)],
+    pub topology: vk::PrimitiveTopology,
+    /// Control points per patch; 0 for pipelines without tessellation.
+    pub patch_control_points: u32,
+    pub polygon_mode: vk::PolygonMode,
+    pub color_format: vk::Format,
+    pub depth_format: vk::Format,
+    pub depth_compare: vk::CompareOp,
+    pub layout: vk::PipelineLayout,
+}
+
+impl Device {
+    pub fn create_pipeline_layout(
+        &self,
+        set_layouts: &[vk::DescriptorSetLayout],
+        name: &str,
+    ) -> Result<vk::PipelineLayout> {
+        let info = vk::PipelineLayoutCreateInfo::default().set_layouts(set_layouts);
+        // SAFETY: the set layouts belong to this device.
+        let layout = unsafe { self.raw.create_pipeline_layout(&info, None) }
+            .context("creating a pipeline layout")?;
+        self.set_name(layout, name);
+        Ok(layout)
+    }
+
+    pub fn destroy_pipeline_layout(&self, layout: vk::PipelineLayout) {
+        // SAFETY: no pipeline built on it is in use.
+        unsafe { self.raw.destroy_pipeline_layout(layout, None) };
+    }
+
+    /// A graphics pipeline with dynamic viewport and scissor, no blending,
+    /// depth test and write, and no face culling.
+    pub fn create_graphics_pipeline(&self, desc: &GraphicsPipelineDesc) -> Result<vk::Pipeline> {
+        let mut modules = Vec::with_capacity(desc.stages.len());
+        for (stage, spirv) in desc.stages {
+            match self.create_shader_module(spirv, &format!("{}.{stage:?}", desc.name)) {
+                Ok(m) => modules.push((*stage, m)),
+                Err(e) => {
+                    self.destroy_modules(&modules);
+                    return Err(e);
+                }
+            }
+        }
+        let stages: Vec<vk::PipelineShaderStageCreateInfo> = modules
+            .iter()
+            .map(|&(stage, module)| {
+                vk::PipelineShaderStageCreateInfo::default()
+                    .stage(stage)
+                    .module(module)
+                    .name(c"main")
+            })
+            .collect();
+        let bindings = [vk::VertexInputBindingDescription::default()
+            .binding(0)
+            .stride(desc.vertex_stride)
+            .input_rate(vk::VertexInputRate::VERTEX)];
+        let attributes: Vec<vk::VertexInputAttributeDescription> = desc
+            .vertex_attributes
+            .iter()
+            .map(|&(location, format, offset)| {
+                vk::VertexInputAttributeDescription::default()
+                    .location(location)
+                    .binding(0)
+                    .format(format)
+                    .offset(offset)
+            })
+            .collect();
+        let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
+            .vertex_binding_descriptions(&bindings)
+            .vertex_attribute_descriptions(&attributes);
+        let input_assembly =
+            vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);
+        let tessellation = vk::PipelineTessellationStateCreateInfo::default()
+            .patch_control_points(desc.patch_control_points);
+        let viewport = vk::PipelineViewportStateCreateInfo::default()
+            .viewport_count(1)
+            .scissor_count(1);
+        let raster = vk::PipelineRasterizationStateCreateInfo::default()
+            .polygon_mode(desc.polygon_mode)
+            .cull_mode(vk::CullModeFlags::NONE)
+            .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
+            .line_width(1.0);
+        let multisample = vk::PipelineMultisampleStateCreateInfo::default()
+            .rasterization_samples(vk::SampleCountFlags::TYPE_1);
+        let depth = vk::PipelineDepthStencilStateCreateInfo::default()
+            .depth_test_enable(true)
+            .depth_write_enable(true)
+            .depth_compare_op(desc.depth_compare);
+        let attachments = [vk::PipelineColorBlendAttachmentState::default()
+            .color_write_mask(vk::ColorComponentFlags::RGBA)];
+        let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&attachments);
+        let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
+        let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);
+        let color_formats = [desc.color_format];
+        let mut rendering = vk::PipelineRenderingCreateInfo::default()
+            .color_attachment_formats(&color_formats)
+            .depth_attachment_format(desc.depth_format);
+        let mut info = vk::GraphicsPipelineCreateInfo::default()
+            .stages(&stages)
+            .vertex_input_state(&vertex_input)
+            .input_assembly_state(&input_assembly)
+            .viewport_state(&viewport)
+            .rasterization_state(&raster)
+            .multisample_state(&multisample)
+            .depth_stencil_state(&depth)
+            .color_blend_state(&blend)
+            .dynamic_state(&dynamic)
+            .layout(desc.layout)
+            .push_next(&mut rendering);
+        if desc.patch_control_points > 0 {
+            info = info.tessellation_state(&tessellation);
+        }
+        // SAFETY: all state structs are locals alive for the call; modules
+        // and layout belong to this device.
+        let created = unsafe {
+            self.raw
+                .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
+        };
+        self.destroy_modules(&modules);
+        let pipeline = created
+            .map_err(|(_, r)| r)
+            .context("creating a graphics pipeline")?[0];
+        self.set_name(pipeline, desc.name);
+        Ok(pipeline)
+    }
+
+    fn destroy_modules(&self, modules: &[(vk::ShaderStageFlags, vk::ShaderModule)]) {
+        for &(_, module) in modules {
+            // SAFETY: modules are only needed during pipeline creation.
+            unsafe { self.raw.destroy_shader_module(module, None) };
+        }
+    }
+
+    pub fn destroy_pipeline(&self, pipeline: vk::Pipeline) {
+        // SAFETY: the caller guarantees it is no longer in use.
+        unsafe { self.raw.destroy_pipeline(pipeline, None) };
+    }
+}

@@ -1,0 +1,278 @@
+//! Render targets: what a renderer draws into. An offscreen target owns its
+//! images and reads them back; a swapchain hands out the same views.
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::device::Device;
+use super::error::{Result, VkError};
+use super::instance::Instance;
+use super::memory::{transition_images, Buffer, BufferDesc, Image, ImageDesc, Transition};
+
+/// Colour format of offscreen targets: sRGB, like a swapchain, so shaders
+/// write linear values and the PNG holds encoded ones.
+pub const OFFSCREEN_COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
+/// Depth format: 32-bit float, used with reversed Z (1 near, 0 far).
+pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+
+/// The images a frame is drawn into, in COLOR_ATTACHMENT_OPTIMAL and
+/// DEPTH_ATTACHMENT_OPTIMAL when the renderer records.
+#[derive(Clone, Copy, Debug)]
+pub struct TargetViews {
+    pub extent: vk::Extent2D,
+    pub color_image: vk::Image,
+    pub color_view: vk::ImageView,
+    pub color_format: vk::Format,
+    pub depth_image: vk::Image,
+    pub depth_view: vk::ImageView,
+    pub depth_format: vk::Format,
+}
+
+/// What a target read back: sRGB RGBA8 pixels and depth, row-major, top row
+/// first.
+pub struct Readback {
+    pub width: u32,
+    pub height: u32,
+    pub rgba: Vec<u8>,
+    pub depth: Vec<f32>,
+}
+
+fn require(
+    device: &Device,
+    instance: &Instance,
+    format: vk::Format,
+    needed: vk::FormatFeatureFlags,
+    what: &str,
+) -> Result<()> {
+    let has = device.format_features(instance, format);
+    if has.contains(needed) {
+        Ok(())
+    } else {
+        Err(VkError::Unsupported(format!(
+            "{} does not support {format:?} as {what} (needs {needed:?}, has {has:?})",
+            device.caps.device_name
+        )))
+    }
+}
+
+/// Checks the depth format once for every kind of target.
+pub fn check_depth_format(device: &Device, instance: &Instance) -> Result<()> {
+    require(
+        device,
+        instance,
+        DEPTH_FORMAT,
+        vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT,
+        "a depth attachment",
+    )
+}
+
+pub struct OffscreenTarget {
+    color: Image,
+    depth: Image,
+    color_readback: Buffer,
+    depth_readback: Buffer,
+}
+
+impl OffscreenTarget {
+    pub fn new(device: &Device, instance: &Instance, width: u32, height: u32) -> Result<Self> {
+        if width == 0 || height == 0 {
+            return Err(VkError::Unsupported(format!(
+                "target size {width}x{height} has no pixels"
+            )));
+        }
+        require(
+            device,
+            instance,
+            OFFSCREEN_COLOR_FORMAT,
+            vk::FormatFeatureFlags::COLOR_ATTACHMENT | vk::FormatFeatureFlags::TRANSFER_SRC,
+            "a colour attachment read back by copy",
+        )?;
+        check_depth_format(device, instance)?;
+        require(
+            device,
+            instance,
+            DEPTH_FORMAT,
+            vk::FormatFeatureFlags::TRANSFER_SRC,
+            "a copy source",
+        )?;
+        let extent = vk::Extent2D { width, height };
+        let color = device.create_image(
+            ImageDesc {
+                extent,
+                format: OFFSCREEN_COLOR_FORMAT,
+                usage: vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                aspect: vk::ImageAspectFlags::COLOR,
+            },
+            "offscreen.color",
+        )?;
+        let depth = device.create_image(
+            ImageDesc {
+                extent,
+                format: DEPTH_FORMAT,
+                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT
+                    | vk::ImageUsageFlags::TRANSFER_SRC,
+                aspect: vk::ImageAspectFlags::DEPTH,
+            },
+            "offscreen.depth",
+        )?;
+        let pixels = u64::from(width) * u64::from(height);
+        let readback = |name: &str| {
+            device.create_buffer(
+                BufferDesc {
+                    size: pixels * 4,
+                    usage: vk::BufferUsageFlags::TRANSFER_DST,
+                    location: MemoryLocation::GpuToCpu,
+                },
+                name,
+            )
+        };
+        Ok(OffscreenTarget {
+            color,
+            depth,
+            color_readback: readback("offscreen.color_readback")?,
+            depth_readback: readback("offscreen.depth_readback")?,
+        })
+    }
+
+    pub fn views(&self) -> TargetViews {
+        TargetViews {
+            extent: self.color.desc.extent,
+            color_image: self.color.raw,
+            color_view: self.color.view,
+            color_format: self.color.desc.format,
+            depth_image: self.depth.raw,
+            depth_view: self.depth.view,
+            depth_format: self.depth.desc.format,
+        }
+    }
+
+    /// Makes both images attachments; earlier contents are discarded.
+    pub fn record_begin(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        transition_images(
+            device,
+            cmd,
+            &[
+                Transition {
+                    image: self.color.raw,
+                    aspect: vk::ImageAspectFlags::COLOR,
+                    // A previous frame's copy must finish before we overwrite.
+                    from: (L::UNDEFINED, S::COPY, A::NONE),
+                    to: (
+                        L::COLOR_ATTACHMENT_OPTIMAL,
+                        S::COLOR_ATTACHMENT_OUTPUT,
+                        A::COLOR_ATTACHMENT_WRITE,
+                    ),
+                },
+                Transition {
+                    image: self.depth.raw,
+                    aspect: vk::ImageAspectFlags::DEPTH,
+                    from: (L::UNDEFINED, S::COPY, A::NONE),
+                    to: (
+                        L::DEPTH_ATTACHMENT_OPTIMAL,
+                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                        A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                    ),
+                },
+            ],
+        );
+    }
+
+    /// Copies both images into host-visible buffers after drawing.
+    pub fn record_readback(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        transition_images(
+            device,
+            cmd,
+            &[
+                Transition {
+                    image: self.color.raw,
+                    aspect: vk::ImageAspectFlags::COLOR,
+                    from: (
+                        L::COLOR_ATTACHMENT_OPTIMAL,
+                        S::COLOR_ATTACHMENT_OUTPUT,
+                        A::COLOR_ATTACHMENT_WRITE,
+                    ),
+                    to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
+                },
+                Transition {
+                    image: self.depth.raw,
+                    aspect: vk::ImageAspectFlags::DEPTH,
+                    from: (
+                        L::DEPTH_ATTACHMENT_OPTIMAL,
+                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                        A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                    ),
+                    to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
+                },
+            ],
+        );
+        let extent = self.color.desc.extent;
+        let copy = |aspect| {
+            vk::BufferImageCopy::default()
+                .image_subresource(
+                    vk::ImageSubresourceLayers::default()
+                        .aspect_mask(aspect)
+                        .layer_count(1),
+                )
+                .image_extent(vk::Extent3D {
+                    width: extent.width,
+                    height: extent.height,
+                    depth: 1,
+                })
+        };
+        // SAFETY: images are in TRANSFER_SRC_OPTIMAL and the buffers hold
+        // width * height * 4 bytes.
+        unsafe {
+            device.cmd_copy_image_to_buffer(
+                cmd,
+                self.color.raw,
+                L::TRANSFER_SRC_OPTIMAL,
+                self.color_readback.raw,
+                &[copy(vk::ImageAspectFlags::COLOR)],
+            );
+            device.cmd_copy_image_to_buffer(
+                cmd,
+                self.depth.raw,
+                L::TRANSFER_SRC_OPTIMAL,
+                self.depth_readback.raw,
+                &[copy(vk::ImageAspectFlags::DEPTH)],
+            );
+        }
+        // Make the copies visible to the host reads after the fence.
+        let barrier = [vk::MemoryBarrier2::default()
+            .src_stage_mask(S::COPY)
+            .src_access_mask(A::TRANSFER_WRITE)
+            .dst_stage_mask(S::HOST)
+            .dst_access_mask(A::HOST_READ)];
+        // SAFETY: `cmd` is recording.
+        unsafe {
+            device.cmd_pipeline_barrier2(
+                cmd,
+                &vk::DependencyInfo::default().memory_barriers(&barrier),
+            )
+        };
+    }
+
+    /// The pixels and depth of the last completed `record_readback`.
+    pub fn read(&self) -> Result<Readback> {
+        let extent = self.color.desc.extent;
+        let unmapped = || VkError::Unsupported("readback memory is not host-mapped".into());
+        let rgba = self.color_readback.mapped().ok_or_else(unmapped)?.to_vec();
+        let depth =
+            bytemuck::pod_collect_to_vec(self.depth_readback.mapped().ok_or_else(unmapped)?);
+        Ok(Readback {
+            width: extent.width,
+            height: extent.height,
+            rgba,
+            depth,
+        })
+    }
+
+    pub fn destroy(self, device: &Device) {
+        device.destroy_image(self.color);
+        device.destroy_image(self.depth);
+        device.destroy_buffer(self.color_readback);
+        device.destroy_buffer(self.depth_readback);
+    }
+}

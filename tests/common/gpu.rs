@@ -1,0 +1,228 @@
+//! GPU test harness: validation always on, any message fails the test, and
+//! no device is a failure unless VKTERRAIN_SKIP_GPU=1 says to skip.
+
+use std::path::PathBuf;
+
+use glam::{DVec3, Vec4};
+use vkterrain::render::{Headless, HeadlessFrame, RenderSettings, TessRenderer};
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::Terrain;
+use vkterrain::vk::target::OFFSCREEN_COLOR_FORMAT;
+use vkterrain::vk::Gpu;
+
+/// True when the environment explicitly asks to skip GPU tests. The test
+/// then returns early and says so; without the variable a missing device
+/// fails the test.
+pub fn skip_gpu() -> bool {
+    let skip = std::env::var("VKTERRAIN_SKIP_GPU").as_deref() == Ok("1");
+    if skip {
+        eprintln!("VKTERRAIN_SKIP_GPU=1: skipping a GPU test");
+    }
+    skip
+}
+
+/// A terrain on the GPU with an offscreen target.
+pub struct GpuScene {
+    pub gpu: Gpu,
+    pub terrain: Terrain,
+    renderer: Option<TessRenderer>,
+    headless: Option<Headless>,
+}
+
+impl GpuScene {
+    pub fn new(terrain: Terrain, width: u32, height: u32, wireframe: bool) -> Self {
+        let gpu = Gpu::new(true).expect(
+            "GPU tests need a Vulkan device with tessellation and the validation layer \
+             (apt-get install mesa-vulkan-drivers vulkan-validationlayers); set VKTERRAIN_SKIP_GPU=1 to skip",
+        );
+        let renderer = TessRenderer::new(&gpu, &terrain, OFFSCREEN_COLOR_FORMAT, 1, wireframe)
+            .expect("renderer");
+        let headless = Headless::new(&gpu, width, height).expect("offscreen target");
+        GpuScene {
+            gpu,
+            terrain,
+            renderer: Some(renderer),
+            headless: Some(headless),
+        }
+    }
+
+    pub fn render(&mut self, camera: &Camera, settings: &RenderSettings) -> HeadlessFrame {
+        let frame = self
+            .headless
+            .as_mut()
+            .unwrap()
+            .render(
+                &self.gpu,
+                self.renderer.as_mut().unwrap(),
+                &self.terrain,
+                camera,
+                settings,
+            )
+            .expect("render");
+        self.assert_clean("rendering");
+        frame
+    }
+
+    pub fn assert_clean(&self, when: &str) {
+        let log = self.gpu.instance.validation_log();
+        assert_eq!(
+            log.count(),
+            0,
+            "validation messages while {when}: {:#?}",
+            log.messages()
+        );
+    }
+
+    /// Tears down in order and checks that teardown was clean too.
+    pub fn finish(mut self) {
+        self.headless.take().unwrap().destroy(&self.gpu);
+        self.renderer.take().unwrap().destroy(&self.gpu.device);
+        assert_eq!(
+            self.gpu.device.memory_in_use(),
+            0,
+            "GPU memory left allocated"
+        );
+        self.assert_clean("tearing down");
+    }
+}
+
+pub fn camera(eye: [f64; 3], target: [f64; 3], fov: f32) -> Camera {
+    Camera {
+        eye: DVec3::from(eye),
+        target: DVec3::from(target),
+        fov_y_deg: fov,
+    }
+}
+
+/// World position seen at each pixel centre, from the depth buffer; None
+/// where the pixel shows the background (depth 0 with reversed Z).
+pub fn world_positions(frame: &HeadlessFrame, camera: &Camera) -> Vec<Option<DVec3>> {
+    let (w, h) = (
+        frame.readback.width as usize,
+        frame.readback.height as usize,
+    );
+    let inverse = frame.view.view_proj.as_dmat4().inverse();
+    frame
+        .readback
+        .depth
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| {
+            if d <= 0.0 {
+                return None;
+            }
+            let (px, py) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+            let ndc = Vec4::new(
+                (px / w as f64 * 2.0 - 1.0) as f32,
+                (py / h as f64 * 2.0 - 1.0) as f32,
+                d,
+                1.0,
+            )
+            .as_dvec4();
+            let p = inverse * ndc;
+            Some(camera.eye + p.truncate() / p.w)
+        })
+        .collect()
+}
+
+/// Pixels of background colour not connected to the image border through
+/// other background pixels: holes inside the terrain's outline.
+pub fn enclosed_background(
+    rgba: &[u8],
+    width: usize,
+    height: usize,
+    is_background: impl Fn(&[u8]) -> bool,
+) -> Vec<(usize, usize)> {
+    let bg: Vec<bool> = rgba.chunks_exact(4).map(&is_background).collect();
+    let mut outside = vec![false; bg.len()];
+    let mut stack: Vec<usize> = Vec::new();
+    for x in 0..width {
+        stack.push(x);
+        stack.push((height - 1) * width + x);
+    }
+    for y in 0..height {
+        stack.push(y * width);
+        stack.push(y * width + width - 1);
+    }
+    while let Some(i) = stack.pop() {
+        if outside[i] || !bg[i] {
+            continue;
+        }
+        outside[i] = true;
+        let (x, y) = (i % width, i / width);
+        if x > 0 {
+            stack.push(i - 1);
+        }
+        if x + 1 < width {
+            stack.push(i + 1);
+        }
+        if y > 0 {
+            stack.push(i - width);
+        }
+        if y + 1 < height {
+            stack.push(i + width);
+        }
+    }
+    (0..bg.len())
+        .filter(|&i| bg[i] && !outside[i])
+        .map(|i| (i % width, i / width))
+        .collect()
+}
+
+/// Compares against tests/golden/NAME.png: a pixel differs when any
+/// channel differs by more than `channel_tolerance`; at most
+/// `max_differing_fraction` of pixels may differ. On mismatch writes
+/// NAME-actual.png and NAME-difference.png next to the golden. With
+/// VKTERRAIN_BLESS=1 the golden is (re)written instead.
+pub fn assert_golden(
+    name: &str,
+    image: &image::RgbaImage,
+    channel_tolerance: u8,
+    max_differing_fraction: f64,
+) {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
+    let golden_path = dir.join(format!("{name}.png"));
+    if std::env::var("VKTERRAIN_BLESS").as_deref() == Ok("1") {
+        image.save(&golden_path).expect("write golden");
+        eprintln!("blessed {}", golden_path.display());
+        return;
+    }
+    let golden = image::open(&golden_path)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (VKTERRAIN_BLESS=1 writes it)",
+                golden_path.display()
+            )
+        })
+        .to_rgba8();
+    assert_eq!(
+        golden.dimensions(),
+        image.dimensions(),
+        "{name}: size differs from the golden image"
+    );
+    let mut difference = image::RgbaImage::new(image.width(), image.height());
+    let mut differing = 0usize;
+    for (x, y, a) in image.enumerate_pixels() {
+        let b = golden.get_pixel(x, y);
+        let worst = (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap();
+        if worst > channel_tolerance {
+            differing += 1;
+        }
+        let v = worst.saturating_mul(4);
+        difference.put_pixel(x, y, image::Rgba([v, v, v, 255]));
+    }
+    let fraction = differing as f64 / (image.width() * image.height()) as f64;
+    if fraction > max_differing_fraction {
+        let actual = dir.join(format!("{name}-actual.png"));
+        let diff = dir.join(format!("{name}-difference.png"));
+        image.save(&actual).unwrap();
+        difference.save(&diff).unwrap();
+        panic!(
+            "{name}: {:.3}% of pixels differ by more than {channel_tolerance} (allowed {:.3}%); wrote {} and {}",
+            fraction * 100.0,
+            max_differing_fraction * 100.0,
+            actual.display(),
+            diff.display()
+        );
+    }
+}

@@ -1,0 +1,69 @@
+//! Helpers shared by the integration tests.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec2;
+use vkterrain::terrain::{Heightmap, LoadOptions, TerrainInfo};
+
+pub const DEM_WIDTH: usize = 403;
+pub const DEM_DEPTH: usize = 344;
+pub const DEM_SPACING: DVec2 = DVec2::new(74.48, 92.15);
+
+pub fn data_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// The Jacksboro DEM in metres (scale 65535 undoes the v / 65535 mapping).
+pub fn dem(file: &str, size: Option<(u64, u64)>) -> Heightmap {
+    let opts = LoadOptions {
+        size,
+        height_scale: 65535.0,
+        ..LoadOptions::default()
+    };
+    Heightmap::load(&data_path(file), &opts).expect("the DEM loads")
+}
+
+pub fn dem_info(cells_per_patch: u32) -> TerrainInfo {
+    TerrainInfo::new(
+        dem("jacksboro_fault_dem.png", None),
+        DEM_SPACING,
+        cells_per_patch,
+        DVec2::ZERO,
+    )
+    .expect("valid terrain parameters")
+}
+
+/// A deterministic pseudo-random heightmap: rough noise plus a slope, so
+/// neighbouring samples differ and planes never fit exactly.
+pub fn noise_map(width: usize, depth: usize, seed: u64) -> Heightmap {
+    Heightmap::from_fn(width, depth, |r, c| {
+        let mut x = seed ^ ((r as u64) << 32 | c as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x ^= x >> 29;
+        x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        x ^= x >> 32;
+        (x % 10_000) as f32 * 0.01 + 0.05 * r as f32
+    })
+    .expect("valid size")
+}
+
+/// A map that steps from 0 to `height` halfway across.
+pub fn cliff_map(width: usize, depth: usize, height: f32) -> Heightmap {
+    Heightmap::from_fn(
+        width,
+        depth,
+        |_, c| if c < width / 2 { 0.0 } else { height },
+    )
+    .expect("valid size")
+}
+
+/// Writes bytes to a fresh file named `name` in a temporary directory.
+pub fn temp_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).expect("temp file written");
+    path
+}
+
+pub mod gpu;

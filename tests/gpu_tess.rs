@@ -1,0 +1,481 @@
+//! The tessellation pipeline on a real Vulkan device (lavapipe in CI):
+//! golden images, cracks, culling, CPU/GPU agreement, precision far from
+//! the origin. Validation is on and any message fails the test.
+
+mod common;
+
+use std::collections::BTreeSet;
+
+use common::gpu::*;
+use common::*;
+use glam::{DVec2, DVec3, Vec3};
+use vkterrain::render::{RenderSettings, Shading};
+use vkterrain::scene::Scene;
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::lod::patch_tess_factors;
+use vkterrain::terrain::{DistanceLod, DistanceMode, Heightmap, Terrain, TerrainInfo};
+
+fn default_terrain(cells_per_patch: u32) -> Terrain {
+    let mut scene = Scene::default_scene();
+    scene.cells_per_patch = cells_per_patch;
+    Terrain::new(scene.terrain_info().unwrap(), 0.0).unwrap()
+}
+
+fn dem_terrain(cells_per_patch: u32, origin: DVec2) -> Terrain {
+    let info = TerrainInfo::new(
+        dem("jacksboro_fault_dem.png", None),
+        DEM_SPACING,
+        cells_per_patch,
+        origin,
+    )
+    .unwrap();
+    Terrain::new(info, 0.0).unwrap()
+}
+
+/// A step from 0 to 300 halfway across a 129x97 map: vertical walls between
+/// patches at different levels.
+fn cliff_terrain() -> Terrain {
+    let info = TerrainInfo::new(
+        cliff_map(129, 97, 300.0),
+        DVec2::new(4.0, 5.0),
+        16,
+        DVec2::ZERO,
+    )
+    .unwrap();
+    Terrain::new(info, 0.0).unwrap()
+}
+
+/// World-space centre, size and top of a terrain.
+fn extent(terrain: &Terrain) -> (DVec3, f64, f64) {
+    let info = terrain.info();
+    let (lo, hi) = info.heightmap().min_max();
+    let o = info.origin();
+    let size = info.world_width().max(info.world_depth());
+    (
+        DVec3::new(o.x, f64::from(lo + hi) / 2.0, o.y),
+        size,
+        f64::from(hi),
+    )
+}
+
+/// Straight down, from high enough to see everything; and two oblique views.
+fn crack_cameras(terrain: &Terrain) -> Vec<(&'static str, Camera)> {
+    let (c, size, top) = extent(terrain);
+    vec![
+        (
+            "top",
+            camera([c.x, top + size * 1.2, c.z], [c.x, c.y, c.z], 50.0),
+        ),
+        (
+            "oblique-sw",
+            camera(
+                [c.x - 0.6 * size, top + 0.35 * size, c.z - 0.7 * size],
+                [c.x, c.y, c.z],
+                55.0,
+            ),
+        ),
+        (
+            "oblique-ne-low",
+            camera(
+                [c.x + 0.45 * size, top + 0.08 * size, c.z + 0.55 * size],
+                [c.x - 0.1 * size, c.y, c.z - 0.1 * size],
+                70.0,
+            ),
+        ),
+    ]
+}
+
+fn flat_settings(terrain: &Terrain, mode: DistanceMode) -> RenderSettings {
+    let (_, size, _) = extent(terrain);
+    RenderSettings {
+        lod: DistanceLod {
+            min_dist: (0.1 * size) as f32,
+            max_dist: (1.5 * size) as f32,
+            min_exp: 0.0,
+            max_exp: 6.0,
+        },
+        lod_mode: mode,
+        shading: Shading::Flat,
+        clear_color: [0.0; 3],
+        ..RenderSettings::default()
+    }
+}
+
+/// Distinct tessellation factors (edges and insides) over the patches the
+/// CPU frustum test keeps, from the Rust mirror of the control shader.
+fn distinct_factors(
+    terrain: &Terrain,
+    camera: &Camera,
+    settings: &RenderSettings,
+    eye_local: Vec3,
+) -> BTreeSet<u32> {
+    let grid = terrain.grid();
+    let frustum = vkterrain::render::FrameView::new(terrain, camera, 1.5).frustum;
+    let mut factors = BTreeSet::new();
+    for p in 0..grid.patch_count() {
+        let id = grid.patch_id(p);
+        let (centre, extents) = terrain.patch_aabb(id);
+        if frustum.aabb_outside(centre - eye_local, extents) {
+            continue;
+        }
+        let corners = terrain.patch_corners(id).map(|c| c - eye_local);
+        let f = patch_tess_factors(corners, &settings.lod, settings.lod_mode);
+        factors.extend(f.edges.iter().chain(&f.inside).map(|v| v.to_bits()));
+    }
+    factors
+}
+
+fn check_cracks(name: &str, terrain: Terrain) {
+    if skip_gpu() {
+        return;
+    }
+    let (w, h) = (384, 256);
+    let cameras = crack_cameras(&terrain);
+    let mut scene = GpuScene::new(terrain, w, h, false);
+    for mode in [DistanceMode::Debug, DistanceMode::Smooth] {
+        let settings = flat_settings(&scene.terrain, mode);
+        for (view, cam) in &cameras {
+            let frame = scene.render(cam, &settings);
+            let factors = distinct_factors(&scene.terrain, cam, &settings, frame.view.eye_local);
+            assert!(
+                factors.len() >= 3,
+                "{name}/{view}/{mode:?}: only {} distinct factors in use",
+                factors.len()
+            );
+            let rgba = &frame.readback.rgba;
+            let terrain_pixels = rgba.chunks_exact(4).filter(|p| p[0] > 128).count();
+            assert!(
+                terrain_pixels > (w * h / 20) as usize,
+                "{name}/{view}: the terrain covers only {terrain_pixels} pixels"
+            );
+            let holes = enclosed_background(rgba, w as usize, h as usize, |p| p[0] < 128);
+            if !holes.is_empty() {
+                frame
+                    .rgba_image()
+                    .save(format!("{name}-{view}-cracks.png"))
+                    .unwrap();
+            }
+            assert!(
+                holes.is_empty(),
+                "{name}/{view}/{mode:?}: {} background pixels inside the terrain, first at {:?}",
+                holes.len(),
+                &holes[..holes.len().min(5)]
+            );
+        }
+    }
+    scene.finish();
+}
+
+#[test]
+fn no_cracks_on_the_default_scene() {
+    check_cracks("default", default_terrain(32));
+}
+
+#[test]
+fn no_cracks_on_the_real_dem() {
+    check_cracks("dem", dem_terrain(16, DVec2::ZERO));
+}
+
+#[test]
+fn no_cracks_on_a_cliff() {
+    check_cracks("cliff", cliff_terrain());
+}
+
+#[test]
+fn default_scene_matches_its_golden_image() {
+    if skip_gpu() {
+        return;
+    }
+    let scene_def = Scene::default_scene();
+    let mut scene = GpuScene::new(default_terrain(32), 320, 180, false);
+    let settings = RenderSettings {
+        lod: scene_def.lod,
+        ..RenderSettings::default()
+    };
+    let frame = scene.render(&scene_def.camera, &settings);
+    assert_golden("default-scene", &frame.rgba_image(), 12, 0.005);
+    let lod_colors = scene.render(
+        &scene_def.camera,
+        &RenderSettings {
+            shading: Shading::LodColors,
+            ..settings
+        },
+    );
+    assert_golden(
+        "default-scene-lod-colors",
+        &lod_colors.rgba_image(),
+        12,
+        0.005,
+    );
+    scene.finish();
+}
+
+#[test]
+fn wireframe_draws_edges_only() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let cams = crack_cameras(&terrain);
+    let mut scene = GpuScene::new(terrain, 256, 256, true);
+    let fill = flat_settings(&scene.terrain, DistanceMode::Debug);
+    let lines = RenderSettings {
+        wireframe: true,
+        ..fill
+    };
+    let solid = scene.render(&cams[0].1, &fill);
+    let wire = scene.render(&cams[0].1, &lines);
+    let lit = |rgba: &[u8]| rgba.chunks_exact(4).filter(|p| p[0] > 128).count();
+    let (solid_px, wire_px) = (lit(&solid.readback.rgba), lit(&wire.readback.rgba));
+    assert!(
+        wire_px > 0 && wire_px * 2 < solid_px,
+        "wireframe {wire_px} vs solid {solid_px} pixels"
+    );
+    scene.finish();
+}
+
+#[test]
+fn culling_skips_patches_outside_the_frustum() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let total = terrain.grid().patch_count();
+    let (c, size, top) = extent(&terrain);
+    let mut scene = GpuScene::new(terrain, 256, 256, false);
+    // Every patch gets factor 8, so each visible patch costs the same.
+    let settings = RenderSettings {
+        lod: DistanceLod {
+            min_dist: 0.0,
+            max_dist: 1.0,
+            min_exp: 3.0,
+            max_exp: 3.0,
+        },
+        ..RenderSettings::default()
+    };
+
+    let away = scene.render(
+        &camera(
+            [c.x, top + 100.0, c.z],
+            [c.x, top + 1000.0, c.z + 10.0],
+            60.0,
+        ),
+        &settings,
+    );
+    let stats = away
+        .measurements
+        .statistics
+        .expect("lavapipe has pipeline statistics");
+    assert_eq!(away.patches_in_frustum, 0);
+    assert_eq!(
+        stats.tcs_patches, total as u64,
+        "every patch reaches the control shader"
+    );
+    assert_eq!(stats.tes_invocations, 0);
+    assert_eq!(stats.clipping_primitives, 0);
+
+    let all = scene.render(
+        &camera([c.x, top + 1.5 * size, c.z], [c.x, c.y, c.z], 60.0),
+        &settings,
+    );
+    assert_eq!(all.patches_in_frustum, total);
+    let all_stats = all.measurements.statistics.unwrap();
+    assert_eq!(all_stats.tes_invocations % total as u64, 0);
+    let per_patch = all_stats.tes_invocations / total as u64;
+    assert!(
+        per_patch >= 81,
+        "factor 8 makes at least 9x9 vertices, got {per_patch}"
+    );
+
+    // Looking at one corner from close by: some patches in, some out.
+    let corner = camera(
+        [c.x - 0.45 * size, top + 0.05 * size, c.z - 0.45 * size],
+        [c.x - 0.2 * size, c.y, c.z - 0.3 * size],
+        40.0,
+    );
+    let part = scene.render(&corner, &settings);
+    let part_stats = part.measurements.statistics.unwrap();
+    assert!(
+        part.patches_in_frustum > 0 && part.patches_in_frustum < total / 2,
+        "{} of {total}",
+        part.patches_in_frustum
+    );
+    assert_eq!(
+        part_stats.tes_invocations,
+        per_patch * part.patches_in_frustum as u64,
+        "TES work only for the CPU's in-frustum patches"
+    );
+    let culling_off = scene.render(
+        &corner,
+        &RenderSettings {
+            cull: false,
+            ..settings
+        },
+    );
+    assert_eq!(
+        culling_off.measurements.statistics.unwrap().tes_invocations,
+        per_patch * total as u64
+    );
+    assert_eq!(
+        part.readback.rgba, culling_off.readback.rgba,
+        "culling changes no pixel"
+    );
+    scene.finish();
+}
+
+/// Top-down view of a small area at maximum tessellation: the depth buffer,
+/// turned back into world positions, lies on `height_at`.
+fn check_depth_against_height_at(name: &str, terrain: Terrain, view_cells: f64) {
+    if skip_gpu() {
+        return;
+    }
+    let info = terrain.info().clone();
+    let (lo, hi) = info.heightmap().min_max();
+    let range = f64::from(hi - lo);
+    let spacing = info.spacing().max_element();
+    let centre = info.sample_position(info.rows() / 3, info.cols() / 3);
+    let fov = 30.0f32;
+    // High enough that `view_cells` cells fill the view.
+    let height =
+        f64::from(hi) + view_cells * spacing / 2.0 / (f64::from(fov).to_radians() / 2.0).tan();
+    let cam = camera(
+        [centre.x, height, centre.y],
+        [centre.x, f64::from(lo), centre.y],
+        fov,
+    );
+    let settings = RenderSettings {
+        lod: DistanceLod {
+            min_dist: 0.0,
+            max_dist: 1.0,
+            min_exp: 6.0,
+            max_exp: 6.0,
+        },
+        ..RenderSettings::default()
+    };
+    let mut scene = GpuScene::new(terrain, 200, 200, false);
+    let frame = scene.render(&cam, &settings);
+    let mut worst = 0.0f64;
+    let mut checked = 0;
+    for p in world_positions(&frame, &cam).into_iter().flatten() {
+        let Some(h) = info.height_at(p.x, p.z) else {
+            continue;
+        };
+        worst = worst.max((p.y - f64::from(h)).abs());
+        checked += 1;
+    }
+    assert!(
+        checked > 30_000,
+        "{name}: only {checked} pixels on the terrain"
+    );
+    assert!(
+        worst <= 1e-3 * range,
+        "{name}: depth disagrees with height_at by {worst} (range {range})"
+    );
+    eprintln!("{name}: worst |GPU - height_at| = {worst:.4} over {checked} pixels (range {range})");
+    scene.finish();
+}
+
+#[test]
+fn depth_matches_height_at_on_the_dem() {
+    check_depth_against_height_at("dem", dem_terrain(4, DVec2::ZERO), 40.0);
+}
+
+#[test]
+fn depth_matches_height_at_on_the_default_scene() {
+    check_depth_against_height_at("default", default_terrain(4), 60.0);
+}
+
+#[test]
+fn far_from_the_origin_renders_the_same() {
+    if skip_gpu() {
+        return;
+    }
+    let shift = DVec3::new(1e6, 0.0, 1e6);
+    let near = dem_terrain(32, DVec2::ZERO);
+    let far = dem_terrain(32, DVec2::new(shift.x, shift.z));
+    let cams = crack_cameras(&near);
+    let settings = RenderSettings::default();
+    let mut near_scene = GpuScene::new(near, 320, 200, false);
+    let mut far_scene = GpuScene::new(far, 320, 200, false);
+    for (view, cam) in &cams {
+        let a = near_scene.render(cam, &settings);
+        let shifted = Camera {
+            eye: cam.eye + shift,
+            target: cam.target + shift,
+            ..*cam
+        };
+        let b = far_scene.render(&shifted, &settings);
+        let differing = a
+            .readback
+            .rgba
+            .chunks_exact(4)
+            .zip(b.readback.rgba.chunks_exact(4))
+            .filter(|(p, q)| (0..3).any(|c| p[c].abs_diff(q[c]) > 12))
+            .count();
+        assert!(
+            differing * 1000 <= 320 * 200,
+            "{view}: {differing} pixels differ 1e6 units out"
+        );
+    }
+    near_scene.finish();
+    far_scene.finish();
+}
+
+#[test]
+fn straight_down_onto_a_patch_corner() {
+    if skip_gpu() {
+        return;
+    }
+    // The eye exactly above a control point, looking straight down.
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let info = terrain.info().clone();
+    let p = info.sample_position(64, 96);
+    let h = f64::from(info.height_at(p.x, p.y).unwrap());
+    let cam = camera([p.x, h + 300.0, p.y], [p.x, h - 10.0, p.y], 60.0);
+    let mut scene = GpuScene::new(terrain, 128, 128, false);
+    let frame = scene.render(&cam, &RenderSettings::default());
+    assert!(
+        frame.readback.depth.iter().all(|&d| d > 0.0),
+        "the terrain fills the view"
+    );
+    // The centre pixel sees the control point's own height.
+    let positions = world_positions(&frame, &cam);
+    let centre = positions[64 * 128 + 64].unwrap();
+    assert!((centre.y - f64::from(info.height_at(centre.x, centre.z).unwrap())).abs() < 0.5);
+    // Eye exactly on the surface, looking along it: still renders cleanly.
+    let on = camera([p.x, h, p.y], [p.x + 1000.0, h, p.y], 60.0);
+    scene.render(&on, &RenderSettings::default());
+    scene.finish();
+}
+
+#[test]
+fn flat_terrain_at_minimum_tessellation() {
+    if skip_gpu() {
+        return;
+    }
+    let flat = Heightmap::from_fn(65, 65, |_, _| 10.0).unwrap();
+    let terrain = Terrain::new(
+        TerrainInfo::new(flat, DVec2::ONE, 32, DVec2::ZERO).unwrap(),
+        0.0,
+    )
+    .unwrap();
+    let cams = crack_cameras(&terrain);
+    let mut scene = GpuScene::new(terrain, 128, 128, false);
+    let settings = RenderSettings {
+        lod: DistanceLod {
+            min_dist: 0.0,
+            max_dist: 0.0,
+            min_exp: 0.0,
+            max_exp: 0.0,
+        },
+        shading: Shading::Flat,
+        clear_color: [0.0; 3],
+        ..RenderSettings::default()
+    };
+    let frame = scene.render(&cams[0].1, &settings);
+    let stats = frame.measurements.statistics.unwrap();
+    // Factor 1 rounds up to 2 with fractional_even spacing: 4 patches of 2x2 quads.
+    assert_eq!(stats.tcs_patches, 4);
+    assert!(enclosed_background(&frame.readback.rgba, 128, 128, |p| p[0] < 128).is_empty());
+    scene.finish();
+}

@@ -1,0 +1,178 @@
+//! Distance LOD: known values, shared edges, degenerate parameters.
+
+mod common;
+
+use common::*;
+use glam::Vec3;
+use proptest::prelude::*;
+use vkterrain::terrain::lod::{patch_tess_factors, tess_factor, LodError};
+use vkterrain::terrain::{DistanceLod, DistanceMode, PatchId, Terrain};
+
+const LOD: DistanceLod = DistanceLod {
+    min_dist: 100.0,
+    max_dist: 1100.0,
+    min_exp: 0.0,
+    max_exp: 6.0,
+};
+
+#[test]
+fn known_values() {
+    let at = |d: f32, mode| tess_factor(Vec3::new(d, 0.0, 0.0), &LOD, mode);
+    assert_eq!(at(0.0, DistanceMode::Smooth), 64.0);
+    assert_eq!(
+        at(100.0, DistanceMode::Smooth),
+        64.0,
+        "d exactly on min_dist"
+    );
+    assert_eq!(
+        at(1100.0, DistanceMode::Smooth),
+        1.0,
+        "d exactly on max_dist"
+    );
+    assert_eq!(at(5000.0, DistanceMode::Smooth), 1.0);
+    assert_eq!(at(600.0, DistanceMode::Smooth), 8.0, "halfway: 2^3");
+    // Exponent 6 - 6 * 0.25 = 4.5 rounds up in debug mode, stays fractional otherwise.
+    assert_eq!(at(350.0, DistanceMode::Debug), 32.0);
+    assert!((at(350.0, DistanceMode::Smooth) - 4.5f32.exp2()).abs() < 1e-4);
+    // Debug mode measures the xz max-norm and ignores height.
+    let p = Vec3::new(300.0, 5000.0, -350.0);
+    assert_eq!(tess_factor(p, &LOD, DistanceMode::Debug), 32.0);
+}
+
+#[test]
+fn degenerate_parameters_stay_finite_in_range() {
+    let step = DistanceLod {
+        min_dist: 50.0,
+        max_dist: 50.0,
+        ..LOD
+    };
+    let reversed = DistanceLod {
+        min_dist: 500.0,
+        max_dist: 50.0,
+        ..LOD
+    };
+    let zero = DistanceLod {
+        min_dist: 0.0,
+        max_dist: 0.0,
+        min_exp: 3.0,
+        max_exp: 3.0,
+    };
+    let points = [
+        Vec3::ZERO,
+        Vec3::new(50.0, 0.0, 0.0),
+        Vec3::new(49.999, 0.0, 0.0),
+        Vec3::new(f32::NAN, 0.0, 0.0),
+        Vec3::splat(f32::INFINITY),
+        Vec3::new(f32::NEG_INFINITY, 1.0, f32::INFINITY),
+        Vec3::splat(f32::MAX),
+    ];
+    for lod in [LOD, step, reversed, zero] {
+        for p in points {
+            for mode in [DistanceMode::Smooth, DistanceMode::Debug] {
+                let f = tess_factor(p, &lod, mode);
+                assert!((1.0..=64.0).contains(&f), "{lod:?} at {p}: {f}");
+            }
+        }
+    }
+    // A step at min == max: finest on the bound, coarsest past it.
+    assert_eq!(
+        tess_factor(Vec3::new(50.0, 0.0, 0.0), &step, DistanceMode::Smooth),
+        64.0
+    );
+    assert_eq!(
+        tess_factor(Vec3::new(50.001, 0.0, 0.0), &step, DistanceMode::Smooth),
+        1.0
+    );
+    // A NaN eye gives the coarsest level, not the finest.
+    assert_eq!(tess_factor(Vec3::NAN, &LOD, DistanceMode::Smooth), 1.0);
+    assert_eq!(tess_factor(Vec3::ZERO, &zero, DistanceMode::Smooth), 8.0);
+}
+
+#[test]
+fn validation_names_the_bad_parameter() {
+    assert_eq!(LOD.validate(), Ok(()));
+    let bad = DistanceLod {
+        min_dist: 10.0,
+        max_dist: 5.0,
+        ..LOD
+    };
+    assert!(matches!(bad.validate(), Err(LodError::Distance { .. })));
+    let bad = DistanceLod {
+        max_dist: f32::INFINITY,
+        ..LOD
+    };
+    assert!(matches!(bad.validate(), Err(LodError::Distance { .. })));
+    let bad = DistanceLod {
+        max_exp: 7.0,
+        ..LOD
+    };
+    assert!(matches!(bad.validate(), Err(LodError::Exponent { .. })));
+    let bad = DistanceLod {
+        min_exp: f32::NAN,
+        ..LOD
+    };
+    assert!(matches!(bad.validate(), Err(LodError::Exponent { .. })));
+}
+
+fn check_shared_edges(
+    terrain: &Terrain,
+    eye: Vec3,
+    lod: &DistanceLod,
+    mode: DistanceMode,
+) -> Result<(), TestCaseError> {
+    let grid = terrain.grid();
+    let factors = |row, col| {
+        let corners = terrain.patch_corners(PatchId { row, col }).map(|c| c - eye);
+        patch_tess_factors(corners, lod, mode)
+    };
+    for row in 0..grid.patch_rows() {
+        for col in 0..grid.patch_cols() {
+            let here = factors(row, col);
+            for f in here.edges.iter().chain(&here.inside) {
+                prop_assert!((1.0..=64.0).contains(f));
+            }
+            if col + 1 < grid.patch_cols() {
+                let right = factors(row, col + 1);
+                prop_assert_eq!(
+                    here.edges[2].to_bits(),
+                    right.edges[0].to_bits(),
+                    "right edge of ({}, {})",
+                    row,
+                    col
+                );
+            }
+            if row + 1 < grid.patch_rows() {
+                let below = factors(row + 1, col);
+                prop_assert_eq!(
+                    here.edges[3].to_bits(),
+                    below.edges[1].to_bits(),
+                    "bottom edge of ({}, {})",
+                    row,
+                    col
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn shared_edges_get_identical_factors(
+        ex in -20_000.0f32..20_000.0,
+        ey in 0.0f32..5_000.0,
+        ez in -20_000.0f32..20_000.0,
+        min_dist in 0.0f32..5_000.0,
+        span in 0.0f32..20_000.0,
+        min_exp in 0.0f32..3.0,
+        extra_exp in 0.0f32..3.0,
+        debug in any::<bool>(),
+    ) {
+        thread_local!(static TERRAIN: Terrain = Terrain::new(dem_info(16), 0.0).unwrap());
+        let lod = DistanceLod { min_dist, max_dist: min_dist + span, min_exp, max_exp: min_exp + extra_exp };
+        let mode = if debug { DistanceMode::Debug } else { DistanceMode::Smooth };
+        TERRAIN.with(|t| check_shared_edges(t, Vec3::new(ex, ey, ez), &lod, mode))?;
+    }
+}
