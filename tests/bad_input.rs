@@ -200,7 +200,7 @@ fn nan_or_infinity_in_float_input() {
         (f32::INFINITY, 0),
         (f32::NEG_INFINITY, 8),
     ] {
-        let mut values = vec![1.0f32; 9];
+        let mut values = [1.0f32; 9];
         values[at] = bad;
         let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
         let opts = LoadOptions {

