@@ -488,3 +488,43 @@ fn flat_terrain_at_minimum_tessellation() {
     assert!(enclosed_background(&frame.readback.rgba, 128, 128, |p| p[0] < 128).is_empty());
     scene.finish();
 }
+
+#[test]
+fn gpu_tests_fail_without_a_device_unless_skipped() {
+    if std::env::var_os("VKTERRAIN_CHILD").is_some() {
+        return;
+    }
+    // Runs one GPU test of this binary again with no Vulkan driver.
+    let run = |skip: bool| {
+        let mut cmd = std::process::Command::new(std::env::current_exe().unwrap());
+        cmd.args([
+            "--exact",
+            "flat_terrain_at_minimum_tessellation",
+            "--test-threads",
+            "1",
+            "--nocapture",
+        ])
+        .env("VKTERRAIN_CHILD", "1")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env_remove("VKTERRAIN_SKIP_GPU");
+        if skip {
+            cmd.env("VKTERRAIN_SKIP_GPU", "1");
+        }
+        cmd.output().unwrap()
+    };
+    let without = run(false);
+    assert!(
+        !without.status.success(),
+        "a GPU test passed with no device"
+    );
+    let output = format!(
+        "{}{}",
+        String::from_utf8_lossy(&without.stdout),
+        String::from_utf8_lossy(&without.stderr)
+    );
+    assert!(output.contains("no Vulkan device found"), "{output}");
+    let skipped = run(true);
+    assert!(skipped.status.success());
+    assert!(String::from_utf8_lossy(&skipped.stderr).contains("VKTERRAIN_SKIP_GPU=1: skipping"));
+}

@@ -87,10 +87,16 @@ impl Instance {
                 .push_next(&mut instance_messenger);
         }
         // SAFETY: every pointer in `info` refers to locals that outlive the call.
-        let raw = unsafe {
-            entry
-                .create_instance(&info, None)
-                .context("creating the Vulkan instance")?
+        let raw = match unsafe { entry.create_instance(&info, None) } {
+            Ok(raw) => raw,
+            // The loader's answer when it finds no driver at all.
+            Err(vk::Result::ERROR_INCOMPATIBLE_DRIVER) => return Err(VkError::NoDevice),
+            Err(result) => {
+                return Err(VkError::Call {
+                    context: "creating the Vulkan instance",
+                    result,
+                })
+            }
         };
 
         let debug_utils =

@@ -31,10 +31,12 @@ pub struct GpuScene {
 
 impl GpuScene {
     pub fn new(terrain: Terrain, width: u32, height: u32, wireframe: bool) -> Self {
-        let gpu = Gpu::new(true).expect(
-            "GPU tests need a Vulkan device with tessellation and the validation layer \
-             (apt-get install mesa-vulkan-drivers vulkan-validationlayers); set VKTERRAIN_SKIP_GPU=1 to skip",
-        );
+        let gpu = Gpu::new(true).unwrap_or_else(|e| {
+            panic!(
+                "GPU tests need a Vulkan device with tessellation and the validation layer: {e} \
+                 (set VKTERRAIN_SKIP_GPU=1 to skip them)"
+            )
+        });
         let renderer = TessRenderer::new(&gpu, &terrain, OFFSCREEN_COLOR_FORMAT, 1, wireframe)
             .expect("renderer");
         let headless = Headless::new(&gpu, width, height).expect("offscreen target");

@@ -1,0 +1,250 @@
+//! `vkterrain render`, `info` and the bare run command, through the binary
+//! on a real Vulkan device (lavapipe in CI), with validation on.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::gpu::skip_gpu;
+use common::*;
+
+fn vkterrain(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn stats(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("stats written"))
+        .expect("stats are JSON")
+}
+
+#[test]
+fn render_writes_the_png_and_its_stats() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--width",
+            "320",
+            "--height",
+            "180",
+            "--out",
+            "f.png",
+            "--stats",
+            "s.json",
+        ],
+    );
+    let stdout = ok(&out);
+    assert!(stdout.contains("wrote f.png (320x180)"), "{stdout}");
+    let image = image::open(dir.path().join("f.png")).unwrap();
+    assert_eq!((image.width(), image.height()), (320, 180));
+    let s = stats(&dir.path().join("s.json"));
+    assert!(!s["device"].as_str().unwrap().is_empty());
+    assert_eq!(s["path"], "tess");
+    assert_eq!(s["patches_total"], 1024);
+    let in_view = s["patches_in_frustum"].as_u64().unwrap();
+    assert!(in_view > 100 && in_view <= 1024, "{in_view}");
+    assert_eq!(s["tcs_patches"], 1024);
+    assert!(s["tes_invocations"].as_u64().unwrap() > 1000);
+    assert!(s["triangles"].as_u64().unwrap() > 1000);
+    assert!(
+        s["gpu_ms"].as_f64().unwrap() > 0.0,
+        "lavapipe has timestamps"
+    );
+    assert!(s["cpu_ms"].as_f64().unwrap() > 0.0);
+    // The heightmap alone is 1025 * 1025 floats.
+    assert!(s["gpu_memory"]["terrain.heightmap"].as_u64().unwrap() >= 1025 * 1025 * 4);
+    assert!(s["gpu_memory_bytes"].as_u64().unwrap() >= 1025 * 1025 * 4);
+    assert_eq!(s["validation_enabled"], true);
+    assert_eq!(s["validation_messages"], 0);
+    assert!(!dir.path().join(".f.png.partial").exists());
+}
+
+#[test]
+fn render_takes_heightmap_and_camera_options() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dem = data_path("jacksboro_fault_dem.r16").display().to_string();
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--heightmap",
+            &dem,
+            "--size",
+            "403x344",
+            "--height-scale",
+            "65535",
+            "--cell-spacing",
+            "74.48,92.15",
+            "--cells-per-patch",
+            "16",
+            "--eye=-15000,9000,-16000",
+            "--target",
+            "0,600,0",
+            "--fov",
+            "50",
+            "--lod-distance",
+            "1000,30000",
+            "--lod-levels",
+            "1,5",
+            "--lod-mode",
+            "debug",
+            "--lod-colors",
+            "--width",
+            "200",
+            "--height",
+            "150",
+            "--out",
+            "dem.png",
+            "--stats",
+            "dem.json",
+        ],
+    );
+    ok(&out);
+    let s = stats(&dir.path().join("dem.json"));
+    assert_eq!(s["patches_total"], 22 * 26);
+    assert_eq!(s["validation_messages"], 0);
+    assert_eq!(s["eye"][0], -15000.0);
+    let wire = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--wireframe",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--out",
+            "w.png",
+        ],
+    );
+    ok(&wire);
+}
+
+#[test]
+fn bare_command_renders_the_default_scene_and_says_where() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .current_dir(dir.path())
+        .env("VKTERRAIN_VALIDATE", "1")
+        .output()
+        .unwrap();
+    let stdout = ok(&out);
+    assert!(
+        stdout.contains("wrote vkterrain-default.png (1280x720)"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("0 validation messages"), "{stdout}");
+    let image = image::open(dir.path().join("vkterrain-default.png")).unwrap();
+    assert_eq!((image.width(), image.height()), (1280, 720));
+}
+
+#[test]
+fn info_names_the_device_and_features() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&ok(&vkterrain(dir.path(), &["info", "--validate"]))).unwrap();
+    assert!(!json["device"]["device_name"].as_str().unwrap().is_empty());
+    assert_eq!(json["device"]["tessellation_shader"], true);
+    assert!(json["used"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|f| f == "tessellationShader"));
+    assert_eq!(json["validation"], true);
+}
+
+#[test]
+fn no_vulkan_driver_is_a_clear_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    for args in [&["info"][..], &["render", "--out", "x.png"][..]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+            .current_dir(dir.path())
+            .args(args)
+            .env("VK_DRIVER_FILES", "/nonexistent/icd.json")
+            .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} succeeded without a driver");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains("no Vulkan device found"),
+            "{args:?}: {stderr}"
+        );
+        assert!(
+            !dir.path().join("x.png").exists(),
+            "no image without a device"
+        );
+    }
+}
+
+#[test]
+fn bad_render_arguments_fail_before_rendering() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&[&str], &str); 7] = [
+        (
+            &["render", "--out", "x.png", "--width", "0"],
+            "outside 1..=16384",
+        ),
+        (
+            &["render", "--out", "x.png", "--fov", "180"],
+            "between 0 and 180",
+        ),
+        (
+            &["render", "--out", "x.png", "--lod-levels", "3,9"],
+            "LOD exponents",
+        ),
+        (
+            &["render", "--out", "x.png", "--lod-distance", "500,100"],
+            "MIN must not exceed MAX",
+        ),
+        (
+            &["render", "--out", "x.png", "--cells-per-patch", "48"],
+            "power of two",
+        ),
+        (&["render", "--out", "x.png", "--eye", "1,2"], "X,Y,Z"),
+        (
+            &["render", "--out", "x.png", "--clear-color", "1,2,3"],
+            "in [0, 1]",
+        ),
+    ];
+    for (args, needle) in cases {
+        let out = vkterrain(dir.path(), args);
+        assert!(!out.status.success(), "{args:?}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            stderr.contains(needle),
+            "{args:?}: expected {needle:?} in {stderr}"
+        );
+        assert!(!dir.path().join("x.png").exists());
+    }
+}
