@@ -192,10 +192,10 @@ fn default_scene_matches_its_golden_image() {
         lod: scene_def.lod,
         ..RenderSettings::default()
     };
-    let frame = scene.render(&scene_def.camera, &settings);
+    let frame = scene.render(&scene_def.camera.unwrap(), &settings);
     assert_golden("default-scene", &frame.rgba_image(), 12, 0.005);
     let lod_colors = scene.render(
-        &scene_def.camera,
+        &scene_def.camera.unwrap(),
         &RenderSettings {
             shading: Shading::LodColors,
             ..settings

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::Args;
 use glam::{DVec2, DVec3};
 
-use crate::scene::{HeightmapSource, Scene};
+use crate::scene::{HeightmapSource, Scene, SceneFileError};
 
 use crate::terrain::{HeightmapFormat, LoadOptions};
 
@@ -129,7 +129,12 @@ pub fn parse_pixels(s: &str) -> Result<u32, String> {
 /// spacing 1, origin 0).
 #[derive(Args, Clone, Debug, Default)]
 pub struct TerrainArgs {
-    /// Heightmap file; without it, the built-in default scene.
+    /// Scene file (TOML); without it and without --heightmap, the built-in
+    /// default scene (assets/scenes/default.toml).
+    #[arg(long, value_name = "PATH", conflicts_with = "heightmap")]
+    pub scene: Option<PathBuf>,
+
+    /// Heightmap file, instead of a scene.
     #[arg(long, value_name = "PATH")]
     pub heightmap: Option<PathBuf>,
 
@@ -180,15 +185,19 @@ fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
 }
 
 impl TerrainArgs {
-    /// The scene these arguments describe: the default scene with the
-    /// options given applied, or a heightmap file with them.
-    pub fn scene(&self) -> Scene {
-        let mut scene = Scene::default_scene();
+    /// The scene these arguments describe: a scene file, the default scene,
+    /// or a heightmap file, with the options given applied.
+    pub fn scene(&self) -> Result<Scene, SceneFileError> {
+        let mut scene = match &self.scene {
+            Some(path) => Scene::load(path)?,
+            None => Scene::default_scene(),
+        };
         if let Some(path) = &self.heightmap {
             scene.heightmap = HeightmapSource::File(path.clone());
             scene.load = LoadOptions::default();
             scene.cell_spacing = DVec2::ONE;
             scene.origin = DVec2::ZERO;
+            scene.camera = None;
         }
         let load = &mut scene.load;
         load.format = self.format.or(load.format);
@@ -200,6 +209,6 @@ impl TerrainArgs {
         load.max_samples = self.max_samples.unwrap_or(load.max_samples);
         scene.cell_spacing = self.cell_spacing.unwrap_or(scene.cell_spacing);
         scene.origin = self.origin.unwrap_or(scene.origin);
-        scene
+        Ok(scene)
     }
 }

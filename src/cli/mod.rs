@@ -90,7 +90,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
 
 /// Loads the terrain the arguments name and places it in the world.
 pub fn load_terrain_info(args: &TerrainArgs, cells_per_patch: Option<u32>) -> Result<TerrainInfo> {
-    let mut scene = args.scene();
+    let mut scene = args.scene()?;
     if let Some(n) = cells_per_patch {
         // Checked first: a bad patch size shouldn't wait for a large file.
         validate_cells_per_patch(n)?;

@@ -12,6 +12,7 @@ use serde::Serialize;
 use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
 use crate::render::{Headless, HeadlessFrame, RenderSettings, Shading, TessRenderer};
 use crate::scene::Scene;
+use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{DistanceMode, Terrain};
@@ -93,7 +94,8 @@ pub struct ViewArgs {
 }
 
 impl ViewArgs {
-    /// Applies the camera and patch options to a scene.
+    /// Applies the patch and LOD options to a scene (the camera options
+    /// apply once the terrain is loaded: see `camera_override`).
     pub fn apply_to_scene(&self, scene: &mut Scene) -> Result<()> {
         if let Some(n) = self.cells_per_patch {
             validate_cells_per_patch(n)?;
@@ -108,10 +110,15 @@ impl ViewArgs {
             scene.lod.max_exp = max;
         }
         scene.lod.validate()?;
-        scene.camera.eye = self.eye.unwrap_or(scene.camera.eye);
-        scene.camera.target = self.target.unwrap_or(scene.camera.target);
-        scene.camera.fov_y_deg = self.fov.unwrap_or(scene.camera.fov_y_deg);
         Ok(())
+    }
+
+    pub fn camera_override(&self) -> CameraOverride {
+        CameraOverride {
+            eye: self.eye,
+            target: self.target,
+            fov: self.fov,
+        }
     }
 
     pub fn settings(&self, scene: &Scene) -> RenderSettings {
@@ -138,6 +145,32 @@ impl ViewArgs {
             cull: !self.no_cull,
             ..defaults
         }
+    }
+}
+
+/// Camera options given on the command line, applied over the scene's
+/// camera (or its overview camera).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CameraOverride {
+    pub eye: Option<DVec3>,
+    pub target: Option<DVec3>,
+    pub fov: Option<f32>,
+}
+
+impl CameraOverride {
+    pub fn apply(&self, base: Camera) -> Result<Camera> {
+        let camera = Camera {
+            eye: self.eye.unwrap_or(base.eye),
+            target: self.target.unwrap_or(base.target),
+            fov_y_deg: self.fov.unwrap_or(base.fov_y_deg),
+        };
+        if camera.eye == camera.target {
+            bail!(
+                "the camera's eye and target are the same point {}",
+                camera.eye
+            );
+        }
+        Ok(camera)
     }
 }
 
@@ -208,12 +241,14 @@ pub struct RenderOutput {
 /// reads back, and tears everything down again.
 pub fn render_scene(
     scene: &Scene,
+    camera: &CameraOverride,
     settings: &RenderSettings,
     width: u32,
     height: u32,
     validate: bool,
 ) -> Result<RenderOutput> {
     let info = scene.terrain_info()?;
+    let camera = camera.apply(scene.camera_for(&info))?;
     let terrain = Terrain::new(info, 0.0)?;
     let gpu = Gpu::new(validate).context("starting Vulkan")?;
     let mut renderer = TessRenderer::new(
@@ -231,7 +266,7 @@ pub fn render_scene(
             return Err(e).context("creating the offscreen target");
         }
     };
-    let frame = headless.render(&gpu, &mut renderer, &terrain, &scene.camera, settings);
+    let frame = headless.render(&gpu, &mut renderer, &terrain, &camera, settings);
     // Memory is reported while everything is still allocated.
     let gpu_memory: BTreeMap<String, u64> = gpu.device.memory_report().into_iter().collect();
     headless.destroy(&gpu);
@@ -258,9 +293,9 @@ pub fn render_scene(
         gpu_memory,
         validation_enabled: gpu.instance.validation_enabled(),
         validation_messages: gpu.validation_messages(),
-        eye: scene.camera.eye.to_array(),
-        target: scene.camera.target.to_array(),
-        fov_deg: scene.camera.fov_y_deg,
+        eye: camera.eye.to_array(),
+        target: camera.target.to_array(),
+        fov_deg: camera.fov_y_deg,
     };
     let validation_log = gpu.instance.validation_log().messages();
     Ok(RenderOutput {
@@ -299,10 +334,17 @@ pub fn save_png(image: &image::RgbaImage, path: &Path) -> Result<()> {
 }
 
 pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
-    let mut scene = cmd.terrain.scene();
+    let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
     let settings = cmd.view.settings(&scene);
-    let output = render_scene(&scene, &settings, cmd.width, cmd.height, cmd.validate)?;
+    let output = render_scene(
+        &scene,
+        &cmd.view.camera_override(),
+        &settings,
+        cmd.width,
+        cmd.height,
+        cmd.validate,
+    )?;
     save_png(&output.frame.rgba_image(), &cmd.out)?;
     if let Some(path) = &cmd.stats {
         let json = serde_json::to_string_pretty(&output.stats)?;

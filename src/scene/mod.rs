@@ -1,19 +1,28 @@
 //! What to load: a heightmap and its placement, the patch size, LOD
-//! parameters and a starting camera. The default scene is built into the
-//! binary, so the run command works from any directory.
+//! parameters and a starting camera, from a TOML scene file (see `file`).
+//! The default scene, `assets/scenes/default.toml` and its heightmap, is
+//! built into the binary, so the run command works from any directory.
 
-use std::path::PathBuf;
+mod file;
+
+use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3};
+
+pub use file::SceneFileError;
 
 use crate::terrain::camera::Camera;
 use crate::terrain::{
     DistanceLod, Heightmap, HeightmapError, HeightmapFormat, LoadOptions, TerrainError, TerrainInfo,
 };
 
+/// The default scene file.
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../../assets/scenes/default.toml");
 /// The default heightmap: 1025x1025, 16-bit, made by `vkterrain generate`
 /// with its default parameters (see assets/README.md).
 pub const DEFAULT_HEIGHTMAP_PNG: &[u8] = include_bytes!("../../assets/heightmaps/default.png");
+/// Vertical field of view when a scene gives none.
+pub const DEFAULT_FOV_DEG: f32 = 55.0;
 
 /// Where a scene's heights come from.
 #[derive(Clone, Debug, PartialEq)]
@@ -37,7 +46,8 @@ pub struct Scene {
     pub origin: DVec2,
     pub cells_per_patch: u32,
     pub lod: DistanceLod,
-    pub camera: Camera,
+    /// None: an overview of the whole terrain (`camera_for`).
+    pub camera: Option<Camera>,
 }
 
 /// Why a scene's terrain could not be built.
@@ -47,35 +57,39 @@ pub enum SceneError {
     Heightmap(#[from] HeightmapError),
     #[error(transparent)]
     Terrain(#[from] TerrainError),
+    #[error(transparent)]
+    File(#[from] SceneFileError),
 }
 
 impl Scene {
-    /// 8.2 km of generated mountains, 1400 m high, seen from the south-west.
+    /// The built-in default scene: its file and heightmap are embedded.
     pub fn default_scene() -> Scene {
-        Scene {
-            heightmap: HeightmapSource::Embedded {
-                name: "assets/heightmaps/default.png (built in)",
-                bytes: DEFAULT_HEIGHTMAP_PNG,
-                format: HeightmapFormat::Png,
-            },
-            load: LoadOptions {
-                height_scale: 1400.0,
-                ..LoadOptions::default()
-            },
-            cell_spacing: DVec2::splat(8.0),
-            origin: DVec2::ZERO,
-            cells_per_patch: 32,
-            lod: DistanceLod {
-                min_dist: 150.0,
-                max_dist: 6000.0,
-                min_exp: 0.0,
-                max_exp: 6.0,
-            },
-            camera: Camera {
-                eye: DVec3::new(-2300.0, 1750.0, -4300.0),
-                target: DVec3::new(300.0, 350.0, 400.0),
-                fov_y_deg: 55.0,
-            },
+        let mut scene =
+            Scene::from_toml(DEFAULT_SCENE_TOML, Path::new("assets/scenes/default.toml"))
+                .expect("the built-in scene file is valid");
+        scene.heightmap = HeightmapSource::Embedded {
+            name: "assets/heightmaps/default.png (built in)",
+            bytes: DEFAULT_HEIGHTMAP_PNG,
+            format: HeightmapFormat::Png,
+        };
+        scene
+    }
+
+    /// The scene's camera, or one that overlooks the whole terrain from
+    /// beyond its south-west corner (-x, -z), high enough to see the far edge.
+    pub fn camera_for(&self, info: &TerrainInfo) -> Camera {
+        if let Some(camera) = self.camera {
+            return camera;
+        }
+        let (lo, hi) = info.heightmap().min_max();
+        let (w, d) = (info.world_width(), info.world_depth());
+        let size = w.max(d);
+        let o = info.origin();
+        let mid = 0.5 * f64::from(lo + hi);
+        Camera {
+            eye: DVec3::new(o.x - 0.3 * w, f64::from(hi) + 0.3 * size, o.y - 0.75 * d),
+            target: DVec3::new(o.x, mid, o.y + 0.1 * d),
+            fov_y_deg: DEFAULT_FOV_DEG,
         }
     }
 
