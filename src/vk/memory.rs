@@ -103,6 +103,36 @@ impl Device {
             .free(allocation);
     }
 
+    /// Allocates memory for a new buffer or image and binds it. On failure
+    /// the memory is freed and `destroy` disposes of the resource, so nothing
+    /// leaks half-made.
+    fn allocate_bound(
+        &self,
+        name: &str,
+        requirements: vk::MemoryRequirements,
+        location: MemoryLocation,
+        linear: bool,
+        bind: impl FnOnce(&Allocation) -> std::result::Result<(), vk::Result>,
+        destroy: impl FnOnce(),
+    ) -> Result<Allocation> {
+        let allocation = match self.allocate(name, requirements, location, linear) {
+            Ok(a) => a,
+            Err(e) => {
+                destroy();
+                return Err(e);
+            }
+        };
+        if let Err(result) = bind(&allocation) {
+            self.release(name, allocation);
+            destroy();
+            return Err(VkError::Call {
+                context: "binding memory",
+                result,
+            });
+        }
+        Ok(allocation)
+    }
+
     /// Bytes currently allocated, per resource name (zero entries dropped).
     pub fn memory_report(&self) -> Vec<(String, u64)> {
         self.memory
@@ -128,20 +158,16 @@ impl Device {
         let raw = unsafe { self.raw.create_buffer(&info, None) }.context("creating a buffer")?;
         // SAFETY: `raw` was just created from this device.
         let requirements = unsafe { self.raw.get_buffer_memory_requirements(raw) };
-        let allocation = match self.allocate(name, requirements, desc.location, true) {
-            Ok(a) => a,
-            Err(e) => {
-                // SAFETY: unused buffer of this device.
-                unsafe { self.raw.destroy_buffer(raw, None) };
-                return Err(e);
-            }
-        };
-        // SAFETY: memory and offset come from the allocator for these requirements.
-        unsafe {
-            self.raw
-                .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
-        }
-        .context("binding buffer memory")?;
+        let allocation = self.allocate_bound(
+            name,
+            requirements,
+            desc.location,
+            true,
+            // SAFETY: memory and offset come from the allocator for these requirements.
+            |a| unsafe { self.raw.bind_buffer_memory(raw, a.memory(), a.offset()) },
+            // SAFETY: an unused buffer of this device.
+            || unsafe { self.raw.destroy_buffer(raw, None) },
+        )?;
         self.set_name(raw, name);
         Ok(Buffer {
             raw,
@@ -233,20 +259,16 @@ impl Device {
         let raw = unsafe { self.raw.create_image(&info, None) }.context("creating an image")?;
         // SAFETY: `raw` was just created from this device.
         let requirements = unsafe { self.raw.get_image_memory_requirements(raw) };
-        let allocation = match self.allocate(name, requirements, MemoryLocation::GpuOnly, false) {
-            Ok(a) => a,
-            Err(e) => {
-                // SAFETY: unused image of this device.
-                unsafe { self.raw.destroy_image(raw, None) };
-                return Err(e);
-            }
-        };
-        // SAFETY: memory from the allocator for these requirements.
-        unsafe {
-            self.raw
-                .bind_image_memory(raw, allocation.memory(), allocation.offset())
-        }
-        .context("binding image memory")?;
+        let allocation = self.allocate_bound(
+            name,
+            requirements,
+            MemoryLocation::GpuOnly,
+            false,
+            // SAFETY: memory and offset come from the allocator for these requirements.
+            |a| unsafe { self.raw.bind_image_memory(raw, a.memory(), a.offset()) },
+            // SAFETY: an unused image of this device.
+            || unsafe { self.raw.destroy_image(raw, None) },
+        )?;
         let view_info = vk::ImageViewCreateInfo::default()
             .image(raw)
             .view_type(vk::ImageViewType::TYPE_2D)
@@ -306,17 +328,8 @@ impl Device {
 
     /// Submits one command buffer and blocks until it completes.
     pub fn submit_and_wait(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
-        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
-        let submit = vk::SubmitInfo2::default().command_buffer_infos(&cmds);
-        // SAFETY: the command buffer is fully recorded; the fence is unsignalled.
-        unsafe {
-            self.raw
-                .queue_submit2(self.queue, &[submit], fence)
-                .context("submitting commands")?;
-            self.raw
-                .wait_for_fences(&[fence], true, u64::MAX)
-                .context("waiting for the GPU")
-        }
+        self.submit(cmd, fence)?;
+        self.wait_fence(fence)
     }
 
     pub fn create_fence(&self, name: &str, signalled: bool) -> Result<vk::Fence> {
