@@ -2,6 +2,7 @@
 //!
 //! Layers, each using only those below it:
 //! - [`cli`]: the command line.
+//! - [`app`]: the window demo (winit and a swapchain).
 //! - [`render`]: the terrain renderer, drawing into a target it is given.
 //! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
 //! - [`scene`]: what to load.
@@ -9,7 +10,9 @@
 //!   table, height queries, frustum and LOD maths). No GPU types.
 //! - [`shader_constants`]: constants shared with GLSL.
 
+pub mod app;
 pub mod cli;
+pub mod output;
 pub mod render;
 pub mod scene;
 /// Constants shared with GLSL, passed to the shader compiler by build.rs.

@@ -145,7 +145,7 @@ fn render_takes_heightmap_and_camera_options() {
 }
 
 #[test]
-fn bare_command_renders_the_default_scene_and_says_where() {
+fn bare_command_without_a_display_renders_headless_and_says_where() {
     if skip_gpu() {
         return;
     }
@@ -153,9 +153,12 @@ fn bare_command_renders_the_default_scene_and_says_where() {
     let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
         .current_dir(dir.path())
         .env("VKTERRAIN_VALIDATE", "1")
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
         .output()
         .unwrap();
     let stdout = ok(&out);
+    assert!(stdout.contains("no display (DISPLAY and WAYLAND_DISPLAY are unset): rendering the default scene headless"), "{stdout}");
     assert!(
         stdout.contains("wrote vkterrain-default.png (1280x720)"),
         "{stdout}"

@@ -15,6 +15,7 @@ use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{PatchId, Terrain, TerrainInfo};
 use args::{parse_point, TerrainArgs};
 
+pub mod demo;
 pub mod render;
 
 #[derive(Parser, Debug)]
@@ -24,14 +25,16 @@ pub mod render;
     about = "Heightmap terrain renderer on Vulkan"
 )]
 pub struct Cli {
-    /// Without a command: render the default scene headless to
-    /// vkterrain-default.png in the current directory.
+    /// Without a command: the default scene in a window, or headless to
+    /// vkterrain-default.png when there is no display.
     #[command(subcommand)]
     pub command: Option<Command>,
 }
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// The default scene (or any) in a window: fly, walk, debug views.
+    Demo(demo::DemoCmd),
     /// Render one frame headless to a PNG (and optionally stats as JSON).
     Render(render::RenderCmd),
     /// The Vulkan device and driver, and which optional features are used.
@@ -79,7 +82,8 @@ pub struct InspectCmd {
 /// Runs a parsed command, writing its output to `out`.
 pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
     match cli.command {
-        None => render::render_default(out),
+        None => demo::run_default(out),
+        Some(Command::Demo(cmd)) => demo::demo(cmd, out),
         Some(Command::Render(cmd)) => render::render(cmd, out),
         Some(Command::Info(cmd)) => render::info(cmd, out),
         Some(Command::Height(cmd)) => height(cmd, out),

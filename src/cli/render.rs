@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
@@ -10,6 +10,7 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
+use crate::output::{save_png, write_atomically};
 use crate::render::{Headless, HeadlessFrame, RenderSettings, Shading, TessRenderer};
 use crate::scene::Scene;
 use crate::terrain::camera::Camera;
@@ -305,34 +306,6 @@ pub fn render_scene(
     })
 }
 
-/// Writes through a temporary file in the same directory, then renames, so
-/// a failure never leaves a half-written file under the final name.
-pub fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let name = path
-        .file_name()
-        .with_context(|| format!("{}: not a file path", path.display()))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(".partial");
-    let tmp = path.with_file_name(tmp_name);
-    let result = write(&tmp).and_then(|()| {
-        std::fs::rename(&tmp, path)
-            .with_context(|| format!("{}: cannot move into place", path.display()))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-pub fn save_png(image: &image::RgbaImage, path: &Path) -> Result<()> {
-    write_atomically(path, |tmp| {
-        image
-            .save_with_format(tmp, image::ImageFormat::Png)
-            .with_context(|| format!("{}: cannot write PNG", path.display()))
-    })
-}
-
 pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
@@ -380,24 +353,6 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
 
 /// Where the bare command writes the default scene.
 pub const DEFAULT_OUTPUT: &str = "vkterrain-default.png";
-
-/// The bare command: the default scene from its own camera, at 1280x720.
-pub fn render_default(out: &mut dyn Write) -> Result<()> {
-    writeln!(
-        out,
-        "rendering the default scene headless (see --help for the other commands)"
-    )?;
-    let cmd = RenderCmd {
-        terrain: TerrainArgs::default(),
-        view: ViewArgs::default(),
-        width: 1280,
-        height: 720,
-        out: PathBuf::from(DEFAULT_OUTPUT),
-        stats: None,
-        validate: false,
-    };
-    render(cmd, out)
-}
 
 #[derive(clap::Args, Debug)]
 pub struct InfoCmd {

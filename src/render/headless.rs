@@ -75,7 +75,7 @@ impl Headless {
         let rec = device.begin_commands(self.cmd)?;
         self.target.record_begin(rec.device, rec.cmd);
         renderer.record(&rec, 0, &views, settings)?;
-        self.target.record_readback(rec.device, rec.cmd);
+        self.target.record_readback(&rec);
         let cmd = rec.finish()?;
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         device.reset_fence(self.fence)?;

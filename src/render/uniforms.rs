@@ -125,6 +125,20 @@ impl FrameView {
         }
     }
 
+    /// This view with another view's frustum, re-expressed relative to this
+    /// view's eye: culling stays where it was while the camera moves on.
+    pub fn with_frustum_of(&self, frozen: &FrameView) -> FrameView {
+        let shift = self.eye_local - frozen.eye_local;
+        let planes = frozen
+            .frustum
+            .planes
+            .map(|p| Vec4::new(p.x, p.y, p.z, p.w + p.truncate().dot(shift)));
+        FrameView {
+            frustum: Frustum { planes },
+            ..*self
+        }
+    }
+
     /// Patches whose box is not outside the frustum: the CPU's version of
     /// the test the control shader makes.
     pub fn patches_in_frustum(&self, terrain: &Terrain) -> usize {

@@ -157,6 +157,53 @@ impl Recorder<'_> {
         }
     }
 
+    /// Copies a whole 2D image (in TRANSFER_SRC_OPTIMAL) into `buffer`,
+    /// tightly packed, then makes the copy visible to host reads after the
+    /// submission's fence.
+    pub fn copy_image_to_buffer(
+        &self,
+        image: vk::Image,
+        aspect: vk::ImageAspectFlags,
+        extent: vk::Extent2D,
+        buffer: vk::Buffer,
+    ) {
+        let region = vk::BufferImageCopy::default()
+            .image_subresource(
+                vk::ImageSubresourceLayers::default()
+                    .aspect_mask(aspect)
+                    .layer_count(1),
+            )
+            .image_extent(vk::Extent3D {
+                width: extent.width,
+                height: extent.height,
+                depth: 1,
+            });
+        let barrier = [vk::MemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COPY)
+            .src_access_mask(vk::AccessFlags2::TRANSFER_WRITE)
+            .dst_stage_mask(vk::PipelineStageFlags2::HOST)
+            .dst_access_mask(vk::AccessFlags2::HOST_READ)];
+        // SAFETY: the image is in TRANSFER_SRC_OPTIMAL and the buffer holds
+        // the whole image.
+        unsafe {
+            self.device.cmd_copy_image_to_buffer(
+                self.cmd,
+                image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                buffer,
+                &[region],
+            );
+            self.device.cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().memory_barriers(&barrier),
+            );
+        }
+    }
+
+    pub fn copy_color_to_buffer(&self, image: vk::Image, extent: vk::Extent2D, buffer: vk::Buffer) {
+        self.copy_image_to_buffer(image, vk::ImageAspectFlags::COLOR, extent, buffer);
+    }
+
     pub fn end_rendering(&self) {
         // SAFETY: matches `begin_rendering`.
         unsafe { self.device.cmd_end_rendering(self.cmd) };

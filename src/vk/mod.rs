@@ -12,6 +12,7 @@ pub mod memory;
 pub mod pipeline;
 pub mod queries;
 pub mod shader;
+pub mod swapchain;
 pub mod target;
 
 pub use device::{Capabilities, Device};

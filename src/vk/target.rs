@@ -4,6 +4,7 @@
 use ash::vk;
 use gpu_allocator::MemoryLocation;
 
+use super::commands::Recorder;
 use super::device::Device;
 use super::error::{Result, VkError};
 use super::instance::Instance;
@@ -179,11 +180,11 @@ impl OffscreenTarget {
     }
 
     /// Copies both images into host-visible buffers after drawing.
-    pub fn record_readback(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+    pub fn record_readback(&self, rec: &Recorder) {
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
         transition_images(
-            device,
-            cmd,
+            rec.device,
+            rec.cmd,
             &[
                 Transition {
                     image: self.color.raw,
@@ -208,50 +209,13 @@ impl OffscreenTarget {
             ],
         );
         let extent = self.color.desc.extent;
-        let copy = |aspect| {
-            vk::BufferImageCopy::default()
-                .image_subresource(
-                    vk::ImageSubresourceLayers::default()
-                        .aspect_mask(aspect)
-                        .layer_count(1),
-                )
-                .image_extent(vk::Extent3D {
-                    width: extent.width,
-                    height: extent.height,
-                    depth: 1,
-                })
-        };
-        // SAFETY: images are in TRANSFER_SRC_OPTIMAL and the buffers hold
-        // width * height * 4 bytes.
-        unsafe {
-            device.cmd_copy_image_to_buffer(
-                cmd,
-                self.color.raw,
-                L::TRANSFER_SRC_OPTIMAL,
-                self.color_readback.raw,
-                &[copy(vk::ImageAspectFlags::COLOR)],
-            );
-            device.cmd_copy_image_to_buffer(
-                cmd,
-                self.depth.raw,
-                L::TRANSFER_SRC_OPTIMAL,
-                self.depth_readback.raw,
-                &[copy(vk::ImageAspectFlags::DEPTH)],
-            );
-        }
-        // Make the copies visible to the host reads after the fence.
-        let barrier = [vk::MemoryBarrier2::default()
-            .src_stage_mask(S::COPY)
-            .src_access_mask(A::TRANSFER_WRITE)
-            .dst_stage_mask(S::HOST)
-            .dst_access_mask(A::HOST_READ)];
-        // SAFETY: `cmd` is recording.
-        unsafe {
-            device.cmd_pipeline_barrier2(
-                cmd,
-                &vk::DependencyInfo::default().memory_barriers(&barrier),
-            )
-        };
+        rec.copy_color_to_buffer(self.color.raw, extent, self.color_readback.raw);
+        rec.copy_image_to_buffer(
+            self.depth.raw,
+            vk::ImageAspectFlags::DEPTH,
+            extent,
+            self.depth_readback.raw,
+        );
     }
 
     /// The pixels and depth of the last completed `record_readback`.

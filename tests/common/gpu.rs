@@ -197,10 +197,30 @@ pub fn assert_golden(
             )
         })
         .to_rgba8();
+    assert_images_match(
+        name,
+        image,
+        &golden,
+        channel_tolerance,
+        max_differing_fraction,
+    );
+}
+
+/// Two images agree when at most `max_differing_fraction` of pixels differ
+/// by more than `channel_tolerance` in a channel. On mismatch writes
+/// NAME-actual.png and NAME-difference.png to tests/golden/.
+pub fn assert_images_match(
+    name: &str,
+    image: &image::RgbaImage,
+    golden: &image::RgbaImage,
+    channel_tolerance: u8,
+    max_differing_fraction: f64,
+) {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
     assert_eq!(
         golden.dimensions(),
         image.dimensions(),
-        "{name}: size differs from the golden image"
+        "{name}: sizes differ"
     );
     let mut difference = image::RgbaImage::new(image.width(), image.height());
     let mut differing = 0usize;

@@ -1,0 +1,168 @@
+//! `vkterrain demo`: the window, and the bare command's choice between a
+//! window and a headless render.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use ash::vk;
+use clap::ValueEnum;
+
+use super::args::{parse_pixels, TerrainArgs};
+use super::render::{render, RenderCmd, ViewArgs, DEFAULT_OUTPUT};
+use crate::app::{self, DemoOptions};
+use crate::terrain::Terrain;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum PresentModeArg {
+    /// Wait for vertical blank; always available.
+    #[default]
+    Fifo,
+    /// Replace the queued image; no tearing, no waiting.
+    Mailbox,
+    /// Present at once; may tear.
+    Immediate,
+}
+
+#[derive(clap::Args, Debug, Default)]
+pub struct DemoCmd {
+    #[command(flatten)]
+    pub terrain: TerrainArgs,
+
+    #[command(flatten)]
+    pub view: ViewArgs,
+
+    /// Window width in pixels.
+    #[arg(long, value_name = "W", default_value = "1280", value_parser = parse_pixels)]
+    pub width: u32,
+
+    /// Window height in pixels.
+    #[arg(long, value_name = "H", default_value = "720", value_parser = parse_pixels)]
+    pub height: u32,
+
+    /// How frames reach the screen (FIFO when the one asked for is missing).
+    #[arg(long, value_enum, default_value_t = PresentModeArg::Fifo)]
+    pub present_mode: PresentModeArg,
+
+    /// Render this many frames (with --exit).
+    #[arg(long, value_name = "N", requires = "exit")]
+    pub frames: Option<u64>,
+
+    /// Resize the window at frame K, to a tiny size two frames later, and back.
+    #[arg(long, value_name = "K", requires = "frames")]
+    pub resize_at: Option<u64>,
+
+    /// Write the last frame to this PNG.
+    #[arg(long, value_name = "PATH", requires = "frames")]
+    pub screenshot: Option<PathBuf>,
+
+    /// Exit after --frames frames.
+    #[arg(long, requires = "frames")]
+    pub exit: bool,
+
+    /// Turn on the Vulkan validation layer (also VKTERRAIN_VALIDATE=1).
+    #[arg(long)]
+    pub validate: bool,
+}
+
+pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
+    if cmd.frames == Some(0) {
+        bail!("--frames must be at least 1");
+    }
+    let mut scene = cmd.terrain.scene()?;
+    cmd.view.apply_to_scene(&mut scene)?;
+    let settings = cmd.view.settings(&scene);
+    let info = scene.terrain_info()?;
+    let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
+    let terrain = Terrain::new(info, 0.0)?;
+    let summary = app::run(DemoOptions {
+        terrain,
+        camera,
+        settings,
+        width: cmd.width,
+        height: cmd.height,
+        present_mode: match cmd.present_mode {
+            PresentModeArg::Fifo => vk::PresentModeKHR::FIFO,
+            PresentModeArg::Mailbox => vk::PresentModeKHR::MAILBOX,
+            PresentModeArg::Immediate => vk::PresentModeKHR::IMMEDIATE,
+        },
+        validate: cmd.validate,
+        frames: cmd.frames,
+        resize_at: cmd.resize_at,
+        screenshot: cmd.screenshot.clone(),
+    })?;
+    let fps = summary.frames as f64 / summary.seconds.max(1e-9);
+    writeln!(
+        out,
+        "rendered {} frames in {:.2} s ({fps:.1} fps) on {}; last frame: GPU {}, {} triangles; {} validation messages",
+        summary.frames,
+        summary.seconds,
+        summary.device,
+        summary.last.gpu_ms.map_or("n/a".into(), |ms| format!("{ms:.2} ms")),
+        summary
+            .last
+            .statistics
+            .map_or("n/a".into(), |s| s.clipping_primitives.to_string()),
+        summary.validation_messages,
+    )?;
+    let sizes: Vec<String> = summary
+        .sizes
+        .iter()
+        .map(|(w, h)| format!("{w}x{h}"))
+        .collect();
+    writeln!(
+        out,
+        "swapchain built {} times; sizes {}",
+        summary.swapchains_built,
+        sizes.join(" -> ")
+    )?;
+    if let Some(path) = &cmd.screenshot {
+        writeln!(out, "wrote {}", path.display())?;
+    }
+    if summary.validation_messages > 0 {
+        bail!(
+            "the validation layer reported {} messages, first: {}",
+            summary.validation_messages,
+            summary.first_messages.first().map_or("", String::as_str)
+        );
+    }
+    Ok(())
+}
+
+/// True when a window system is there to open a window on.
+pub fn display_available() -> bool {
+    ["DISPLAY", "WAYLAND_DISPLAY"]
+        .iter()
+        .any(|v| std::env::var_os(v).is_some_and(|s| !s.is_empty()))
+}
+
+/// The bare command: the default scene in a window, or, with no display,
+/// headless to vkterrain-default.png.
+pub fn run_default(out: &mut dyn Write) -> Result<()> {
+    if display_available() {
+        return demo(
+            DemoCmd {
+                width: 1280,
+                height: 720,
+                ..DemoCmd::default()
+            },
+            out,
+        );
+    }
+    writeln!(
+        out,
+        "no display (DISPLAY and WAYLAND_DISPLAY are unset): rendering the default scene headless instead"
+    )?;
+    render(
+        RenderCmd {
+            terrain: TerrainArgs::default(),
+            view: ViewArgs::default(),
+            width: 1280,
+            height: 720,
+            out: PathBuf::from(DEFAULT_OUTPUT),
+            stats: None,
+            validate: false,
+        },
+        out,
+    )
+}

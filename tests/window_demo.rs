@@ -1,0 +1,90 @@
+//! The window demo under Xvfb: a scripted run with resizes exits cleanly
+//! with no validation message, and its screenshot matches the headless
+//! render of the same camera.
+
+mod common;
+
+use std::process::Command;
+
+use common::gpu::{assert_images_match, skip_gpu};
+
+#[test]
+fn scripted_run_with_resizes_matches_the_headless_render() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let shot = dir.path().join("shot.png");
+    let camera = [
+        "--eye=-1500,1400,-3000",
+        "--target",
+        "200,300,0",
+        "--fov",
+        "60",
+    ];
+    let mut args = vec![
+        "-a",
+        "-s",
+        "-screen 0 1600x1200x24",
+        env!("CARGO_BIN_EXE_vkterrain"),
+        "demo",
+        "--validate",
+    ];
+    args.extend(camera);
+    args.extend([
+        "--width",
+        "640",
+        "--height",
+        "400",
+        "--frames",
+        "24",
+        "--resize-at",
+        "8",
+        "--exit",
+    ]);
+    args.extend(["--screenshot", shot.to_str().unwrap()]);
+    let out = Command::new("xvfb-run")
+        .args(&args)
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("rendered 24 frames"), "{stdout}");
+    assert!(stdout.contains("; 0 validation messages"), "{stdout}");
+    // Resized to 2/3, to a tiny size, and back.
+    assert!(
+        stdout.contains("sizes 640x400 -> 426x266 -> 16x12 -> 640x400"),
+        "{stdout}"
+    );
+
+    let headless = dir.path().join("headless.png");
+    let mut render = vec![
+        "render",
+        "--validate",
+        "--width",
+        "640",
+        "--height",
+        "400",
+        "--out",
+        headless.to_str().unwrap(),
+    ];
+    render.extend(camera);
+    let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(&render)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let window = image::open(&shot).unwrap().to_rgba8();
+    let offscreen = image::open(&headless).unwrap().to_rgba8();
+    assert_images_match("window-vs-headless", &window, &offscreen, 12, 0.005);
+}
