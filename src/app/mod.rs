@@ -50,6 +50,8 @@ pub struct DemoOptions {
     pub height: u32,
     pub present_mode: vk::PresentModeKHR,
     pub validate: bool,
+    /// Eye height above the ground when walking.
+    pub walk_height: f64,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -266,7 +268,10 @@ impl Running {
             screenshot_buffer: None,
             frame: 0,
             rebuild: true,
-            controller: CameraController::new(&options.camera, speed_for(&options.terrain)),
+            controller: CameraController {
+                eye_height: options.walk_height,
+                ..CameraController::new(&options.camera, speed_for(&options.terrain))
+            },
             keys: Keys::default(),
             settings: options.settings,
             frozen: None,

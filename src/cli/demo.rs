@@ -60,9 +60,22 @@ pub struct DemoCmd {
     #[arg(long, requires = "frames")]
     pub exit: bool,
 
+    /// Eye height above the ground when walking (keys 2 / 3).
+    #[arg(long, value_name = "H", default_value_t = 1.8, value_parser = positive)]
+    pub walk_height: f64,
+
     /// Turn on the Vulkan validation layer (also VKTERRAIN_VALIDATE=1).
     #[arg(long)]
     pub validate: bool,
+}
+
+fn positive(s: &str) -> Result<f64, String> {
+    let v = super::args::parse_finite(s)?;
+    if v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{s:?} must be positive"))
+    }
 }
 
 pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
@@ -87,6 +100,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
             PresentModeArg::Immediate => vk::PresentModeKHR::IMMEDIATE,
         },
         validate: cmd.validate,
+        walk_height: cmd.walk_height,
         frames: cmd.frames,
         resize_at: cmd.resize_at,
         screenshot: cmd.screenshot.clone(),
@@ -144,6 +158,7 @@ pub fn run_default(out: &mut dyn Write) -> Result<()> {
             DemoCmd {
                 width: 1280,
                 height: 720,
+                walk_height: 1.8,
                 ..DemoCmd::default()
             },
             out,
