@@ -8,7 +8,7 @@
 //! - `#include "..."` resolves inside `glsl/`.
 //! - The constants of `src/shader_constants.rs` arrive as macro definitions.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 include!("src/shader_constants.rs");
 
@@ -21,7 +21,12 @@ const STAGES: [(&str, shaderc::ShaderKind); 5] = [
 ];
 
 fn main() {
-    let glsl_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("glsl");
+    // Read at run time: `env!` would bake in the checkout the build script
+    // was compiled in, and a target directory shared between checkouts
+    // would then compile another checkout's shaders.
+    let manifest_dir =
+        PathBuf::from(std::env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let glsl_dir = manifest_dir.join("glsl");
     let out_dir = PathBuf::from(std::env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     println!("cargo:rerun-if-changed=src/shader_constants.rs");
     println!("cargo:rerun-if-changed={}", glsl_dir.display());

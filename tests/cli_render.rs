@@ -127,6 +127,36 @@ fn render_takes_heightmap_and_camera_options() {
     assert_eq!(s["patches_total"], 22 * 26);
     assert_eq!(s["validation_messages"], 0);
     assert_eq!(s["eye"][0], -15000.0);
+    let brute = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--path",
+            "brute",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--out",
+            "b.png",
+            "--stats",
+            "b.json",
+        ],
+    );
+    ok(&brute);
+    let b = stats(&dir.path().join("b.json"));
+    assert_eq!(b["path"], "brute");
+    assert_eq!(b["tes_invocations"], 0);
+    assert!(
+        b["triangles"].as_u64().unwrap() > 100_000,
+        "every cell in view drawn: {}",
+        b["triangles"]
+    );
+    assert_eq!(b["validation_messages"], 0);
+    // Brute needs no buffers of its own: no control points, no indices.
+    assert!(b["gpu_memory"].get("terrain.control_points").is_none());
+    assert!(b["gpu_memory"].get("terrain.patch_indices").is_none());
     let wire = vkterrain(
         dir.path(),
         &[

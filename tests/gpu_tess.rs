@@ -9,7 +9,7 @@ use std::collections::BTreeSet;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, DVec3, Vec3};
-use vkterrain::render::{RenderSettings, Shading};
+use vkterrain::render::{RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::lod::patch_tess_factors;
@@ -334,7 +334,14 @@ fn culling_skips_patches_outside_the_frustum() {
 
 /// Top-down view of a small area at maximum tessellation: the depth buffer,
 /// turned back into world positions, lies on `height_at`.
-fn check_depth_against_height_at(name: &str, terrain: Terrain, view_cells: f64) {
+/// Returns the worst |GPU height - height_at| relative to the height range.
+fn check_depth_against_height_at(
+    name: &str,
+    terrain: Terrain,
+    view_cells: f64,
+    path: RenderPath,
+    tolerance: f64,
+) {
     if skip_gpu() {
         return;
     }
@@ -359,6 +366,7 @@ fn check_depth_against_height_at(name: &str, terrain: Terrain, view_cells: f64) 
             min_exp: 6.0,
             max_exp: 6.0,
         },
+        path,
         ..RenderSettings::default()
     };
     let mut scene = GpuScene::new(terrain, 200, 200, false);
@@ -377,21 +385,76 @@ fn check_depth_against_height_at(name: &str, terrain: Terrain, view_cells: f64) 
         "{name}: only {checked} pixels on the terrain"
     );
     assert!(
-        worst <= 1e-3 * range,
-        "{name}: depth disagrees with height_at by {worst} (range {range})"
+        worst <= tolerance * range,
+        "{name}/{path:?}: depth disagrees with height_at by {worst} (range {range})"
     );
-    eprintln!("{name}: worst |GPU - height_at| = {worst:.4} over {checked} pixels (range {range})");
+    eprintln!("{name}/{path:?}: worst |GPU - height_at| = {worst:.5} over {checked} pixels (range {range})");
     scene.finish();
 }
 
 #[test]
 fn depth_matches_height_at_on_the_dem() {
-    check_depth_against_height_at("dem", dem_terrain(4, DVec2::ZERO), 40.0);
+    check_depth_against_height_at(
+        "dem",
+        dem_terrain(4, DVec2::ZERO),
+        40.0,
+        RenderPath::Tess,
+        1e-3,
+    );
+}
+
+/// Brute draws height_at's own triangles: only depth precision separates them.
+#[test]
+fn brute_surface_is_height_at() {
+    check_depth_against_height_at(
+        "dem",
+        dem_terrain(32, DVec2::ZERO),
+        40.0,
+        RenderPath::Brute,
+        2e-5,
+    );
+    check_depth_against_height_at(
+        "default",
+        default_terrain(32),
+        60.0,
+        RenderPath::Brute,
+        2e-5,
+    );
+}
+
+#[test]
+fn brute_has_no_cracks() {
+    if skip_gpu() {
+        return;
+    }
+    for (name, terrain) in [
+        ("dem", dem_terrain(32, DVec2::ZERO)),
+        ("cliff", cliff_terrain()),
+    ] {
+        let cameras = crack_cameras(&terrain);
+        let mut scene = GpuScene::new(terrain, 256, 192, false);
+        let settings = RenderSettings {
+            path: RenderPath::Brute,
+            ..flat_settings(&scene.terrain, DistanceMode::Smooth)
+        };
+        for (view, cam) in &cameras {
+            let frame = scene.render(cam, &settings);
+            let stats = frame.measurements.statistics.unwrap();
+            assert_eq!(
+                stats.tes_invocations, 0,
+                "no tessellation on the brute path"
+            );
+            assert!(stats.clipping_primitives > 0);
+            let holes = enclosed_background(&frame.readback.rgba, 256, 192, |p| p[0] < 128);
+            assert!(holes.is_empty(), "{name}/{view}: {} holes", holes.len());
+        }
+        scene.finish();
+    }
 }
 
 #[test]
 fn depth_matches_height_at_on_the_default_scene() {
-    check_depth_against_height_at("default", default_terrain(4), 60.0);
+    check_depth_against_height_at("default", default_terrain(4), 60.0, RenderPath::Tess, 1e-3);
 }
 
 #[test]

@@ -18,7 +18,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    FrameMeasurements, FrameUniforms, FrameView, RenderSettings, Shading, TessRenderer,
+    FrameMeasurements, FrameUniforms, FrameView, RenderPath, RenderSettings, RendererOptions,
+    Shading, TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
@@ -37,7 +38,8 @@ vkterrain controls
   2 / 3          walk / fly
   F1  this help                  F2  wireframe (when the device supports it)
   F3  LOD colours                F4  freeze culling (keep the current frustum)
-  F5  LOD debug mode             - / =   LOD distances down / up
+  F5  LOD debug mode             F6  render path (tess / brute)
+  - / =   LOD distances down / up
   F12 screenshot                 Esc     quit";
 
 /// What the demo runs.
@@ -127,7 +129,7 @@ struct Running {
     gpu: Gpu,
     surface: Option<Surface>,
     swapchain: Option<Swapchain>,
-    renderer: Option<TessRenderer>,
+    renderer: Option<TerrainRenderer>,
     pool: vk::CommandPool,
     frames: Vec<FrameSync>,
     screenshot_buffer: Option<Buffer>,
@@ -309,12 +311,17 @@ impl Running {
             .unwrap_or(vk::Format::B8G8R8A8_SRGB);
         let wireframe = self.gpu.device.caps.fill_mode_non_solid;
         self.renderer = Some(
-            TessRenderer::new(
+            TerrainRenderer::new(
                 &self.gpu,
                 &options.terrain,
                 format,
                 FRAMES_IN_FLIGHT as u32,
-                wireframe,
+                // Brute adds pipelines only (no buffers): cheap to have ready
+                // for the path key.
+                &RendererOptions {
+                    paths: vec![RenderPath::Tess, RenderPath::Brute],
+                    wireframe,
+                },
             )
             .context("preparing the terrain for the GPU")?,
         );
@@ -419,6 +426,13 @@ impl Running {
                     Some(_) => None,
                     None => Some(self.view(&options.terrain)),
                 }
+            }
+            KeyCode::F6 => {
+                self.settings.path = match self.settings.path {
+                    RenderPath::Tess => RenderPath::Brute,
+                    RenderPath::Brute => RenderPath::Tess,
+                };
+                println!("render path: {:?}", self.settings.path);
             }
             KeyCode::F5 => {
                 self.settings.lod_mode = match self.settings.lod_mode {
@@ -674,7 +688,8 @@ impl Running {
             .statistics
             .map_or("n/a".into(), |s| s.clipping_primitives.to_string());
         let mut title = format!(
-            "vkterrain | {:.1} fps | GPU {gpu} | {triangles} triangles | {}/{} patches",
+            "vkterrain | {:?} | {:.1} fps | GPU {gpu} | {triangles} triangles | {}/{} patches",
+            self.settings.path,
             self.fps,
             self.patches_drawn,
             options.terrain.grid().patch_count()

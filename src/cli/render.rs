@@ -11,7 +11,9 @@ use serde::Serialize;
 
 use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
 use crate::output::{save_png, write_atomically};
-use crate::render::{Headless, HeadlessFrame, RenderSettings, Shading, TessRenderer};
+use crate::render::{
+    Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, Shading, TerrainRenderer,
+};
 use crate::scene::Scene;
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
@@ -21,12 +23,22 @@ use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::{Capabilities, Gpu};
 
 /// Which way the terrain is drawn.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RenderPath {
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum PathArg {
     /// Hardware tessellation.
     #[default]
     Tess,
+    /// The full-resolution reference mesh.
+    Brute,
+}
+
+impl From<PathArg> for RenderPath {
+    fn from(p: PathArg) -> Self {
+        match p {
+            PathArg::Tess => RenderPath::Tess,
+            PathArg::Brute => RenderPath::Brute,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -70,8 +82,8 @@ pub struct ViewArgs {
     pub fov: Option<f32>,
 
     /// Render path.
-    #[arg(long, value_enum, default_value_t = RenderPath::Tess)]
-    pub path: RenderPath,
+    #[arg(long, value_enum, default_value_t = PathArg::Tess)]
+    pub path: PathArg,
 
     /// Draw triangle edges only (needs fillModeNonSolid).
     #[arg(long)]
@@ -125,6 +137,7 @@ impl ViewArgs {
     pub fn settings(&self, scene: &Scene) -> RenderSettings {
         let defaults = RenderSettings::default();
         RenderSettings {
+            path: self.path.into(),
             lod: scene.lod,
             lod_mode: match self.lod_mode {
                 LodModeArg::Smooth => DistanceMode::Smooth,
@@ -252,12 +265,15 @@ pub fn render_scene(
     let camera = camera.apply(scene.camera_for(&info))?;
     let terrain = Terrain::new(info, 0.0)?;
     let gpu = Gpu::new(validate).context("starting Vulkan")?;
-    let mut renderer = TessRenderer::new(
+    let mut renderer = TerrainRenderer::new(
         &gpu,
         &terrain,
         OFFSCREEN_COLOR_FORMAT,
         1,
-        settings.wireframe,
+        &RendererOptions {
+            paths: vec![settings.path],
+            wireframe: settings.wireframe,
+        },
     )
     .context("preparing the terrain for the GPU")?;
     let mut headless = match Headless::new(&gpu, width, height) {
@@ -278,7 +294,7 @@ pub fn render_scene(
     let stats = FrameStats {
         device: caps.device_name.clone(),
         driver: format!("{} ({})", caps.driver_name, caps.driver_info),
-        path: RenderPath::Tess,
+        path: settings.path,
         width,
         height,
         patches_total: terrain.grid().patch_count(),

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use ash::vk;
 
-use super::tess::{FrameMeasurements, TessRenderer};
+use super::renderer::{FrameMeasurements, TerrainRenderer};
 use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
@@ -60,7 +60,7 @@ impl Headless {
     pub fn render(
         &mut self,
         gpu: &Gpu,
-        renderer: &mut TessRenderer,
+        renderer: &mut TerrainRenderer,
         terrain: &Terrain,
         camera: &Camera,
         settings: &RenderSettings,

@@ -2,10 +2,10 @@
 //! draw recording into a target it is given. Knows nothing of windows.
 
 pub mod headless;
+pub mod renderer;
 pub mod shaders;
-pub mod tess;
 pub mod uniforms;
 
 pub use headless::{Headless, HeadlessFrame};
-pub use tess::{FrameMeasurements, TessRenderer};
+pub use renderer::{FrameMeasurements, RenderPath, RendererOptions, TerrainRenderer};
 pub use uniforms::{FrameUniforms, FrameView, RenderSettings, Shading};

@@ -5,6 +5,7 @@ use std::mem::{offset_of, size_of};
 
 use glam::{DVec3, Mat4, Vec3, Vec4};
 
+use super::renderer::RenderPath;
 use crate::shader_constants::{
     LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
 };
@@ -52,6 +53,7 @@ pub enum Shading {
 /// What a frame looks like, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
+    pub path: RenderPath,
     pub lod: DistanceLod,
     pub lod_mode: DistanceMode,
     pub shading: Shading,
@@ -67,6 +69,7 @@ pub struct RenderSettings {
 impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
+            path: RenderPath::Tess,
             lod: DistanceLod::default(),
             lod_mode: DistanceMode::Smooth,
             shading: Shading::Lit,

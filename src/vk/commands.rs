@@ -240,6 +240,13 @@ impl Recorder<'_> {
         }
     }
 
+    /// A non-indexed draw without vertex buffers (the shader uses
+    /// gl_VertexIndex).
+    pub fn draw(&self, vertex_count: u32) {
+        // SAFETY: a pipeline is bound, inside rendering.
+        unsafe { self.device.cmd_draw(self.cmd, vertex_count, 1, 0, 0) };
+    }
+
     pub fn draw_indexed(&self, first_index: u32, index_count: u32) {
         // SAFETY: geometry and pipeline are bound, inside rendering; the
         // caller keeps the range inside the index buffer.

@@ -80,8 +80,14 @@ impl Device {
                     .offset(offset)
             })
             .collect();
+        // A pipeline without attributes reads no vertex buffer at all.
+        let bindings = if attributes.is_empty() {
+            &bindings[..0]
+        } else {
+            &bindings[..]
+        };
         let vertex_input = vk::PipelineVertexInputStateCreateInfo::default()
-            .vertex_binding_descriptions(&bindings)
+            .vertex_binding_descriptions(bindings)
             .vertex_attribute_descriptions(&attributes);
         let input_assembly =
             vk::PipelineInputAssemblyStateCreateInfo::default().topology(desc.topology);

@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 
 use glam::{DVec3, Vec4};
-use vkterrain::render::{Headless, HeadlessFrame, RenderSettings, TessRenderer};
+use vkterrain::render::{
+    Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, TerrainRenderer,
+};
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::Terrain;
 use vkterrain::vk::target::OFFSCREEN_COLOR_FORMAT;
@@ -25,7 +27,7 @@ pub fn skip_gpu() -> bool {
 pub struct GpuScene {
     pub gpu: Gpu,
     pub terrain: Terrain,
-    renderer: Option<TessRenderer>,
+    renderer: Option<TerrainRenderer>,
     headless: Option<Headless>,
 }
 
@@ -37,8 +39,17 @@ impl GpuScene {
                  (set VKTERRAIN_SKIP_GPU=1 to skip them)"
             )
         });
-        let renderer = TessRenderer::new(&gpu, &terrain, OFFSCREEN_COLOR_FORMAT, 1, wireframe)
-            .expect("renderer");
+        let renderer = TerrainRenderer::new(
+            &gpu,
+            &terrain,
+            OFFSCREEN_COLOR_FORMAT,
+            1,
+            &RendererOptions {
+                paths: vec![RenderPath::Tess, RenderPath::Brute],
+                wireframe,
+            },
+        )
+        .expect("renderer");
         let headless = Headless::new(&gpu, width, height).expect("offscreen target");
         GpuScene {
             gpu,

@@ -1,0 +1,475 @@
+//! The terrain renderer. It shares one heightmap image, descriptor set
+//! layout and per-frame uniforms between the render paths, and builds the
+//! geometry and pipelines of only the paths asked for:
+//!
+//! - **tess**: patches of four control points; factors and culling in the
+//!   control shader, displacement in the evaluation shader.
+//! - **brute**: every sample a vertex, with `height_at`'s triangle split and
+//!   no buffers at all (the vertex shader derives each sample from its
+//!   index); the reference that error is measured against.
+
+use std::mem::size_of;
+
+use ash::vk;
+
+use super::shaders;
+use super::uniforms::{FrameUniforms, RenderSettings};
+use crate::shader_constants::{BINDING_FRAME, BINDING_HEIGHTMAP};
+use crate::terrain::Terrain;
+use crate::vk::commands::Recorder;
+use crate::vk::memory::{Buffer, Image};
+use crate::vk::pipeline::GraphicsPipelineDesc;
+use crate::vk::queries::{FrameQueries, PipelineStatistics};
+use crate::vk::target::{TargetViews, DEPTH_FORMAT};
+use crate::vk::{Device, Gpu, Result, VkError};
+
+/// Per-frame-in-flight resources: the uniform block is rewritten each frame,
+/// so a frame still on the GPU keeps its own.
+struct FrameSlot {
+    uniforms: Buffer,
+    set: vk::DescriptorSet,
+    queries: FrameQueries,
+}
+
+/// Which way the terrain is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RenderPath {
+    /// Hardware tessellation.
+    #[default]
+    Tess,
+    /// The full-resolution mesh.
+    Brute,
+}
+
+/// What a renderer builds.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RendererOptions {
+    pub paths: Vec<RenderPath>,
+    /// Also build line pipelines (needs fillModeNonSolid).
+    pub wireframe: bool,
+}
+
+/// Fill and (when asked for) wireframe pipelines of one path.
+struct PathPipelines {
+    fill: vk::Pipeline,
+    wireframe: Option<vk::Pipeline>,
+}
+
+impl PathPipelines {
+    fn select(&self, wireframe: bool) -> Result<vk::Pipeline> {
+        if !wireframe {
+            return Ok(self.fill);
+        }
+        self.wireframe.ok_or_else(|| {
+            VkError::Unsupported("the wireframe pipeline was not built for this renderer".into())
+        })
+    }
+
+    fn destroy(self, device: &Device) {
+        for pipeline in std::iter::once(self.fill).chain(self.wireframe) {
+            device.destroy_pipeline(pipeline);
+        }
+    }
+}
+
+struct TessGeometry {
+    control_points: Buffer,
+    indices: Buffer,
+    index_count: u32,
+    pipelines: PathPipelines,
+}
+
+struct BruteGeometry {
+    vertex_count: u32,
+    pipelines: PathPipelines,
+}
+
+/// Draws a terrain into any target, by the paths it was built for.
+pub struct TerrainRenderer {
+    heightmap: Image,
+    sampler: vk::Sampler,
+    set_layout: vk::DescriptorSetLayout,
+    pipeline_layout: vk::PipelineLayout,
+    descriptor_pool: vk::DescriptorPool,
+    tess: Option<TessGeometry>,
+    brute: Option<BruteGeometry>,
+    color_format: vk::Format,
+    max_patches_per_draw: Option<u32>,
+    frames: Vec<FrameSlot>,
+}
+
+/// What one frame's queries measured; None where the device can't tell.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameMeasurements {
+    pub gpu_ms: Option<f64>,
+    pub statistics: Option<PipelineStatistics>,
+}
+
+impl TerrainRenderer {
+    /// Uploads the terrain and builds the pipelines of `options.paths` for
+    /// targets of `color_format`.
+    pub fn new(
+        gpu: &Gpu,
+        terrain: &Terrain,
+        color_format: vk::Format,
+        frames_in_flight: u32,
+        options: &RendererOptions,
+    ) -> Result<Self> {
+        let device = &gpu.device;
+        let info = terrain.info();
+        let (cols, rows) = (info.cols() as u32, info.rows() as u32);
+        let limit = device.caps.max_image_dimension_2d;
+        if cols > limit || rows > limit {
+            return Err(VkError::Unsupported(format!(
+                "heightmap of {cols}x{rows} samples exceeds this device's largest image ({limit}x{limit})"
+            )));
+        }
+        let features = device.format_features(&gpu.instance, vk::Format::R32_SFLOAT);
+        if !features
+            .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::TRANSFER_DST)
+        {
+            return Err(VkError::Unsupported(format!(
+                "{} cannot sample R32_SFLOAT images ({features:?})",
+                device.caps.device_name
+            )));
+        }
+        if options.wireframe && !device.caps.fill_mode_non_solid {
+            return Err(VkError::Unsupported(format!(
+                "wireframe needs fillModeNonSolid, which {} lacks",
+                device.caps.device_name
+            )));
+        }
+        let wants = |path| options.paths.contains(&path);
+        if wants(RenderPath::Tess) && !device.caps.tessellation_shader {
+            return Err(VkError::Unsupported(format!(
+                "the tess path needs tessellationShader, which {} lacks",
+                device.caps.device_name
+            )));
+        }
+        // Brute draws 6 vertices per cell, counted by a signed index in GLSL.
+        let brute_vertices = 6 * u64::from(cols - 1) * u64::from(rows - 1);
+        if wants(RenderPath::Brute) && brute_vertices > i32::MAX as u64 {
+            return Err(VkError::Unsupported(format!(
+                "the brute path draws {brute_vertices} vertices for {cols}x{rows} samples, over the {} one draw can address",
+                i32::MAX
+            )));
+        }
+
+        let heightmap = device.upload_r32f_image(
+            "terrain.heightmap",
+            cols,
+            rows,
+            info.heightmap().heights(),
+        )?;
+        let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
+        let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        if wants(RenderPath::Tess) {
+            stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
+                | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
+        }
+        let set_layout = device.create_descriptor_set_layout(
+            &[
+                (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
+                (
+                    BINDING_HEIGHTMAP,
+                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                    stages,
+                ),
+            ],
+            "terrain.set_layout",
+        )?;
+        let pipeline_layout =
+            device.create_pipeline_layout(&[set_layout], "terrain.pipeline_layout")?;
+        let (descriptor_pool, sets) = device.allocate_descriptor_sets(
+            set_layout,
+            &[
+                (vk::DescriptorType::UNIFORM_BUFFER, 1),
+                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+            ],
+            frames_in_flight,
+            "terrain.frame_set",
+        )?;
+        let mut frames = Vec::with_capacity(sets.len());
+        for (i, set) in sets.into_iter().enumerate() {
+            let uniforms = device.create_host_buffer(
+                &format!("terrain.frame_uniforms[{i}]"),
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                bytemuck::bytes_of(&FrameUniforms::default()),
+            )?;
+            device.write_uniform_buffer(
+                set,
+                BINDING_FRAME,
+                uniforms.raw,
+                size_of::<FrameUniforms>() as u64,
+            );
+            device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
+            let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
+            frames.push(FrameSlot {
+                uniforms,
+                set,
+                queries,
+            });
+        }
+        let mut renderer = TerrainRenderer {
+            heightmap,
+            sampler,
+            set_layout,
+            pipeline_layout,
+            descriptor_pool,
+            tess: None,
+            brute: None,
+            color_format,
+            max_patches_per_draw: device.caps.max_patches_per_draw,
+            frames,
+        };
+        // From here on, a failure tears down what was built.
+        let built = (|| {
+            if wants(RenderPath::Tess) {
+                let pipelines =
+                    build_pipelines(device, &renderer, RenderPath::Tess, options.wireframe)?;
+                let control_points = device.upload_buffer(
+                    "terrain.control_points",
+                    vk::BufferUsageFlags::VERTEX_BUFFER,
+                    bytemuck::cast_slice(terrain.control_points()),
+                );
+                let indices = device.upload_buffer(
+                    "terrain.patch_indices",
+                    vk::BufferUsageFlags::INDEX_BUFFER,
+                    bytemuck::cast_slice(terrain.indices()),
+                );
+                renderer.tess = Some(TessGeometry {
+                    control_points: control_points?,
+                    indices: indices?,
+                    index_count: terrain.indices().len() as u32,
+                    pipelines,
+                });
+            }
+            if wants(RenderPath::Brute) {
+                renderer.brute = Some(BruteGeometry {
+                    vertex_count: brute_vertices as u32,
+                    pipelines: build_pipelines(
+                        device,
+                        &renderer,
+                        RenderPath::Brute,
+                        options.wireframe,
+                    )?,
+                });
+            }
+            Ok(())
+        })();
+        match built {
+            Ok(()) => Ok(renderer),
+            Err(e) => {
+                renderer.destroy(device);
+                Err(e)
+            }
+        }
+    }
+
+    pub fn color_format(&self) -> vk::Format {
+        self.color_format
+    }
+
+    pub fn frames_in_flight(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether `path` was built.
+    pub fn has_path(&self, path: RenderPath) -> bool {
+        match path {
+            RenderPath::Tess => self.tess.is_some(),
+            RenderPath::Brute => self.brute.is_some(),
+        }
+    }
+
+    /// Writes the uniforms of frame slot `slot`; its previous frame must
+    /// have completed.
+    pub fn prepare(&mut self, slot: usize, uniforms: &FrameUniforms) -> Result<()> {
+        self.frames[slot]
+            .uniforms
+            .mapped_mut()
+            .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
+            .copy_from_slice(bytemuck::bytes_of(uniforms));
+        Ok(())
+    }
+
+    /// Records the terrain draw of `settings.path` into `target` (already in
+    /// attachment layouts), timed and counted by slot `slot`'s queries.
+    pub fn record(
+        &self,
+        rec: &Recorder,
+        slot: usize,
+        target: &TargetViews,
+        settings: &RenderSettings,
+    ) -> Result<()> {
+        let not_built = || {
+            VkError::Unsupported(format!(
+                "the {:?} path was not built for this renderer",
+                settings.path
+            ))
+        };
+        let frame = &self.frames[slot];
+        frame.queries.reset(rec.device, rec.cmd);
+        rec.begin_rendering(target, settings.clear_color);
+        frame.queries.begin(rec.device, rec.cmd);
+        match settings.path {
+            RenderPath::Tess => {
+                let tess = self.tess.as_ref().ok_or_else(not_built)?;
+                rec.bind_graphics(
+                    tess.pipelines.select(settings.wireframe)?,
+                    self.pipeline_layout,
+                    frame.set,
+                );
+                rec.bind_geometry(tess.control_points.raw, tess.indices.raw);
+                // One draw, or batches where the driver needs them (see
+                // `Capabilities::max_patches_per_draw`).
+                let batch = self
+                    .max_patches_per_draw
+                    .map_or(tess.index_count, |n| n * 4);
+                let mut first = 0;
+                while first < tess.index_count {
+                    let count = (tess.index_count - first).min(batch);
+                    rec.draw_indexed(first, count);
+                    first += count;
+                }
+            }
+            RenderPath::Brute => {
+                let brute = self.brute.as_ref().ok_or_else(not_built)?;
+                rec.bind_graphics(
+                    brute.pipelines.select(settings.wireframe)?,
+                    self.pipeline_layout,
+                    frame.set,
+                );
+                rec.draw(brute.vertex_count);
+            }
+        }
+        frame.queries.end(rec.device, rec.cmd);
+        rec.end_rendering();
+        Ok(())
+    }
+
+    /// What slot `slot`'s last frame measured; call after its fence.
+    pub fn measurements(&self, device: &Device, slot: usize) -> Result<FrameMeasurements> {
+        let queries = &self.frames[slot].queries;
+        Ok(FrameMeasurements {
+            gpu_ms: queries.gpu_ms(&device.raw)?,
+            statistics: queries.statistics(&device.raw)?,
+        })
+    }
+
+    pub fn destroy(self, device: &Device) {
+        for frame in self.frames {
+            device.destroy_buffer(frame.uniforms);
+            frame.queries.destroy(&device.raw);
+        }
+        if let Some(tess) = self.tess {
+            tess.pipelines.destroy(device);
+            device.destroy_buffer(tess.control_points);
+            device.destroy_buffer(tess.indices);
+        }
+        if let Some(brute) = self.brute {
+            brute.pipelines.destroy(device);
+        }
+        device.destroy_pipeline_layout(self.pipeline_layout);
+        // The pool frees its sets; the layout goes after them.
+        device.destroy_descriptor_pool(self.descriptor_pool);
+        device.destroy_descriptor_set_layout(self.set_layout);
+        device.destroy_sampler(self.sampler);
+        device.destroy_image(self.heightmap);
+    }
+}
+
+fn build_pipelines(
+    device: &Device,
+    renderer: &TerrainRenderer,
+    path: RenderPath,
+    wireframe: bool,
+) -> Result<PathPipelines> {
+    let create = |mode, suffix| {
+        create_pipeline(
+            device,
+            renderer.pipeline_layout,
+            renderer.color_format,
+            path,
+            mode,
+            suffix,
+        )
+    };
+    let fill = create(vk::PolygonMode::FILL, "fill")?;
+    let wireframe = if wireframe {
+        match create(vk::PolygonMode::LINE, "wireframe") {
+            Ok(p) => Some(p),
+            Err(e) => {
+                device.destroy_pipeline(fill);
+                return Err(e);
+            }
+        }
+    } else {
+        None
+    };
+    Ok(PathPipelines { fill, wireframe })
+}
+
+fn create_pipeline(
+    device: &Device,
+    layout: vk::PipelineLayout,
+    color_format: vk::Format,
+    path: RenderPath,
+    polygon_mode: vk::PolygonMode,
+    suffix: &str,
+) -> Result<vk::Pipeline> {
+    let (name, stages, topology, patch_control_points, vertex_stride, vertex_attributes): (
+        String,
+        &[_],
+        _,
+        _,
+        _,
+        &[_],
+    ) = match path {
+        RenderPath::Tess => (
+            format!("terrain.pipeline.tess.{suffix}"),
+            &[
+                (vk::ShaderStageFlags::VERTEX, shaders::TERRAIN_VERT),
+                (
+                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
+                    shaders::TERRAIN_TESC,
+                ),
+                (
+                    vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+                    shaders::TERRAIN_TESE,
+                ),
+                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+            ],
+            vk::PrimitiveTopology::PATCH_LIST,
+            4,
+            size_of::<[f32; 4]>() as u32,
+            &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
+        ),
+        RenderPath::Brute => (
+            format!("terrain.pipeline.brute.{suffix}"),
+            &[
+                (vk::ShaderStageFlags::VERTEX, shaders::BRUTE_VERT),
+                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+            ],
+            vk::PrimitiveTopology::TRIANGLE_LIST,
+            0,
+            0,
+            &[],
+        ),
+    };
+    device.create_graphics_pipeline(&GraphicsPipelineDesc {
+        name: &name,
+        stages,
+        vertex_stride,
+        vertex_attributes,
+        topology,
+        patch_control_points,
+        polygon_mode,
+        color_format,
+        depth_format: DEPTH_FORMAT,
+        // Reversed Z: nearer is larger.
+        depth_compare: vk::CompareOp::GREATER,
+        layout,
+    })
+}
