@@ -26,7 +26,7 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     // x, y: lowest and highest height (colour ramp); z: 1 when frustum
     // culling is on.
     vec4 height_range;
-    // x: LOD mode, y: shading mode.
+    // x: LOD mode, y: shading mode, z: cells per patch.
     uvec4 modes;
 } frame;
 

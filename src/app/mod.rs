@@ -18,8 +18,8 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::render::{
-    FrameMeasurements, FrameUniforms, FrameView, RenderPath, RenderSettings, RendererOptions,
-    Shading, TerrainRenderer,
+    FrameMeasurements, FrameView, RenderPath, RenderSettings, RendererOptions, Shading,
+    TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
@@ -38,7 +38,7 @@ vkterrain controls
   2 / 3          walk / fly
   F1  this help                  F2  wireframe (when the device supports it)
   F3  LOD colours                F4  freeze culling (keep the current frustum)
-  F5  LOD debug mode             F6  render path (tess / brute)
+  F5  LOD debug mode             F6  render path (tess, geomip, brute)
   - / =   LOD distances down / up
   F12 screenshot                 Esc     quit";
 
@@ -319,7 +319,7 @@ impl Running {
                 // Brute adds pipelines only (no buffers): cheap to have ready
                 // for the path key.
                 &RendererOptions {
-                    paths: vec![RenderPath::Tess, RenderPath::Brute],
+                    paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
                     wireframe,
                 },
             )
@@ -429,7 +429,8 @@ impl Running {
             }
             KeyCode::F6 => {
                 self.settings.path = match self.settings.path {
-                    RenderPath::Tess => RenderPath::Brute,
+                    RenderPath::Tess => RenderPath::Geomip,
+                    RenderPath::Geomip => RenderPath::Brute,
                     RenderPath::Brute => RenderPath::Tess,
                 };
                 println!("render path: {:?}", self.settings.path);
@@ -555,11 +556,7 @@ impl Running {
         if let Some(frozen) = &self.frozen {
             view = view.with_frustum_of(frozen);
         }
-        self.patches_drawn = view.patches_in_frustum(&options.terrain);
-        renderer.prepare(
-            slot,
-            &FrameUniforms::new(&options.terrain, &view, &self.settings),
-        )?;
+        self.patches_drawn = renderer.prepare(slot, &options.terrain, &view, &self.settings)?;
 
         if capture && swapchain.readable && self.screenshot_buffer.is_none() {
             self.screenshot_buffer = Some(device.create_buffer(

@@ -28,6 +28,9 @@ pub enum PathArg {
     /// Hardware tessellation.
     #[default]
     Tess,
+    /// Geomipmapping with stitched edges and geomorphing (no tessellation
+    /// shaders needed).
+    Geomip,
     /// The full-resolution reference mesh.
     Brute,
 }
@@ -36,6 +39,7 @@ impl From<PathArg> for RenderPath {
     fn from(p: PathArg) -> Self {
         match p {
             PathArg::Tess => RenderPath::Tess,
+            PathArg::Geomip => RenderPath::Geomip,
             PathArg::Brute => RenderPath::Brute,
         }
     }
@@ -104,6 +108,10 @@ pub struct ViewArgs {
     /// Turn GPU frustum culling of patches off.
     #[arg(long)]
     pub no_cull: bool,
+
+    /// Geomip path: switch levels abruptly instead of geomorphing.
+    #[arg(long)]
+    pub no_morph: bool,
 }
 
 impl ViewArgs {
@@ -157,6 +165,7 @@ impl ViewArgs {
                 defaults.clear_color
             }),
             cull: !self.no_cull,
+            geomorph: !self.no_morph,
             ..defaults
         }
     }

@@ -6,7 +6,7 @@ use std::time::Instant;
 use ash::vk;
 
 use super::renderer::{FrameMeasurements, TerrainRenderer};
-use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
+use super::uniforms::{FrameView, RenderSettings};
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
 use crate::vk::target::{OffscreenTarget, Readback};
@@ -71,7 +71,7 @@ impl Headless {
         let aspect = views.extent.width as f32 / views.extent.height as f32;
         let view = FrameView::new(terrain, camera, aspect);
         let patches_in_frustum = view.patches_in_frustum(terrain);
-        renderer.prepare(0, &FrameUniforms::new(terrain, &view, settings))?;
+        renderer.prepare(0, terrain, &view, settings)?;
         let rec = device.begin_commands(self.cmd)?;
         self.target.record_begin(rec.device, rec.cmd);
         renderer.record(&rec, 0, &views, settings)?;

@@ -4,6 +4,11 @@
 //!
 //! - **tess**: patches of four control points; factors and culling in the
 //!   control shader, displacement in the evaluation shader.
+//! - **geomip**: geomipmapping for devices without tessellation: one
+//!   vertex template and one index list per level and stitched-side mask,
+//!   shared by every patch; levels chosen on the CPU each frame, patches
+//!   drawn with their level in push constants, geomorphing in the vertex
+//!   shader (see `terrain::geomip`).
 //! - **brute**: every sample a vertex, with `height_at`'s triangle split and
 //!   no buffers at all (the vertex shader derives each sample from its
 //!   index); the reference that error is measured against.
@@ -13,9 +18,9 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::shaders;
-use super::uniforms::{FrameUniforms, RenderSettings};
+use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
 use crate::shader_constants::{BINDING_FRAME, BINDING_HEIGHTMAP};
-use crate::terrain::Terrain;
+use crate::terrain::{geomip, Terrain};
 use crate::vk::commands::Recorder;
 use crate::vk::memory::{Buffer, Image};
 use crate::vk::pipeline::GraphicsPipelineDesc;
@@ -38,6 +43,8 @@ pub enum RenderPath {
     /// Hardware tessellation.
     #[default]
     Tess,
+    /// Geomipmapping with stitched edges and geomorphing.
+    Geomip,
     /// The full-resolution mesh.
     Brute,
 }
@@ -80,6 +87,37 @@ struct TessGeometry {
     pipelines: PathPipelines,
 }
 
+struct GeomipGeometry {
+    template: Buffer,
+    indices: Buffer,
+    variants: Vec<(u32, u32)>,
+    /// The shared layout plus the per-patch push constants.
+    layout: vk::PipelineLayout,
+    pipelines: PathPipelines,
+    /// This frame's visible patches.
+    draws: Vec<GeomipDraw>,
+}
+
+/// One patch of the geomip path: its index list and push constants.
+#[derive(Clone, Copy, Debug)]
+struct GeomipDraw {
+    first: u32,
+    count: u32,
+    constants: GeomipConstants,
+}
+
+/// Push constants of glsl/geomip.vert.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GeomipConstants {
+    pub origin: [i32; 2],
+    pub level: i32,
+    pub interior: f32,
+    pub sides: [f32; 4],
+}
+const _: () = assert!(size_of::<GeomipConstants>() == 32);
+const _: () = assert!(std::mem::offset_of!(GeomipConstants, sides) == 16);
+
 struct BruteGeometry {
     vertex_count: u32,
     pipelines: PathPipelines,
@@ -93,6 +131,7 @@ pub struct TerrainRenderer {
     pipeline_layout: vk::PipelineLayout,
     descriptor_pool: vk::DescriptorPool,
     tess: Option<TessGeometry>,
+    geomip: Option<GeomipGeometry>,
     brute: Option<BruteGeometry>,
     color_format: vk::Format,
     max_patches_per_draw: Option<u32>,
@@ -218,6 +257,7 @@ impl TerrainRenderer {
             pipeline_layout,
             descriptor_pool,
             tess: None,
+            geomip: None,
             brute: None,
             color_format,
             max_patches_per_draw: device.caps.max_patches_per_draw,
@@ -244,6 +284,10 @@ impl TerrainRenderer {
                     index_count: terrain.indices().len() as u32,
                     pipelines,
                 });
+            }
+            if wants(RenderPath::Geomip) {
+                renderer.geomip =
+                    Some(build_geomip(device, &renderer, terrain, options.wireframe)?);
             }
             if wants(RenderPath::Brute) {
                 renderer.brute = Some(BruteGeometry {
@@ -279,19 +323,35 @@ impl TerrainRenderer {
     pub fn has_path(&self, path: RenderPath) -> bool {
         match path {
             RenderPath::Tess => self.tess.is_some(),
+            RenderPath::Geomip => self.geomip.is_some(),
             RenderPath::Brute => self.brute.is_some(),
         }
     }
 
-    /// Writes the uniforms of frame slot `slot`; its previous frame must
-    /// have completed.
-    pub fn prepare(&mut self, slot: usize, uniforms: &FrameUniforms) -> Result<()> {
+    /// Writes the uniforms of frame slot `slot` (its previous frame must
+    /// have completed) and, for the geomip path, chooses this frame's patch
+    /// levels. Returns how many patches the frame draws (for the tess path,
+    /// the CPU's count of patches in the frustum).
+    pub fn prepare(
+        &mut self,
+        slot: usize,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+    ) -> Result<usize> {
+        let uniforms = FrameUniforms::new(terrain, view, settings);
         self.frames[slot]
             .uniforms
             .mapped_mut()
             .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
-            .copy_from_slice(bytemuck::bytes_of(uniforms));
-        Ok(())
+            .copy_from_slice(bytemuck::bytes_of(&uniforms));
+        if settings.path == RenderPath::Geomip {
+            if let Some(geomip) = self.geomip.as_mut() {
+                geomip.choose(terrain, view, settings);
+                return Ok(geomip.draws.len());
+            }
+        }
+        Ok(view.patches_in_frustum(terrain))
     }
 
     /// Records the terrain draw of `settings.path` into `target` (already in
@@ -334,6 +394,19 @@ impl TerrainRenderer {
                     first += count;
                 }
             }
+            RenderPath::Geomip => {
+                let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
+                rec.bind_graphics(
+                    geomip.pipelines.select(settings.wireframe)?,
+                    geomip.layout,
+                    frame.set,
+                );
+                rec.bind_geometry(geomip.template.raw, geomip.indices.raw);
+                for draw in &geomip.draws {
+                    rec.push_vertex_constants(geomip.layout, bytemuck::bytes_of(&draw.constants));
+                    rec.draw_indexed(draw.first, draw.count);
+                }
+            }
             RenderPath::Brute => {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
                 rec.bind_graphics(
@@ -368,6 +441,12 @@ impl TerrainRenderer {
             device.destroy_buffer(tess.control_points);
             device.destroy_buffer(tess.indices);
         }
+        if let Some(geomip) = self.geomip {
+            geomip.pipelines.destroy(device);
+            device.destroy_pipeline_layout(geomip.layout);
+            device.destroy_buffer(geomip.template);
+            device.destroy_buffer(geomip.indices);
+        }
         if let Some(brute) = self.brute {
             brute.pipelines.destroy(device);
         }
@@ -386,16 +465,23 @@ fn build_pipelines(
     path: RenderPath,
     wireframe: bool,
 ) -> Result<PathPipelines> {
-    let create = |mode, suffix| {
-        create_pipeline(
-            device,
-            renderer.pipeline_layout,
-            renderer.color_format,
-            path,
-            mode,
-            suffix,
-        )
-    };
+    build_pipelines_with(
+        device,
+        renderer.pipeline_layout,
+        renderer.color_format,
+        path,
+        wireframe,
+    )
+}
+
+fn build_pipelines_with(
+    device: &Device,
+    layout: vk::PipelineLayout,
+    color_format: vk::Format,
+    path: RenderPath,
+    wireframe: bool,
+) -> Result<PathPipelines> {
+    let create = |mode, suffix| create_pipeline(device, layout, color_format, path, mode, suffix);
     let fill = create(vk::PolygonMode::FILL, "fill")?;
     let wireframe = if wireframe {
         match create(vk::PolygonMode::LINE, "wireframe") {
@@ -446,6 +532,17 @@ fn create_pipeline(
             size_of::<[f32; 4]>() as u32,
             &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
         ),
+        RenderPath::Geomip => (
+            format!("terrain.pipeline.geomip.{suffix}"),
+            &[
+                (vk::ShaderStageFlags::VERTEX, shaders::GEOMIP_VERT),
+                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+            ],
+            vk::PrimitiveTopology::TRIANGLE_LIST,
+            0,
+            size_of::<[u16; 2]>() as u32,
+            &[(0, vk::Format::R16G16_UINT, 0)],
+        ),
         RenderPath::Brute => (
             format!("terrain.pipeline.brute.{suffix}"),
             &[
@@ -472,4 +569,102 @@ fn create_pipeline(
         depth_compare: vk::CompareOp::GREATER,
         layout,
     })
+}
+
+fn build_geomip(
+    device: &Device,
+    renderer: &TerrainRenderer,
+    terrain: &Terrain,
+    wireframe: bool,
+) -> Result<GeomipGeometry> {
+    let n = terrain.grid().cells_per_patch();
+    let variants = geomip::IndexVariants::build(n);
+    let layout = device.create_pipeline_layout_with_push(
+        &[renderer.set_layout],
+        vk::ShaderStageFlags::VERTEX,
+        size_of::<GeomipConstants>() as u32,
+        "terrain.pipeline_layout.geomip",
+    )?;
+    let built = (|| {
+        let pipelines = build_pipelines_with(
+            device,
+            layout,
+            renderer.color_format,
+            RenderPath::Geomip,
+            wireframe,
+        )?;
+        let template = device.upload_buffer(
+            "terrain.geomip_vertex_template",
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            bytemuck::cast_slice(&geomip::vertex_template(n)),
+        );
+        let indices = device.upload_buffer(
+            "terrain.geomip_indices",
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            bytemuck::cast_slice(&variants.indices),
+        );
+        match (template, indices) {
+            (Ok(template), Ok(indices)) => Ok((pipelines, template, indices)),
+            (template, indices) => {
+                pipelines.destroy(device);
+                for b in [template, indices].into_iter().flatten() {
+                    device.destroy_buffer(b);
+                }
+                Err(VkError::Unsupported(
+                    "uploading the geomip buffers failed".into(),
+                ))
+            }
+        }
+    })();
+    match built {
+        Ok((pipelines, template, indices)) => Ok(GeomipGeometry {
+            template,
+            indices,
+            variants: variants.ranges,
+            layout,
+            pipelines,
+            draws: Vec::new(),
+        }),
+        Err(e) => {
+            device.destroy_pipeline_layout(layout);
+            Err(e)
+        }
+    }
+}
+
+impl GeomipGeometry {
+    /// Levels by distance, balanced; the visible patches become this
+    /// frame's draws, with their morph factors.
+    fn choose(&mut self, terrain: &Terrain, view: &FrameView, settings: &RenderSettings) {
+        let grid = terrain.grid();
+        let d0 = settings.lod.min_dist;
+        let chosen = geomip::select_levels_by_distance(terrain, view.eye_local, d0);
+        self.draws.clear();
+        for p in 0..grid.patch_count() {
+            let id = grid.patch_id(p);
+            let (centre, extents) = terrain.patch_aabb(id);
+            if settings.cull && view.frustum.aabb_outside(centre - view.eye_local, extents) {
+                continue;
+            }
+            let level = usize::from(chosen.levels[p]);
+            let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
+            let (first, count) = self.variants[level * 16 + usize::from(coarser)];
+            let (interior, sides) = if settings.geomorph {
+                geomip::patch_morph(&chosen, grid, id, d0)
+            } else {
+                (0.0, [0.0; 4])
+            };
+            let rect = grid.sample_rect(id);
+            self.draws.push(GeomipDraw {
+                first,
+                count,
+                constants: GeomipConstants {
+                    origin: [rect.col0 as i32, rect.row0 as i32],
+                    level: level as i32,
+                    interior,
+                    sides,
+                },
+            });
+        }
+    }
 }

@@ -54,6 +54,8 @@ pub enum Shading {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     pub path: RenderPath,
+    /// Geomip path: glide vertices between levels instead of popping.
+    pub geomorph: bool,
     pub lod: DistanceLod,
     pub lod_mode: DistanceMode,
     pub shading: Shading,
@@ -70,6 +72,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
             path: RenderPath::Tess,
+            geomorph: true,
             lod: DistanceLod::default(),
             lod_mode: DistanceMode::Smooth,
             shading: Shading::Lit,
@@ -190,7 +193,7 @@ impl FrameUniforms {
                     Shading::LodColors => SHADE_LOD_COLORS,
                     Shading::Flat => SHADE_FLAT,
                 },
-                0,
+                info.cells_per_patch(),
                 0,
             ],
         }

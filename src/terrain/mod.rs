@@ -7,6 +7,7 @@ pub mod camera;
 pub mod error;
 pub mod error_table;
 pub mod generate;
+pub mod geomip;
 pub mod grid;
 pub mod heightmap;
 pub mod info;

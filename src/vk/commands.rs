@@ -240,6 +240,15 @@ impl Recorder<'_> {
         }
     }
 
+    /// Sets vertex-stage push constants from offset 0.
+    pub fn push_vertex_constants(&self, layout: vk::PipelineLayout, bytes: &[u8]) {
+        // SAFETY: `layout` has a vertex push-constant range covering `bytes`.
+        unsafe {
+            self.device
+                .cmd_push_constants(self.cmd, layout, vk::ShaderStageFlags::VERTEX, 0, bytes)
+        };
+    }
+
     /// A non-indexed draw without vertex buffers (the shader uses
     /// gl_VertexIndex).
     pub fn draw(&self, vertex_count: u32) {

@@ -38,6 +38,27 @@ impl Device {
         Ok(layout)
     }
 
+    /// A pipeline layout with one push-constant range at offset 0.
+    pub fn create_pipeline_layout_with_push(
+        &self,
+        set_layouts: &[vk::DescriptorSetLayout],
+        stages: vk::ShaderStageFlags,
+        push_size: u32,
+        name: &str,
+    ) -> Result<vk::PipelineLayout> {
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(stages)
+            .size(push_size)];
+        let info = vk::PipelineLayoutCreateInfo::default()
+            .set_layouts(set_layouts)
+            .push_constant_ranges(&ranges);
+        // SAFETY: the set layouts belong to this device.
+        let layout = unsafe { self.raw.create_pipeline_layout(&info, None) }
+            .context("creating a pipeline layout")?;
+        self.set_name(layout, name);
+        Ok(layout)
+    }
+
     pub fn destroy_pipeline_layout(&self, layout: vk::PipelineLayout) {
         // SAFETY: no pipeline built on it is in use.
         unsafe { self.raw.destroy_pipeline_layout(layout, None) };

@@ -45,7 +45,7 @@ impl GpuScene {
             OFFSCREEN_COLOR_FORMAT,
             1,
             &RendererOptions {
-                paths: vec![RenderPath::Tess, RenderPath::Brute],
+                paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
                 wireframe,
             },
         )

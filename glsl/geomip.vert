@@ -1,0 +1,68 @@
+#version 460
+#extension GL_GOOGLE_include_directive : require
+#include "terrain_common.glsl"
+
+// The geomip path: one vertex template of (N+1)^2 grid offsets drawn once
+// per visible patch, with the patch's level and sides in push constants.
+// Mirror: terrain::geomip (levels, morph targets; the factors come from
+// terrain::geomip::patch_morph in the push constants).
+
+layout(location = 0) in uvec2 in_offset;  // (column, row) in the patch
+
+layout(push_constant) uniform PatchConstants {
+    ivec2 origin;      // sample (column, row) of the patch's upper-left corner
+    int level;         // step 2^level
+    float interior;    // morph factor of the interior
+    vec4 sides;        // morph factors of the left, top, right, bottom sides
+} pc;
+
+layout(location = 0) out vec2 out_grid;
+layout(location = 1) out float out_height;
+layout(location = 2) flat out float out_inside_factor;
+
+ivec2 clamp_sample(ivec2 offset) {
+    // Remainder patches: offsets past the last sample collapse onto it.
+    return min(pc.origin + offset, ivec2(frame.spacing_size.zw) - 1);
+}
+
+float height_of(ivec2 offset) {
+    return texelFetch(heightmap, clamp_sample(offset), 0).r;
+}
+
+vec2 local_xz(ivec2 sample_cr) {
+    return vec2(frame.grid.x + float(sample_cr.x) * frame.spacing_size.x,
+                frame.grid.y - float(sample_cr.y) * frame.spacing_size.y);
+}
+
+void main() {
+    ivec2 offset = ivec2(in_offset);
+    ivec2 sample_cr = clamp_sample(offset);
+    float h = texelFetch(heightmap, sample_cr, 0).r;
+    vec2 xz = local_xz(sample_cr);
+    vec3 rel = vec3(xz.x, h, xz.y) - frame.eye_local.xyz;
+
+    int n = int(frame.modes.z);
+    int s = 1 << pc.level;
+    ivec2 k = offset / s;
+    bool odd_x = (k.x & 1) == 1;
+    bool odd_y = (k.y & 1) == 1;
+    // A vertex on a side takes that side's factor (shared with the
+    // neighbour); corners are never odd.
+    float morph = offset.x == 0 ? pc.sides.x
+        : offset.y == 0 ? pc.sides.y
+        : offset.x == n ? pc.sides.z
+        : offset.y == n ? pc.sides.w
+        : pc.interior;
+    if ((odd_x || odd_y) && morph > 0.0) {
+        // Mirror: terrain::geomip::morph_target.
+        ivec2 a = odd_x && odd_y ? offset + ivec2(s, -s) : (odd_x ? offset - ivec2(s, 0) : offset - ivec2(0, s));
+        ivec2 b = odd_x && odd_y ? offset + ivec2(-s, s) : (odd_x ? offset + ivec2(s, 0) : offset + ivec2(0, s));
+        h = mix(h, 0.5 * (height_of(a) + height_of(b)), morph);
+        rel.y = h - frame.eye_local.y;
+    }
+    gl_Position = frame.view_proj * vec4(rel, 1.0);
+    out_grid = vec2(sample_cr);
+    out_height = h;
+    // Shown as the tessellation factor with the same density.
+    out_inside_factor = float(n >> pc.level);
+}

@@ -1,0 +1,319 @@
+//! Geomipmapping without tessellation shaders: per-patch levels, neighbour
+//! balancing, and the index buffers every patch shares.
+//!
+//! A patch of N cells is drawn from one vertex template of (N+1)^2 grid
+//! offsets. At level l it uses every 2^l-th vertex: N / 2^l cells a side,
+//! from full resolution (level 0) down to a single quad (level log2 N).
+//!
+//! **No cracks at any level difference.** Neighbours are first balanced to
+//! at most one level apart (only by refining the coarser one, so error never
+//! grows). A side whose neighbour is one level coarser is *stitched*: every
+//! 2x2 block of cells touching it is drawn as a fan from the block's centre
+//! that skips the midpoint the coarser neighbour lacks, so both patches meet
+//! along the same edges and there is no T-junction. Other blocks keep
+//! `height_at`'s split (diagonal from the upper-right to the lower-left
+//! corner), so level 0 is exactly the brute mesh. One index list per level
+//! and coarser-side mask (16 per level), built once, serves every patch.
+//!
+//! **Geomorphing** (in the vertex shader) moves the vertices a level drops
+//! onto the next coarser surface (`morph_target`) as the patch's distance
+//! nears the next level, so a level change does not pop. Factors are per
+//! patch, from the same distance that picks its level, so a switch happens
+//! exactly at morph 1 (going coarser) or 0 (going finer). A side shared with
+//! a patch of the same level takes the factor of the farther of the two, so
+//! both move its vertices alike; a side shared with a finer patch does not
+//! morph, because that patch stitches to its vertices where they are.
+
+use glam::Vec3;
+
+use super::grid::{PatchGrid, PatchId};
+use super::Terrain;
+
+/// Sides of a patch, as bits of a mask.
+pub const LEFT: u8 = 1;
+pub const TOP: u8 = 2;
+pub const RIGHT: u8 = 4;
+pub const BOTTOM: u8 = 8;
+
+/// Number of levels for `cells_per_patch` (a power of two): log2(N) + 1.
+pub fn level_count(cells_per_patch: usize) -> usize {
+    cells_per_patch.trailing_zeros() as usize + 1
+}
+
+/// Index of template vertex (row i, column j) for patches of `n` cells.
+fn vertex(n: usize, i: usize, j: usize) -> u32 {
+    (i * (n + 1) + j) as u32
+}
+
+/// The vertex template: (column, row) offsets of the (n+1)^2 vertices.
+pub fn vertex_template(n: usize) -> Vec<[u16; 2]> {
+    let mut v = Vec::with_capacity((n + 1) * (n + 1));
+    for i in 0..=n {
+        for j in 0..=n {
+            v.push([j as u16, i as u16]);
+        }
+    }
+    v
+}
+
+/// Triangles of one patch at `level` whose sides in `coarser` border a patch
+/// one level coarser, as template vertex indices.
+pub fn patch_indices(n: usize, level: usize, coarser: u8) -> Vec<u32> {
+    let s = 1usize << level;
+    let k = n / s;
+    let mut out = Vec::new();
+    let cell = |out: &mut Vec<u32>, i: usize, j: usize, step: usize| {
+        // A = (i, j), B = (i, j+1), C = (i+1, j), D = (i+1, j+1): ABC, DCB.
+        let (a, b) = (vertex(n, i, j), vertex(n, i, j + step));
+        let (c, d) = (vertex(n, i + step, j), vertex(n, i + step, j + step));
+        out.extend_from_slice(&[a, b, c, d, c, b]);
+    };
+    if k == 1 || coarser == 0 {
+        for bi in 0..k {
+            for bj in 0..k {
+                cell(&mut out, bi * s, bj * s, s);
+            }
+        }
+        return out;
+    }
+    // k >= 2 and even: work in 2x2 blocks of cells.
+    let blocks = k / 2;
+    for bi in 0..blocks {
+        for bj in 0..blocks {
+            let (i0, j0) = (bi * 2 * s, bj * 2 * s);
+            let mut touching = 0u8;
+            if bj == 0 {
+                touching |= LEFT;
+            }
+            if bi == 0 {
+                touching |= TOP;
+            }
+            if bj == blocks - 1 {
+                touching |= RIGHT;
+            }
+            if bi == blocks - 1 {
+                touching |= BOTTOM;
+            }
+            let stitched = touching & coarser;
+            if stitched == 0 {
+                for (di, dj) in [(0, 0), (0, s), (s, 0), (s, s)] {
+                    cell(&mut out, i0 + di, j0 + dj, s);
+                }
+                continue;
+            }
+            // Fan from the centre over the block's ring, clockwise from the
+            // upper-left corner; a stitched side loses its midpoint.
+            let v = |di: usize, dj: usize| vertex(n, i0 + di, j0 + dj);
+            let (m, e) = (s, 2 * s);
+            let mut ring = vec![v(0, 0)];
+            if stitched & TOP == 0 {
+                ring.push(v(0, m));
+            }
+            ring.push(v(0, e));
+            if stitched & RIGHT == 0 {
+                ring.push(v(m, e));
+            }
+            ring.push(v(e, e));
+            if stitched & BOTTOM == 0 {
+                ring.push(v(e, m));
+            }
+            ring.push(v(e, 0));
+            if stitched & LEFT == 0 {
+                ring.push(v(m, 0));
+            }
+            let centre = v(m, m);
+            for t in 0..ring.len() {
+                out.extend_from_slice(&[centre, ring[t], ring[(t + 1) % ring.len()]]);
+            }
+        }
+    }
+    out
+}
+
+/// Every (level, coarser mask) index list concatenated, with the
+/// (first index, count) of each at `level * 16 + mask`.
+pub struct IndexVariants {
+    pub indices: Vec<u32>,
+    pub ranges: Vec<(u32, u32)>,
+}
+
+impl IndexVariants {
+    pub fn build(n: usize) -> Self {
+        let mut indices = Vec::new();
+        let mut ranges = Vec::new();
+        for level in 0..level_count(n) {
+            for mask in 0..16u8 {
+                let list = patch_indices(n, level, mask);
+                ranges.push((indices.len() as u32, list.len() as u32));
+                indices.extend(list);
+            }
+        }
+        IndexVariants { indices, ranges }
+    }
+
+    pub fn range(&self, level: usize, coarser: u8) -> (u32, u32) {
+        self.ranges[level * 16 + usize::from(coarser)]
+    }
+}
+
+/// Where a vertex the level drops glides to: the midpoint of the two level
+/// l+1 vertices on the coarse edge or diagonal through it. `(i, j)` is the
+/// template position (a multiple of the level's step `s`); None for a vertex
+/// that the next level keeps.
+pub fn morph_target(i: usize, j: usize, s: usize) -> Option<[(isize, isize); 2]> {
+    let (odd_i, odd_j) = ((i / s) % 2 == 1, (j / s) % 2 == 1);
+    let (i, j, s) = (i as isize, j as isize, s as isize);
+    match (odd_i, odd_j) {
+        (false, false) => None,
+        (false, true) => Some([(i, j - s), (i, j + s)]),
+        (true, false) => Some([(i - s, j), (i + s, j)]),
+        // The centre of a coarse cell lies on its B-C diagonal.
+        (true, true) => Some([(i - s, j + s), (i + s, j - s)]),
+    }
+}
+
+/// Level by distance (seed 001): level l covers distances
+/// [d0 * 2^l, d0 * 2^(l+1)), level 0 everything nearer than 2 * d0.
+pub fn level_for_distance(distance: f32, d0: f32, levels: usize) -> usize {
+    let ratio = distance / d0.max(f32::MIN_POSITIVE);
+    if ratio.is_nan() || ratio < 2.0 {
+        return 0;
+    }
+    (ratio.log2().floor() as usize).min(levels - 1)
+}
+
+/// Morph factor of a patch of `level` at `distance`: 0 up to 70% of the
+/// level's far distance, rising to 1 at it, where the next level takes over.
+pub fn morph_factor(distance: f32, d0: f32, level: usize) -> f32 {
+    let end = d0 * (1u32 << (level + 1)) as f32;
+    let start = 0.7 * end;
+    super::lod::saturate((distance - start) / (end - start))
+}
+
+/// Balances levels so neighbours differ by at most one, only ever lowering
+/// (refining) a level.
+pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
+    let (rows, cols) = (grid.patch_rows(), grid.patch_cols());
+    loop {
+        let mut changed = false;
+        for r in 0..rows {
+            for c in 0..cols {
+                let p = r * cols + c;
+                let mut limit = levels[p];
+                let mut consider = |q: usize| limit = limit.min(levels[q] + 1);
+                if c > 0 {
+                    consider(p - 1);
+                }
+                if c + 1 < cols {
+                    consider(p + 1);
+                }
+                if r > 0 {
+                    consider(p - cols);
+                }
+                if r + 1 < rows {
+                    consider(p + cols);
+                }
+                if limit < levels[p] {
+                    levels[p] = limit;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            return;
+        }
+    }
+}
+
+/// Sides of `id` whose neighbour is coarser (`.0`) and finer (`.1`), for
+/// balanced levels.
+pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8) {
+    let here = levels[grid.patch_index(id)];
+    let (mut coarser, mut finer) = (0u8, 0u8);
+    let mut side = |bit: u8, r: usize, c: usize| {
+        let there = levels[grid.patch_index(PatchId { row: r, col: c })];
+        if there > here {
+            coarser |= bit;
+        } else if there < here {
+            finer |= bit;
+        }
+    };
+    if id.col > 0 {
+        side(LEFT, id.row, id.col - 1);
+    }
+    if id.row > 0 {
+        side(TOP, id.row - 1, id.col);
+    }
+    if id.col + 1 < grid.patch_cols() {
+        side(RIGHT, id.row, id.col + 1);
+    }
+    if id.row + 1 < grid.patch_rows() {
+        side(BOTTOM, id.row + 1, id.col);
+    }
+    (coarser, finer)
+}
+
+/// Levels and distances of every patch (culled ones too: their neighbours
+/// need them). A patch's distance is that of the nearest point of its box
+/// to `eye_local` (the eye relative to the terrain's centre).
+pub struct PatchLevels {
+    pub levels: Vec<u8>,
+    pub distances: Vec<f32>,
+}
+
+/// Levels by distance, balanced.
+pub fn select_levels_by_distance(terrain: &Terrain, eye_local: Vec3, d0: f32) -> PatchLevels {
+    let grid = terrain.grid();
+    let count = level_count(grid.cells_per_patch());
+    let distances: Vec<f32> = (0..grid.patch_count())
+        .map(|p| {
+            let (centre, extents) = terrain.patch_aabb(grid.patch_id(p));
+            ((eye_local - centre).abs() - extents)
+                .max(Vec3::ZERO)
+                .length()
+        })
+        .collect();
+    let mut levels: Vec<u8> = distances
+        .iter()
+        .map(|&d| level_for_distance(d, d0, count) as u8)
+        .collect();
+    balance(&mut levels, grid);
+    PatchLevels { levels, distances }
+}
+
+/// Morph factors of one patch: for its interior, and for its sides (left,
+/// top, right, bottom). All 0 at the coarsest level.
+pub fn patch_morph(
+    chosen: &PatchLevels,
+    grid: &PatchGrid,
+    id: PatchId,
+    d0: f32,
+) -> (f32, [f32; 4]) {
+    let p = grid.patch_index(id);
+    let level = usize::from(chosen.levels[p]);
+    if level + 1 >= level_count(grid.cells_per_patch()) {
+        return (0.0, [0.0; 4]);
+    }
+    let own = morph_factor(chosen.distances[p], d0, level);
+    let side = |neighbour: Option<(usize, usize)>| match neighbour {
+        None => own,
+        Some((r, c)) => {
+            let q = grid.patch_index(PatchId { row: r, col: c });
+            match chosen.levels[q].cmp(&chosen.levels[p]) {
+                std::cmp::Ordering::Equal => {
+                    morph_factor(chosen.distances[p].max(chosen.distances[q]), d0, level)
+                }
+                // Finer: frozen. Coarser: the stitched side has no vertex to move.
+                _ => 0.0,
+            }
+        }
+    };
+    let (r, c) = (id.row, id.col);
+    let sides = [
+        side((c > 0).then(|| (r, c - 1))),
+        side((r > 0).then(|| (r - 1, c))),
+        side((c + 1 < grid.patch_cols()).then(|| (r, c + 1))),
+        side((r + 1 < grid.patch_rows()).then(|| (r + 1, c))),
+    ];
+    (own, sides)
+}

@@ -1,0 +1,145 @@
+//! The CPU half of the geomip path: index lists, stitching, balancing,
+//! levels and morph targets.
+
+mod common;
+
+use common::*;
+use glam::{DVec2, Vec3};
+use vkterrain::terrain::geomip::*;
+use vkterrain::terrain::{Terrain, TerrainInfo};
+
+/// (row, column) of a template vertex index.
+fn rc(n: usize, v: u32) -> (i64, i64) {
+    ((v as usize / (n + 1)) as i64, (v as usize % (n + 1)) as i64)
+}
+
+fn twice_area(n: usize, t: &[u32]) -> i64 {
+    let [a, b, c] = [rc(n, t[0]), rc(n, t[1]), rc(n, t[2])];
+    ((b.0 - a.0) * (c.1 - a.1) - (b.1 - a.1) * (c.0 - a.0)).abs()
+}
+
+#[test]
+fn every_variant_covers_the_patch_exactly() {
+    for n in [2usize, 4, 8, 16, 32, 64] {
+        let variants = IndexVariants::build(n);
+        for level in 0..level_count(n) {
+            let s = 1usize << level;
+            for mask in 0..16u8 {
+                let (first, count) = variants.range(level, mask);
+                let list = &variants.indices[first as usize..(first + count) as usize];
+                assert_eq!(list.len() % 3, 0);
+                // Areas add up to the patch, and no triangle is degenerate.
+                let total: i64 = list.chunks(3).map(|t| twice_area(n, t)).sum();
+                assert_eq!(total, 2 * (n * n) as i64, "n={n} level={level} mask={mask}");
+                assert!(list.chunks(3).all(|t| twice_area(n, t) > 0));
+                for &v in list {
+                    let (r, c) = rc(n, v);
+                    assert!(
+                        r % s as i64 == 0 && c % s as i64 == 0,
+                        "vertex off the level's grid"
+                    );
+                    // A stitched side uses only the coarser level's vertices.
+                    let coarse = 2 * s as i64;
+                    let on = |bit: u8, yes: bool, along: i64| {
+                        mask & bit != 0 && yes && along % coarse != 0
+                    };
+                    let n = n as i64;
+                    assert!(
+                        !(on(LEFT, c == 0, r) || on(RIGHT, c == n, r) || on(TOP, r == 0, c) || on(BOTTOM, r == n, c))
+                            || level + 1 == level_count(n as usize),
+                        "n={n} level={level} mask={mask}: vertex ({r},{c}) is missing on the coarser side"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn level_zero_without_stitching_is_the_brute_split() {
+    let n = 4;
+    let list = patch_indices(n, 0, 0);
+    let mut expected = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let v = |r: usize, c: usize| (r * (n + 1) + c) as u32;
+            expected.extend([
+                v(i, j),
+                v(i, j + 1),
+                v(i + 1, j),
+                v(i + 1, j + 1),
+                v(i + 1, j),
+                v(i, j + 1),
+            ]);
+        }
+    }
+    assert_eq!(list, expected);
+}
+
+#[test]
+fn levels_by_distance_and_morph_factors() {
+    assert_eq!(level_for_distance(0.0, 100.0, 6), 0);
+    assert_eq!(level_for_distance(199.9, 100.0, 6), 0);
+    assert_eq!(level_for_distance(200.0, 100.0, 6), 1);
+    assert_eq!(level_for_distance(399.0, 100.0, 6), 1);
+    assert_eq!(level_for_distance(1e9, 100.0, 6), 5);
+    assert_eq!(level_for_distance(f32::NAN, 100.0, 6), 0);
+    assert_eq!(level_for_distance(500.0, 0.0, 6), 5);
+    // Morph reaches 1 exactly where the next level takes over.
+    assert_eq!(morph_factor(400.0, 100.0, 1), 1.0);
+    assert_eq!(morph_factor(280.0, 100.0, 1), 0.0);
+    assert!((morph_factor(340.0, 100.0, 1) - 0.5).abs() < 1e-6);
+}
+
+#[test]
+fn morph_targets_lie_on_the_coarser_triangles() {
+    assert_eq!(morph_target(4, 4, 2), None);
+    assert_eq!(morph_target(4, 6, 2), Some([(4, 4), (4, 8)]));
+    assert_eq!(morph_target(6, 4, 2), Some([(4, 4), (8, 4)]));
+    // The centre of a coarse cell: on its upper-right to lower-left diagonal.
+    assert_eq!(morph_target(6, 6, 2), Some([(4, 8), (8, 4)]));
+}
+
+#[test]
+fn balanced_levels_differ_by_at_most_one() {
+    let info =
+        TerrainInfo::new(noise_map(257, 257, 3), DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let grid = terrain.grid();
+    for eye in [
+        Vec3::new(0.0, 50.0, 0.0),
+        Vec3::new(-1200.0, 10.0, 1200.0),
+        Vec3::new(5000.0, 3000.0, 0.0),
+    ] {
+        let levels = select_levels_by_distance(&terrain, eye, 20.0).levels;
+        let mut differing = 0;
+        for p in 0..grid.patch_count() {
+            let id = grid.patch_id(p);
+            let (coarser, finer) = neighbour_masks(&levels, grid, id);
+            assert_eq!(coarser & finer, 0);
+            for (dr, dc) in [(0i64, 1i64), (1, 0)] {
+                let (r, c) = (id.row as i64 + dr, id.col as i64 + dc);
+                if r < grid.patch_rows() as i64 && c < grid.patch_cols() as i64 {
+                    let q = grid.patch_index(vkterrain::terrain::PatchId {
+                        row: r as usize,
+                        col: c as usize,
+                    });
+                    let diff = (i16::from(levels[p]) - i16::from(levels[q])).abs();
+                    assert!(
+                        diff <= 1,
+                        "neighbours {p} and {q}: {} vs {}",
+                        levels[p],
+                        levels[q]
+                    );
+                    differing += usize::from(diff == 1);
+                }
+            }
+        }
+        if eye.y < 100.0 {
+            assert!(
+                differing > 0,
+                "a close eye gives neighbours at different levels"
+            );
+        }
+    }
+}
