@@ -25,7 +25,7 @@ use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
 use crate::vk::memory::{transition_images, Buffer, BufferDesc, Transition};
 use crate::vk::swapchain::{surface_extensions, Acquired, Surface, Swapchain};
-use crate::vk::{Device, Gpu, Instance};
+use crate::vk::{Device, DisabledFeatures, Gpu, Instance};
 use camera::{CameraController, Mode, Movement};
 
 /// Frames the CPU may record ahead of the GPU.
@@ -54,6 +54,8 @@ pub struct DemoOptions {
     pub validate: bool,
     /// Eye height above the ground when walking.
     pub walk_height: f64,
+    /// Behave as if the device lacked tessellation shaders.
+    pub disable_tessellation: bool,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -249,7 +251,10 @@ impl Running {
         let instance =
             Instance::new(validate, surface_extensions(display)?).context("starting Vulkan")?;
         let surface = Surface::new(&instance, display, handle)?;
-        let device = match Device::new(&instance, &[ash::khr::swapchain::NAME]) {
+        let disabled = DisabledFeatures {
+            tessellation_shader: options.disable_tessellation,
+        };
+        let device = match Device::new(&instance, &[ash::khr::swapchain::NAME], &disabled) {
             Ok(d) => d,
             Err(e) => {
                 surface.destroy();
@@ -293,6 +298,12 @@ impl Running {
             let _ = running.shutdown();
             return Err(e);
         }
+        let mut notes = Vec::new();
+        running.settings =
+            crate::render::with_fallback(running.settings, &running.gpu.device.caps, &mut notes);
+        for note in notes {
+            println!("{note}");
+        }
         if running.settings.wireframe && !running.gpu.device.caps.fill_mode_non_solid {
             running.settings.wireframe = false;
             log::warn!("wireframe needs fillModeNonSolid, which this device lacks");
@@ -319,7 +330,7 @@ impl Running {
                 // Brute adds pipelines only (no buffers): cheap to have ready
                 // for the path key.
                 &RendererOptions {
-                    paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
+                    paths: self.paths(),
                     wireframe,
                 },
             )
@@ -428,11 +439,12 @@ impl Running {
                 }
             }
             KeyCode::F6 => {
-                self.settings.path = match self.settings.path {
-                    RenderPath::Tess => RenderPath::Geomip,
-                    RenderPath::Geomip => RenderPath::Brute,
-                    RenderPath::Brute => RenderPath::Tess,
-                };
+                let paths = self.paths();
+                let next = paths
+                    .iter()
+                    .position(|&p| p == self.settings.path)
+                    .map_or(0, |i| (i + 1) % paths.len());
+                self.settings.path = paths[next];
                 println!("render path: {:?}", self.settings.path);
             }
             KeyCode::F5 => {
@@ -459,6 +471,15 @@ impl Running {
             _ => {}
         }
         Ok(())
+    }
+
+    /// The paths this device can draw, in the order F6 cycles through them.
+    fn paths(&self) -> Vec<RenderPath> {
+        let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
+        if self.gpu.device.caps.tessellation_shader {
+            paths.insert(0, RenderPath::Tess);
+        }
+        paths
     }
 
     fn view(&self, terrain: &Terrain) -> FrameView {

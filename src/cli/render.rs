@@ -12,7 +12,8 @@ use serde::Serialize;
 use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
 use crate::output::{save_png, write_atomically};
 use crate::render::{
-    Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, Shading, TerrainRenderer,
+    with_fallback, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, Shading,
+    TerrainRenderer,
 };
 use crate::scene::Scene;
 use crate::terrain::camera::Camera;
@@ -20,7 +21,7 @@ use crate::terrain::generate::{generate as generate_heightmap, write_png16, Gene
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{DistanceMode, Terrain};
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
-use crate::vk::{Capabilities, Gpu};
+use crate::vk::{Capabilities, DisabledFeatures, Gpu};
 
 /// Which way the terrain is drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -112,6 +113,11 @@ pub struct ViewArgs {
     /// Geomip path: switch levels abruptly instead of geomorphing.
     #[arg(long)]
     pub no_morph: bool,
+
+    /// Behave as if the device lacked tessellation shaders (the tess path
+    /// then falls back to geomip, as on such a device).
+    #[arg(long)]
+    pub no_tessellation: bool,
 }
 
 impl ViewArgs {
@@ -258,6 +264,8 @@ pub struct RenderOutput {
     pub frame: HeadlessFrame,
     pub stats: FrameStats,
     pub validation_log: Vec<String>,
+    /// What changed from what was asked for, and why (fallbacks).
+    pub notes: Vec<String>,
 }
 
 /// Renders one frame of `scene` headless: builds the GPU objects, draws,
@@ -269,11 +277,17 @@ pub fn render_scene(
     width: u32,
     height: u32,
     validate: bool,
+    disable_tessellation: bool,
 ) -> Result<RenderOutput> {
     let info = scene.terrain_info()?;
     let camera = camera.apply(scene.camera_for(&info))?;
     let terrain = Terrain::new(info, 0.0)?;
-    let gpu = Gpu::new(validate).context("starting Vulkan")?;
+    let disabled = DisabledFeatures {
+        tessellation_shader: disable_tessellation,
+    };
+    let gpu = Gpu::with_disabled(validate, &disabled).context("starting Vulkan")?;
+    let mut notes = Vec::new();
+    let settings = &with_fallback(*settings, &gpu.device.caps, &mut notes);
     let mut renderer = TerrainRenderer::new(
         &gpu,
         &terrain,
@@ -328,6 +342,7 @@ pub fn render_scene(
         frame,
         stats,
         validation_log,
+        notes,
     })
 }
 
@@ -342,7 +357,11 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         cmd.width,
         cmd.height,
         cmd.validate,
+        cmd.view.no_tessellation,
     )?;
+    for note in &output.notes {
+        writeln!(out, "{note}")?;
+    }
     save_png(&output.frame.rgba_image(), &cmd.out)?;
     if let Some(path) = &cmd.stats {
         let json = serde_json::to_string_pretty(&output.stats)?;
@@ -384,6 +403,10 @@ pub struct InfoCmd {
     /// Turn on the Vulkan validation layer.
     #[arg(long)]
     pub validate: bool,
+
+    /// Behave as if the device lacked tessellation shaders.
+    #[arg(long)]
+    pub no_tessellation: bool,
 }
 
 #[derive(Serialize)]
@@ -395,9 +418,16 @@ struct InfoReport<'a> {
 }
 
 pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
-    let gpu = Gpu::new(cmd.validate).context("starting Vulkan")?;
+    let disabled = DisabledFeatures {
+        tessellation_shader: cmd.no_tessellation,
+    };
+    let gpu = Gpu::with_disabled(cmd.validate, &disabled).context("starting Vulkan")?;
     let caps = &gpu.device.caps;
     let optional = [
+        (
+            "tessellationShader (the tess path; geomip otherwise)",
+            caps.tessellation_shader,
+        ),
         ("fillModeNonSolid (wireframe)", caps.fill_mode_non_solid),
         (
             "pipelineStatisticsQuery (triangle counts)",
@@ -405,7 +435,7 @@ pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
         ),
         ("timestamps (GPU time)", caps.timestamp_period_ns.is_some()),
     ];
-    let mut used = vec!["tessellationShader", "dynamicRendering", "synchronization2"];
+    let mut used = vec!["dynamicRendering", "synchronization2"];
     used.extend(optional.iter().filter(|o| o.1).map(|o| o.0));
     let missing = optional.iter().filter(|o| !o.1).map(|o| o.0).collect();
     let report = InfoReport {

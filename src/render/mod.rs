@@ -7,5 +7,7 @@ pub mod shaders;
 pub mod uniforms;
 
 pub use headless::{Headless, HeadlessFrame};
-pub use renderer::{FrameMeasurements, RenderPath, RendererOptions, TerrainRenderer};
+pub use renderer::{
+    with_fallback, FrameMeasurements, RenderPath, RendererOptions, TerrainRenderer,
+};
 pub use uniforms::{FrameUniforms, FrameView, RenderSettings, Shading};

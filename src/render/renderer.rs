@@ -49,6 +49,26 @@ pub enum RenderPath {
     Brute,
 }
 
+/// The tess path needs tessellation shaders; without them, geomip draws the
+/// same terrain. Says so in `notes`.
+pub fn with_fallback(
+    settings: RenderSettings,
+    caps: &crate::vk::Capabilities,
+    notes: &mut Vec<String>,
+) -> RenderSettings {
+    if settings.path == RenderPath::Tess && !caps.tessellation_shader {
+        notes.push(format!(
+            "{}: tessellationShader is unavailable, falling back to the geomip path",
+            caps.device_name
+        ));
+        return RenderSettings {
+            path: RenderPath::Geomip,
+            ..settings
+        };
+    }
+    settings
+}
+
 /// What a renderer builds.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RendererOptions {

@@ -52,6 +52,13 @@ pub struct Device {
     pub(super) transient_pool: vk::CommandPool,
 }
 
+/// Features to treat as missing even where the device has them, to test
+/// the fallbacks.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DisabledFeatures {
+    pub tessellation_shader: bool,
+}
+
 struct Candidate {
     physical: vk::PhysicalDevice,
     queue_family: u32,
@@ -133,10 +140,15 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
 }
 
 impl Device {
-    /// Picks the best device (discrete, integrated, virtual, then CPU) that
-    /// offers tessellation shaders, and creates it with the optional features
-    /// it has. `extensions`: device extensions to enable (the swapchain's).
-    pub fn new(instance: &Instance, extensions: &[&CStr]) -> Result<Self> {
+    /// Picks the best device: one with tessellation shaders first, then
+    /// discrete, integrated, virtual, CPU. Optional features it has are
+    /// enabled, except those `disabled` asks to behave as missing.
+    /// `extensions`: device extensions to enable (the swapchain's).
+    pub fn new(
+        instance: &Instance,
+        extensions: &[&CStr],
+        disabled: &DisabledFeatures,
+    ) -> Result<Self> {
         // SAFETY: enumerating devices of a live instance.
         let physicals = unsafe { instance.raw.enumerate_physical_devices() }
             .context("listing Vulkan devices")?;
@@ -144,26 +156,16 @@ impl Device {
             .iter()
             .filter_map(|&p| inspect(&instance.raw, p))
             .collect();
-        if candidates.is_empty() {
-            return Err(VkError::NoDevice);
+        for c in &mut candidates {
+            c.caps.tessellation_shader &= !disabled.tessellation_shader;
         }
-        let found = candidates
-            .iter()
-            .map(|c| format!("{} ({})", c.caps.device_name, c.caps.driver_name))
-            .collect::<Vec<_>>()
-            .join(", ");
-        candidates.retain(|c| c.caps.tessellation_shader);
-        let best =
-            candidates
-                .into_iter()
-                .max_by_key(|c| c.rank)
-                .ok_or(VkError::NoSuitableDevice {
-                    missing: "tessellationShader".into(),
-                    found,
-                })?;
+        let best = candidates
+            .into_iter()
+            .max_by_key(|c| (c.caps.tessellation_shader, c.rank))
+            .ok_or(VkError::NoDevice)?;
         let caps = best.caps;
         let features = vk::PhysicalDeviceFeatures::default()
-            .tessellation_shader(true)
+            .tessellation_shader(caps.tessellation_shader)
             .fill_mode_non_solid(caps.fill_mode_non_solid)
             .pipeline_statistics_query(caps.pipeline_statistics_query);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()

@@ -17,9 +17,6 @@ pub enum VkError {
     #[error("no Vulkan device found; install a driver (apt-get install mesa-vulkan-drivers for lavapipe)")]
     NoDevice,
 
-    #[error("no Vulkan device offers {missing}; devices found: {found}")]
-    NoSuitableDevice { missing: String, found: String },
-
     #[error("the validation layer VK_LAYER_KHRONOS_validation is not installed (apt-get install vulkan-validationlayers)")]
     NoValidationLayer,
 

@@ -15,7 +15,7 @@ pub mod shader;
 pub mod swapchain;
 pub mod target;
 
-pub use device::{Capabilities, Device};
+pub use device::{Capabilities, Device, DisabledFeatures};
 pub use error::{Result, VkError};
 pub use instance::Instance;
 
@@ -34,9 +34,14 @@ impl Gpu {
     /// `validate`: VK_LAYER_KHRONOS_validation with synchronization
     /// validation (also on when VKTERRAIN_VALIDATE=1).
     pub fn new(validate: bool) -> Result<Self> {
+        Gpu::with_disabled(validate, &DisabledFeatures::default())
+    }
+
+    /// As `new`, treating the `disabled` features as missing.
+    pub fn with_disabled(validate: bool, disabled: &DisabledFeatures) -> Result<Self> {
         let validate = validate || std::env::var(VALIDATE_ENV).is_ok_and(|v| v == "1");
         let instance = Instance::new(validate, &[])?;
-        let device = Device::new(&instance, &[])?;
+        let device = Device::new(&instance, &[], disabled)?;
         Ok(Gpu { device, instance })
     }
 
