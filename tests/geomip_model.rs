@@ -143,3 +143,46 @@ fn balanced_levels_differ_by_at_most_one() {
         }
     }
 }
+
+#[test]
+fn levels_by_projected_error() {
+    // A plane has no error at any level: the coarsest everywhere, no morph.
+    let plane =
+        vkterrain::terrain::Heightmap::from_fn(129, 129, |r, c| 0.5 * r as f32 + 0.25 * c as f32)
+            .unwrap();
+    let terrain = Terrain::new(
+        TerrainInfo::new(plane, DVec2::ONE, 32, DVec2::ZERO).unwrap(),
+        0.0,
+    )
+    .unwrap();
+    let table = terrain.error_table();
+    let chosen = select_levels_by_error(&terrain, &table, Vec3::new(0.0, 10.0, 0.0), 1000.0, 1.0);
+    assert!(chosen.levels.iter().all(|&l| l == 5), "{:?}", chosen.levels);
+    assert!(chosen.morph.iter().all(|&m| m == 0.0));
+
+    // Rough ground: finer near the eye, coarser with a larger tolerance or a
+    // smaller screen, never finer.
+    let rolling = vkterrain::terrain::Heightmap::from_fn(257, 257, |r, c| {
+        let (x, z) = (c as f32, r as f32);
+        20.0 * (x / 9.0).sin() * (z / 13.0).cos() + 2.0 * (x / 2.3).sin()
+    })
+    .unwrap();
+    let info = TerrainInfo::new(rolling, DVec2::splat(2.0), 32, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let table = terrain.error_table();
+    let eye = Vec3::new(-200.0, 60.0, -200.0);
+    let strict = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0);
+    let loose = select_levels_by_error(&terrain, &table, eye, 200.0, 8.0);
+    let small = select_levels_by_error(&terrain, &table, eye, 50.0, 1.0);
+    let sum = |l: &PatchLevels| l.levels.iter().map(|&v| u32::from(v)).sum::<u32>();
+    assert!(sum(&loose) > sum(&strict) && sum(&small) > sum(&strict));
+    assert!(strict.levels.iter().zip(&loose.levels).all(|(s, l)| s <= l));
+    // The eye hangs over the (-x, -z) corner patch: row 7, column 0.
+    assert_eq!(
+        strict.levels[7 * 8],
+        0,
+        "the patch under the eye at full resolution"
+    );
+    assert!(strict.levels[7] > 0, "the far corner coarser");
+    assert!(strict.morph.iter().all(|m| (0.0..=1.0).contains(m)));
+}

@@ -7,7 +7,7 @@ mod common;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec3};
-use vkterrain::render::{FrameView, RenderPath, RenderSettings, Shading};
+use vkterrain::render::{FrameView, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::geomip::{neighbour_masks, select_levels_by_distance};
@@ -29,7 +29,7 @@ fn settings(d0: f32, morph: bool) -> RenderSettings {
 
 /// Sides where neighbours sit at different levels, from the Rust mirror.
 fn level_steps(terrain: &Terrain, camera: &Camera, d0: f32) -> usize {
-    let view = FrameView::new(terrain, camera, 4.0 / 3.0);
+    let view = FrameView::new(terrain, camera, 256, 192);
     let levels = select_levels_by_distance(terrain, view.eye_local, d0).levels;
     let grid = terrain.grid();
     (0..grid.patch_count())
@@ -245,4 +245,45 @@ fn geomorphing_removes_popping() {
     );
     scene.finish();
     let _ = Vec3::ZERO;
+}
+
+#[test]
+fn error_mode_is_crack_free_and_follows_the_tolerance() {
+    if skip_gpu() {
+        return;
+    }
+    let info = TerrainInfo::new(
+        dem("jacksboro_fault_dem.png", None),
+        DEM_SPACING,
+        16,
+        DVec2::ZERO,
+    )
+    .unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let mut scene = GpuScene::new(terrain, 256, 192, false);
+    let cameras = [
+        camera([-9000.0, 2500.0, -12000.0], [0.0, 400.0, 0.0], 60.0),
+        camera([3000.0, 1400.0, 2000.0], [-2000.0, 500.0, 6000.0], 70.0),
+    ];
+    for cam in &cameras {
+        let mut last = u64::MAX;
+        for pixels in [1.0, 4.0, 16.0] {
+            let frame = scene.render(
+                cam,
+                &RenderSettings {
+                    lod_metric: LodMetric::Error(pixels),
+                    ..settings(1.0, true)
+                },
+            );
+            let holes = enclosed_background(&frame.readback.rgba, 256, 192, |p| p[0] < 128);
+            assert!(holes.is_empty(), "{pixels} px: {} holes", holes.len());
+            let triangles = frame.measurements.statistics.unwrap().clipping_invocations;
+            assert!(
+                triangles < last,
+                "{pixels} px: {triangles} triangles, not fewer than {last}"
+            );
+            last = triangles;
+        }
+    }
+    scene.finish();
 }

@@ -110,7 +110,7 @@ fn distinct_factors(
     eye_local: Vec3,
 ) -> BTreeSet<u32> {
     let grid = terrain.grid();
-    let frustum = vkterrain::render::FrameView::new(terrain, camera, 1.5).frustum;
+    let frustum = vkterrain::render::FrameView::new(terrain, camera, 384, 256).frustum;
     let mut factors = BTreeSet::new();
     for p in 0..grid.patch_count() {
         let id = grid.patch_id(p);

@@ -493,7 +493,8 @@ impl Running {
         FrameView::new(
             terrain,
             &self.controller.camera(),
-            extent.width as f32 / extent.height as f32,
+            extent.width,
+            extent.height,
         )
     }
 
@@ -572,8 +573,12 @@ impl Running {
             }
         };
         let extent = swapchain.extent;
-        let aspect = extent.width as f32 / extent.height as f32;
-        let mut view = FrameView::new(&options.terrain, &self.controller.camera(), aspect);
+        let mut view = FrameView::new(
+            &options.terrain,
+            &self.controller.camera(),
+            extent.width,
+            extent.height,
+        );
         if let Some(frozen) = &self.frozen {
             view = view.with_frustum_of(frozen);
         }

@@ -12,8 +12,8 @@ use serde::Serialize;
 use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
 use crate::output::{save_png, write_atomically};
 use crate::render::{
-    with_fallback, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, Shading,
-    TerrainRenderer,
+    with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
+    Shading, TerrainRenderer,
 };
 use crate::scene::Scene;
 use crate::terrain::camera::Camera;
@@ -43,6 +43,24 @@ impl From<PathArg> for RenderPath {
             PathArg::Geomip => RenderPath::Geomip,
             PathArg::Brute => RenderPath::Brute,
         }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum LodArg {
+    /// By distance from the eye (the first level reaches --lod-distance's MIN).
+    #[default]
+    Distance,
+    /// By each level's largest error projected to the screen.
+    Error,
+}
+
+fn positive_pixels(s: &str) -> Result<f32, String> {
+    let v = super::args::parse_finite(s)?;
+    if v > 0.0 {
+        Ok(v as f32)
+    } else {
+        Err(format!("--pixel-error {s:?} must be positive"))
     }
 }
 
@@ -110,6 +128,14 @@ pub struct ViewArgs {
     #[arg(long)]
     pub no_cull: bool,
 
+    /// How the geomip path picks levels: by distance, or by projected error.
+    #[arg(long, value_enum, default_value_t = LodArg::Distance)]
+    pub lod: LodArg,
+
+    /// Largest projected error in pixels with --lod error.
+    #[arg(long, value_name = "PIXELS", default_value = "1", value_parser = positive_pixels)]
+    pub pixel_error: f32,
+
     /// Geomip path: switch levels abruptly instead of geomorphing.
     #[arg(long)]
     pub no_morph: bool,
@@ -137,6 +163,9 @@ impl ViewArgs {
             scene.lod.max_exp = max;
         }
         scene.lod.validate()?;
+        if self.lod == LodArg::Error && self.path == PathArg::Tess {
+            bail!("--lod error chooses levels on the geomip path; the tess path's factors are by distance");
+        }
         Ok(())
     }
 
@@ -172,6 +201,10 @@ impl ViewArgs {
             }),
             cull: !self.no_cull,
             geomorph: !self.no_morph,
+            lod_metric: match self.lod {
+                LodArg::Distance => LodMetric::Distance,
+                LodArg::Error => LodMetric::Error(self.pixel_error),
+            },
             ..defaults
         }
     }

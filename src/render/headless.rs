@@ -68,8 +68,7 @@ impl Headless {
         let device = &gpu.device;
         let start = Instant::now();
         let views = self.target.views();
-        let aspect = views.extent.width as f32 / views.extent.height as f32;
-        let view = FrameView::new(terrain, camera, aspect);
+        let view = FrameView::new(terrain, camera, views.extent.width, views.extent.height);
         let patches_in_frustum = view.patches_in_frustum(terrain);
         renderer.prepare(0, terrain, &view, settings)?;
         let rec = device.begin_commands(self.cmd)?;

@@ -10,4 +10,4 @@ pub use headless::{Headless, HeadlessFrame};
 pub use renderer::{
     with_fallback, FrameMeasurements, RenderPath, RendererOptions, TerrainRenderer,
 };
-pub use uniforms::{FrameUniforms, FrameView, RenderSettings, Shading};
+pub use uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings, Shading};

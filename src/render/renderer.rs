@@ -18,9 +18,9 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::shaders;
-use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
+use super::uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings};
 use crate::shader_constants::{BINDING_FRAME, BINDING_HEIGHTMAP};
-use crate::terrain::{geomip, Terrain};
+use crate::terrain::{geomip, ErrorTable, Terrain};
 use crate::vk::commands::Recorder;
 use crate::vk::memory::{Buffer, Image};
 use crate::vk::pipeline::GraphicsPipelineDesc;
@@ -116,6 +116,8 @@ struct GeomipGeometry {
     pipelines: PathPipelines,
     /// This frame's visible patches.
     draws: Vec<GeomipDraw>,
+    /// Per-patch errors of each level, for choosing levels by projected error.
+    errors: ErrorTable,
 }
 
 /// One patch of the geomip path: its index list and push constants.
@@ -644,6 +646,7 @@ fn build_geomip(
             layout,
             pipelines,
             draws: Vec::new(),
+            errors: terrain.error_table(),
         }),
         Err(e) => {
             device.destroy_pipeline_layout(layout);
@@ -657,8 +660,18 @@ impl GeomipGeometry {
     /// frame's draws, with their morph factors.
     fn choose(&mut self, terrain: &Terrain, view: &FrameView, settings: &RenderSettings) {
         let grid = terrain.grid();
-        let d0 = settings.lod.min_dist;
-        let chosen = geomip::select_levels_by_distance(terrain, view.eye_local, d0);
+        let chosen = match settings.lod_metric {
+            LodMetric::Distance => {
+                geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
+            }
+            LodMetric::Error(pixels) => geomip::select_levels_by_error(
+                terrain,
+                &self.errors,
+                view.eye_local,
+                view.pixels_per_radian,
+                pixels,
+            ),
+        };
         self.draws.clear();
         for p in 0..grid.patch_count() {
             let id = grid.patch_id(p);
@@ -670,7 +683,7 @@ impl GeomipGeometry {
             let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
             let (first, count) = self.variants[level * 16 + usize::from(coarser)];
             let (interior, sides) = if settings.geomorph {
-                geomip::patch_morph(&chosen, grid, id, d0)
+                geomip::patch_morph(&chosen, grid, id)
             } else {
                 (0.0, [0.0; 4])
             };

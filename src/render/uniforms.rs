@@ -50,10 +50,23 @@ pub enum Shading {
     Flat,
 }
 
+/// How levels are chosen.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LodMetric {
+    /// By distance from the eye (`lod.min_dist` is the first level's range).
+    #[default]
+    Distance,
+    /// By the projected error of each level, at most this many pixels.
+    Error(f32),
+}
+
 /// What a frame looks like, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     pub path: RenderPath,
+    /// How the geomip path picks levels.
+    pub lod_metric: LodMetric,
     /// Geomip path: glide vertices between levels instead of popping.
     pub geomorph: bool,
     pub lod: DistanceLod,
@@ -72,6 +85,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
             path: RenderPath::Tess,
+            lod_metric: LodMetric::Distance,
             geomorph: true,
             lod: DistanceLod::default(),
             lod_mode: DistanceMode::Smooth,
@@ -92,13 +106,18 @@ pub struct FrameView {
     pub frustum: Frustum,
     /// The eye relative to the terrain's centre.
     pub eye_local: Vec3,
+    /// Viewport height over 2 tan(fov / 2): a length L at distance d seen
+    /// face-on covers L * pixels_per_radian / d pixels.
+    pub pixels_per_radian: f32,
     pub near: f32,
     pub far: f32,
 }
 
 impl FrameView {
     /// Near and far enclose the whole terrain, from its Y bounds.
-    pub fn new(terrain: &Terrain, camera: &Camera, aspect: f32) -> Self {
+    /// For a viewport of `width` x `height` pixels.
+    pub fn new(terrain: &Terrain, camera: &Camera, width: u32, height: u32) -> Self {
+        let aspect = width.max(1) as f32 / height.max(1) as f32;
         let info = terrain.info();
         let origin = info.origin();
         let (lo, hi) = terrain
@@ -122,7 +141,11 @@ impl FrameView {
             camera.eye.z - origin.y,
         )
         .as_vec3();
+        // Projection y scale is 1 / tan(fov / 2); the view is a pure
+        // rotation, so it is the length of the matrix's second row.
+        let row1 = Vec3::new(view_proj.x_axis.y, view_proj.y_axis.y, view_proj.z_axis.y);
         FrameView {
+            pixels_per_radian: 0.5 * height.max(1) as f32 * row1.length(),
             view_proj,
             frustum: Frustum::from_view_proj(view_proj),
             eye_local,

@@ -26,6 +26,7 @@
 
 use glam::Vec3;
 
+use super::error_table::ErrorTable;
 use super::grid::{PatchGrid, PatchId};
 use super::Terrain;
 
@@ -253,58 +254,121 @@ pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8)
     (coarser, finer)
 }
 
-/// Levels and distances of every patch (culled ones too: their neighbours
-/// need them). A patch's distance is that of the nearest point of its box
-/// to `eye_local` (the eye relative to the terrain's centre).
+/// Levels of every patch (culled ones too: their neighbours need them) and
+/// each patch's own morph factor towards the next coarser level.
 pub struct PatchLevels {
     pub levels: Vec<u8>,
-    pub distances: Vec<f32>,
+    pub morph: Vec<f32>,
 }
 
-/// Levels by distance, balanced.
-pub fn select_levels_by_distance(terrain: &Terrain, eye_local: Vec3, d0: f32) -> PatchLevels {
+/// Distance from `eye_local` (the eye relative to the terrain's centre) to
+/// the nearest point of each patch's box.
+fn patch_distances(terrain: &Terrain, eye_local: Vec3) -> Vec<f32> {
     let grid = terrain.grid();
-    let count = level_count(grid.cells_per_patch());
-    let distances: Vec<f32> = (0..grid.patch_count())
+    (0..grid.patch_count())
         .map(|p| {
             let (centre, extents) = terrain.patch_aabb(grid.patch_id(p));
             ((eye_local - centre).abs() - extents)
                 .max(Vec3::ZERO)
                 .length()
         })
-        .collect();
+        .collect()
+}
+
+/// Levels by distance (seed 001), balanced; morph by `morph_factor`.
+pub fn select_levels_by_distance(terrain: &Terrain, eye_local: Vec3, d0: f32) -> PatchLevels {
+    let grid = terrain.grid();
+    let count = level_count(grid.cells_per_patch());
+    let distances = patch_distances(terrain, eye_local);
     let mut levels: Vec<u8> = distances
         .iter()
         .map(|&d| level_for_distance(d, d0, count) as u8)
         .collect();
     balance(&mut levels, grid);
-    PatchLevels { levels, distances }
+    let morph = distances
+        .iter()
+        .zip(&levels)
+        .map(|(&d, &l)| {
+            let l = usize::from(l);
+            if l + 1 >= count {
+                0.0
+            } else {
+                morph_factor(d, d0, l)
+            }
+        })
+        .collect();
+    PatchLevels { levels, morph }
+}
+
+/// Levels by projected error (seed 002): the coarsest level whose
+/// max-error vertex, seen from the patch's nearest point, is at most
+/// `pixel_error` pixels on screen. `pixels_per_radian` is the viewport
+/// height over 2 tan(fov / 2): an error e at distance d covers
+/// e * pixels_per_radian / d pixels. Level l is good enough from the
+/// distance t_l = e_l * pixels_per_radian / pixel_error on; the morph
+/// factor is the fraction of the way from t_l to t_(l+1).
+pub fn select_levels_by_error(
+    terrain: &Terrain,
+    table: &ErrorTable,
+    eye_local: Vec3,
+    pixels_per_radian: f32,
+    pixel_error: f32,
+) -> PatchLevels {
+    let grid = terrain.grid();
+    let n = grid.cells_per_patch();
+    let count = level_count(n);
+    let distances = patch_distances(terrain, eye_local);
+    // Geomip level l has n / 2^l segments a side: error table level index
+    // log2(n) - l.
+    let threshold = |p: usize, level: usize| {
+        let k = (count - 1) - level;
+        table.error(p, k) * pixels_per_radian / pixel_error.max(f32::MIN_POSITIVE)
+    };
+    let mut levels: Vec<u8> = distances
+        .iter()
+        .enumerate()
+        .map(|(p, &d)| {
+            (0..count)
+                .rev()
+                .find(|&l| threshold(p, l) <= d)
+                .unwrap_or(0) as u8
+        })
+        .collect();
+    balance(&mut levels, grid);
+    let morph = distances
+        .iter()
+        .enumerate()
+        .map(|(p, &d)| {
+            let l = usize::from(levels[p]);
+            if l + 1 >= count {
+                return 0.0;
+            }
+            let (from, to) = (threshold(p, l), threshold(p, l + 1));
+            if to <= from {
+                // The next level is as good: fully on its surface.
+                return 1.0;
+            }
+            super::lod::saturate((d - from) / (to - from))
+        })
+        .collect();
+    PatchLevels { levels, morph }
 }
 
 /// Morph factors of one patch: for its interior, and for its sides (left,
-/// top, right, bottom). All 0 at the coarsest level.
-pub fn patch_morph(
-    chosen: &PatchLevels,
-    grid: &PatchGrid,
-    id: PatchId,
-    d0: f32,
-) -> (f32, [f32; 4]) {
+/// top, right, bottom). All 0 at the coarsest level (its own factor is).
+pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32, [f32; 4]) {
     let p = grid.patch_index(id);
-    let level = usize::from(chosen.levels[p]);
-    if level + 1 >= level_count(grid.cells_per_patch()) {
-        return (0.0, [0.0; 4]);
-    }
-    let own = morph_factor(chosen.distances[p], d0, level);
+    let own = chosen.morph[p];
     let side = |neighbour: Option<(usize, usize)>| match neighbour {
         None => own,
         Some((r, c)) => {
             let q = grid.patch_index(PatchId { row: r, col: c });
-            match chosen.levels[q].cmp(&chosen.levels[p]) {
-                std::cmp::Ordering::Equal => {
-                    morph_factor(chosen.distances[p].max(chosen.distances[q]), d0, level)
-                }
+            if chosen.levels[q] == chosen.levels[p] {
+                // Whichever of the two switches first has morph 1 then.
+                own.max(chosen.morph[q])
+            } else {
                 // Finer: frozen. Coarser: the stitched side has no vertex to move.
-                _ => 0.0,
+                0.0
             }
         }
     };
