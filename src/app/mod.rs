@@ -652,16 +652,7 @@ impl Running {
                 transition_images(
                     rec.device,
                     rec.cmd,
-                    &[Transition {
-                        image: views.color_image,
-                        aspect: vk::ImageAspectFlags::COLOR,
-                        from: (
-                            L::COLOR_ATTACHMENT_OPTIMAL,
-                            S::COLOR_ATTACHMENT_OUTPUT,
-                            A::COLOR_ATTACHMENT_WRITE,
-                        ),
-                        to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
-                    }],
+                    &[Transition::color_output_to_copy(views.color_image)],
                 );
                 rec.copy_color_to_buffer(views.color_image, extent, buffer.raw);
                 transition_images(

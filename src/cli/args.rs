@@ -212,3 +212,24 @@ impl TerrainArgs {
         Ok(scene)
     }
 }
+
+/// Image or window size in pixels.
+#[derive(Args, Clone, Copy, Debug)]
+pub struct SizeArgs {
+    /// Width in pixels.
+    #[arg(long, value_name = "W", default_value = "1280", value_parser = parse_pixels)]
+    pub width: u32,
+
+    /// Height in pixels.
+    #[arg(long, value_name = "H", default_value = "720", value_parser = parse_pixels)]
+    pub height: u32,
+}
+
+impl Default for SizeArgs {
+    fn default() -> Self {
+        SizeArgs {
+            width: 1280,
+            height: 720,
+        }
+    }
+}

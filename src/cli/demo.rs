@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use ash::vk;
 use clap::ValueEnum;
 
-use super::args::{parse_pixels, TerrainArgs};
+use super::args::{SizeArgs, TerrainArgs};
 use super::render::{render, RenderCmd, ViewArgs, DEFAULT_OUTPUT};
 use crate::app::{self, DemoOptions};
 use crate::terrain::Terrain;
@@ -32,13 +32,8 @@ pub struct DemoCmd {
     #[command(flatten)]
     pub view: ViewArgs,
 
-    /// Window width in pixels.
-    #[arg(long, value_name = "W", default_value = "1280", value_parser = parse_pixels)]
-    pub width: u32,
-
-    /// Window height in pixels.
-    #[arg(long, value_name = "H", default_value = "720", value_parser = parse_pixels)]
-    pub height: u32,
+    #[command(flatten)]
+    pub size: SizeArgs,
 
     /// How frames reach the screen (FIFO when the one asked for is missing).
     #[arg(long, value_enum, default_value_t = PresentModeArg::Fifo)]
@@ -92,8 +87,8 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         terrain,
         camera,
         settings,
-        width: cmd.width,
-        height: cmd.height,
+        width: cmd.size.width,
+        height: cmd.size.height,
         present_mode: match cmd.present_mode {
             PresentModeArg::Fifo => vk::PresentModeKHR::FIFO,
             PresentModeArg::Mailbox => vk::PresentModeKHR::MAILBOX,
@@ -157,8 +152,6 @@ pub fn run_default(out: &mut dyn Write) -> Result<()> {
     if display_available() {
         return demo(
             DemoCmd {
-                width: 1280,
-                height: 720,
                 walk_height: 1.8,
                 ..DemoCmd::default()
             },
@@ -173,8 +166,7 @@ pub fn run_default(out: &mut dyn Write) -> Result<()> {
         RenderCmd {
             terrain: TerrainArgs::default(),
             view: ViewArgs::default(),
-            width: 1280,
-            height: 720,
+            size: SizeArgs::default(),
             out: PathBuf::from(DEFAULT_OUTPUT),
             stats: None,
             validate: false,

@@ -9,7 +9,7 @@ use clap::ValueEnum;
 use glam::DVec3;
 use serde::Serialize;
 
-use super::args::{parse_color, parse_dvec3, parse_fov, parse_pixels, parse_range, TerrainArgs};
+use super::args::{parse_color, parse_dvec3, parse_fov, parse_range, SizeArgs, TerrainArgs};
 use crate::output::{save_png, write_atomically};
 use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
@@ -244,13 +244,8 @@ pub struct RenderCmd {
     #[command(flatten)]
     pub view: ViewArgs,
 
-    /// Image width in pixels.
-    #[arg(long, value_name = "W", default_value = "1280", value_parser = parse_pixels)]
-    pub width: u32,
-
-    /// Image height in pixels.
-    #[arg(long, value_name = "H", default_value = "720", value_parser = parse_pixels)]
-    pub height: u32,
+    #[command(flatten)]
+    pub size: SizeArgs,
 
     /// Where to write the PNG.
     #[arg(long, value_name = "PATH")]
@@ -387,8 +382,8 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         &scene,
         &cmd.view.camera_override(),
         &settings,
-        cmd.width,
-        cmd.height,
+        cmd.size.width,
+        cmd.size.height,
         cmd.validate,
         cmd.view.no_tessellation,
     )?;

@@ -365,6 +365,23 @@ pub struct Transition {
     pub to: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2),
 }
 
+impl Transition {
+    /// A colour attachment just drawn, made ready to be copied from.
+    pub fn color_output_to_copy(image: vk::Image) -> Transition {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        Transition {
+            image,
+            aspect: vk::ImageAspectFlags::COLOR,
+            from: (
+                L::COLOR_ATTACHMENT_OPTIMAL,
+                S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_WRITE,
+            ),
+            to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
+        }
+    }
+}
+
 /// Records a batch of image transitions as one barrier.
 pub fn transition_images(device: &ash::Device, cmd: vk::CommandBuffer, transitions: &[Transition]) {
     let barriers: Vec<vk::ImageMemoryBarrier2> = transitions

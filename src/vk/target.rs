@@ -186,16 +186,7 @@ impl OffscreenTarget {
             rec.device,
             rec.cmd,
             &[
-                Transition {
-                    image: self.color.raw,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                    from: (
-                        L::COLOR_ATTACHMENT_OPTIMAL,
-                        S::COLOR_ATTACHMENT_OUTPUT,
-                        A::COLOR_ATTACHMENT_WRITE,
-                    ),
-                    to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
-                },
+                Transition::color_output_to_copy(self.color.raw),
                 Transition {
                     image: self.depth.raw,
                     aspect: vk::ImageAspectFlags::DEPTH,
