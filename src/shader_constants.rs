@@ -8,6 +8,11 @@ pub const BINDING_FRAME: u32 = 0;
 /// Descriptor binding of the heightmap (set 0): R32_SFLOAT, read with texelFetch.
 pub const BINDING_HEIGHTMAP: u32 = 1;
 
+/// Storage buffer of inputs of the GLSL mirror check (compute, tests only).
+pub const BINDING_MIRROR_CASES: u32 = 2;
+/// Storage buffer of results of the GLSL mirror check.
+pub const BINDING_MIRROR_RESULTS: u32 = 3;
+
 /// Smallest tessellation factor.
 pub const MIN_TESS_FACTOR: f32 = 1.0;
 /// Largest tessellation factor: the Vulkan minimum for maxTessellationGenerationLevel.
@@ -34,6 +39,8 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
     vec![
         ("BINDING_FRAME", BINDING_FRAME.to_string()),
         ("BINDING_HEIGHTMAP", BINDING_HEIGHTMAP.to_string()),
+        ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
+        ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),
         ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),
         ("MAX_TESS_FACTOR", float(MAX_TESS_FACTOR)),
         ("MAX_TESS_EXPONENT", float(MAX_TESS_EXPONENT)),

@@ -12,3 +12,4 @@ pub const TERRAIN_TESE: &[u8] = spirv!("terrain.tese");
 pub const TERRAIN_FRAG: &[u8] = spirv!("terrain.frag");
 pub const BRUTE_VERT: &[u8] = spirv!("brute.vert");
 pub const GEOMIP_VERT: &[u8] = spirv!("geomip.vert");
+pub const MIRROR_CHECK_COMP: &[u8] = spirv!("mirror_check.comp");

@@ -240,6 +240,41 @@ impl Recorder<'_> {
         }
     }
 
+    /// Runs `groups` workgroups of a compute pipeline, then makes its
+    /// storage writes visible to host reads after the fence.
+    pub fn dispatch_for_host(
+        &self,
+        pipeline: vk::Pipeline,
+        layout: vk::PipelineLayout,
+        set: vk::DescriptorSet,
+        groups: u32,
+    ) {
+        let barrier = [vk::MemoryBarrier2::default()
+            .src_stage_mask(vk::PipelineStageFlags2::COMPUTE_SHADER)
+            .src_access_mask(vk::AccessFlags2::SHADER_STORAGE_WRITE)
+            .dst_stage_mask(vk::PipelineStageFlags2::HOST)
+            .dst_access_mask(vk::AccessFlags2::HOST_READ)];
+        // SAFETY: pipeline, layout and set are compatible objects of this
+        // device; `cmd` is recording outside rendering.
+        unsafe {
+            self.device
+                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline);
+            self.device.cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                layout,
+                0,
+                &[set],
+                &[],
+            );
+            self.device.cmd_dispatch(self.cmd, groups, 1, 1);
+            self.device.cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().memory_barriers(&barrier),
+            );
+        }
+    }
+
     /// Sets vertex-stage push constants from offset 0.
     pub fn push_vertex_constants(&self, layout: vk::PipelineLayout, bytes: &[u8]) {
         // SAFETY: `layout` has a vertex push-constant range covering `bytes`.

@@ -101,6 +101,25 @@ impl Device {
         unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
     }
 
+    pub fn write_storage_buffer(
+        &self,
+        set: vk::DescriptorSet,
+        binding: u32,
+        buffer: vk::Buffer,
+        range: u64,
+    ) {
+        let info = [vk::DescriptorBufferInfo::default()
+            .buffer(buffer)
+            .range(range)];
+        let write = vk::WriteDescriptorSet::default()
+            .dst_set(set)
+            .dst_binding(binding)
+            .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+            .buffer_info(&info);
+        // SAFETY: set and buffer belong to this device; the set is not in use.
+        unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
+    }
+
     pub fn write_sampled_image(
         &self,
         set: vk::DescriptorSet,

@@ -173,6 +173,34 @@ impl Device {
         }
     }
 
+    /// A compute pipeline from one shader.
+    pub fn create_compute_pipeline(
+        &self,
+        spirv: &[u8],
+        layout: vk::PipelineLayout,
+        name: &str,
+    ) -> Result<vk::Pipeline> {
+        let module = self.create_shader_module(spirv, &format!("{name}.module"))?;
+        let stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::COMPUTE)
+            .module(module)
+            .name(c"main");
+        let info = vk::ComputePipelineCreateInfo::default()
+            .stage(stage)
+            .layout(layout);
+        // SAFETY: module and layout belong to this device.
+        let created = unsafe {
+            self.raw
+                .create_compute_pipelines(vk::PipelineCache::null(), &[info], None)
+        };
+        self.destroy_modules(&[(vk::ShaderStageFlags::COMPUTE, module)]);
+        let pipeline = created
+            .map_err(|(_, r)| r)
+            .context("creating a compute pipeline")?[0];
+        self.set_name(pipeline, name);
+        Ok(pipeline)
+    }
+
     pub fn destroy_pipeline(&self, pipeline: vk::Pipeline) {
         // SAFETY: the caller guarantees it is no longer in use.
         unsafe { self.raw.destroy_pipeline(pipeline, None) };

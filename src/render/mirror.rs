@@ -1,0 +1,179 @@
+//! Runs the shared GLSL formulas (tessellation factor, frustum test, height
+//! sampling) in a compute shader on inputs from the CPU, so tests can hold
+//! them against their Rust mirrors. A diagnostic: no render path uses it.
+
+use std::mem::size_of;
+
+use ash::vk;
+use glam::{Vec2, Vec3};
+use gpu_allocator::MemoryLocation;
+
+use super::shaders;
+use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
+use crate::shader_constants::{
+    BINDING_FRAME, BINDING_HEIGHTMAP, BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS,
+};
+use crate::terrain::Terrain;
+use crate::vk::memory::BufferDesc;
+use crate::vk::{Gpu, Result, VkError};
+
+/// One input of the check.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MirrorCase {
+    /// Camera-relative position for the factor; box centre for the frustum test.
+    pub position: Vec3,
+    pub extents: Vec3,
+    /// Continuous sample coordinates (column, row) for height sampling.
+    pub grid: Vec2,
+}
+
+/// What the GPU computed for one case.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MirrorResult {
+    pub tess_factor: f32,
+    pub outside_frustum: bool,
+    pub height: f32,
+}
+
+const LOCAL_SIZE: u32 = 64;
+
+/// Evaluates every case on the GPU with the uniforms a frame of `view` and
+/// `settings` would use.
+pub fn run_mirror_check(
+    gpu: &Gpu,
+    terrain: &Terrain,
+    view: &FrameView,
+    settings: &RenderSettings,
+    cases: &[MirrorCase],
+) -> Result<Vec<MirrorResult>> {
+    if cases.is_empty() {
+        return Ok(Vec::new());
+    }
+    let device = &gpu.device;
+    let info = terrain.info();
+    let inputs: Vec<[f32; 4]> = cases
+        .iter()
+        .flat_map(|c| {
+            [
+                c.position.extend(0.0),
+                c.extents.extend(0.0),
+                c.grid.extend(0.0).extend(0.0),
+            ]
+        })
+        .map(|v| v.to_array())
+        .collect();
+    let uniforms = FrameUniforms::new(terrain, view, settings);
+    let results_size = (cases.len() * size_of::<[f32; 4]>()) as u64;
+
+    let heightmap = device.upload_r32f_image(
+        "mirror.heightmap",
+        info.cols() as u32,
+        info.rows() as u32,
+        info.heightmap().heights(),
+    )?;
+    let sampler = device.create_nearest_sampler("mirror.sampler")?;
+    let frame = device.create_host_buffer(
+        "mirror.frame",
+        vk::BufferUsageFlags::UNIFORM_BUFFER,
+        bytemuck::bytes_of(&uniforms),
+    )?;
+    let input = device.create_host_buffer(
+        "mirror.cases",
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        bytemuck::cast_slice(&inputs),
+    )?;
+    let output = device.create_buffer(
+        BufferDesc {
+            size: results_size,
+            usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+            location: MemoryLocation::GpuToCpu,
+        },
+        "mirror.results",
+    )?;
+    let stage = vk::ShaderStageFlags::COMPUTE;
+    let set_layout = device.create_descriptor_set_layout(
+        &[
+            (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stage),
+            (
+                BINDING_HEIGHTMAP,
+                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stage,
+            ),
+            (
+                BINDING_MIRROR_CASES,
+                vk::DescriptorType::STORAGE_BUFFER,
+                stage,
+            ),
+            (
+                BINDING_MIRROR_RESULTS,
+                vk::DescriptorType::STORAGE_BUFFER,
+                stage,
+            ),
+        ],
+        "mirror.set_layout",
+    )?;
+    let layout = device.create_pipeline_layout(&[set_layout], "mirror.pipeline_layout")?;
+    let (pool, sets) = device.allocate_descriptor_sets(
+        set_layout,
+        &[
+            (vk::DescriptorType::UNIFORM_BUFFER, 1),
+            (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+            (vk::DescriptorType::STORAGE_BUFFER, 2),
+        ],
+        1,
+        "mirror.set",
+    )?;
+    let set = sets[0];
+    device.write_uniform_buffer(
+        set,
+        BINDING_FRAME,
+        frame.raw,
+        size_of::<FrameUniforms>() as u64,
+    );
+    device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
+    device.write_storage_buffer(
+        set,
+        BINDING_MIRROR_CASES,
+        input.raw,
+        (inputs.len() * 16) as u64,
+    );
+    device.write_storage_buffer(set, BINDING_MIRROR_RESULTS, output.raw, results_size);
+    let pipeline =
+        device.create_compute_pipeline(shaders::MIRROR_CHECK_COMP, layout, "mirror.pipeline");
+
+    let ran = pipeline.and_then(|pipeline| {
+        let groups = (cases.len() as u32).div_ceil(LOCAL_SIZE);
+        let done = device.one_shot("mirror.commands", |cmd| {
+            let rec = crate::vk::commands::Recorder {
+                device: &device.raw,
+                cmd,
+            };
+            rec.dispatch_for_host(pipeline, layout, set, groups);
+        });
+        device.destroy_pipeline(pipeline);
+        done
+    });
+    let results = ran.and_then(|()| {
+        let bytes = output
+            .mapped()
+            .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
+        let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+        Ok(values
+            .into_iter()
+            .map(|v| MirrorResult {
+                tess_factor: v[0],
+                outside_frustum: v[1] != 0.0,
+                height: v[2],
+            })
+            .collect())
+    });
+    device.destroy_pipeline_layout(layout);
+    device.destroy_descriptor_pool(pool);
+    device.destroy_descriptor_set_layout(set_layout);
+    device.destroy_buffer(output);
+    device.destroy_buffer(input);
+    device.destroy_buffer(frame);
+    device.destroy_sampler(sampler);
+    device.destroy_image(heightmap);
+    results
+}

@@ -1,0 +1,173 @@
+//! The GLSL formulas against their Rust mirrors, on a grid of inputs and
+//! degenerate ones, through a compute shader that includes the same shared
+//! GLSL file the terrain stages use.
+
+mod common;
+
+use common::gpu::*;
+use common::*;
+use glam::{DVec2, Vec2, Vec3};
+use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
+use vkterrain::render::{FrameView, RenderSettings};
+use vkterrain::terrain::camera::aabb_outside_frustum;
+use vkterrain::terrain::lod::tess_factor;
+use vkterrain::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
+use vkterrain::vk::Gpu;
+
+#[test]
+fn glsl_formulas_match_their_rust_mirrors() {
+    if skip_gpu() {
+        return;
+    }
+    let gpu = Gpu::new(true).expect("a Vulkan device (set VKTERRAIN_SKIP_GPU=1 to skip)");
+    let info = TerrainInfo::new(
+        dem("jacksboro_fault_dem.png", None),
+        DEM_SPACING,
+        32,
+        DVec2::ZERO,
+    )
+    .unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let map = terrain.info().heightmap().clone();
+    let (lo, hi) = map.min_max();
+    let view = FrameView::new(
+        &terrain,
+        &camera([-8000.0, 3000.0, -9000.0], [0.0, 500.0, 0.0], 55.0),
+        640,
+        480,
+    );
+
+    let lods = [
+        DistanceLod {
+            min_dist: 100.0,
+            max_dist: 5000.0,
+            min_exp: 0.0,
+            max_exp: 6.0,
+        },
+        DistanceLod {
+            min_dist: 700.0,
+            max_dist: 700.0,
+            min_exp: 1.0,
+            max_exp: 5.0,
+        },
+        DistanceLod {
+            min_dist: 0.0,
+            max_dist: 0.0,
+            min_exp: 3.0,
+            max_exp: 3.0,
+        },
+    ];
+    // Distances on a grid, exactly on the bounds, and degenerate positions.
+    let mut positions: Vec<Vec3> = (0..200)
+        .map(|k| Vec3::new(k as f32 * 37.0, -(k as f32) * 11.0, k as f32 * 5.0))
+        .collect();
+    positions.extend([
+        Vec3::new(100.0, 0.0, 0.0),
+        Vec3::new(5000.0, 0.0, 0.0),
+        Vec3::new(700.0, 0.0, 0.0),
+        Vec3::ZERO,
+    ]);
+    positions.extend([
+        Vec3::splat(f32::INFINITY),
+        Vec3::splat(f32::MAX),
+        Vec3::new(-1e30, 0.0, 1e30),
+    ]);
+    // Boxes just inside and just outside each frustum plane.
+    let mut boxes = Vec::new();
+    for plane in view.frustum.planes {
+        let n = plane.truncate();
+        let on = -n * plane.w; // the plane's point nearest the origin
+        let extents = Vec3::new(3.0, 2.0, 1.0);
+        let r = extents.dot(n.abs());
+        boxes.push((on - n * (r + 0.5), extents));
+        boxes.push((on - n * (r - 0.5), extents));
+    }
+    // Sample coordinates: every corner and far edge, exact samples, random.
+    let (w, d) = ((map.width() - 1) as f32, (map.depth() - 1) as f32);
+    let mut grid = vec![
+        Vec2::ZERO,
+        Vec2::new(w, 0.0),
+        Vec2::new(0.0, d),
+        Vec2::new(w, d),
+        Vec2::new(w, d / 2.0),
+        Vec2::new(w / 2.0, d),
+    ];
+    grid.extend((0..300).map(|k| Vec2::new((k * 37 % 403) as f32, (k * 13 % 344) as f32)));
+    grid.extend((0..300).map(|k| Vec2::new((k as f32 * 1.337) % w, (k as f32 * 0.9137) % d)));
+    grid.extend([Vec2::new(-5.0, 3.0), Vec2::new(w + 10.0, d + 10.0)]);
+
+    let count = positions.len().max(boxes.len()).max(grid.len());
+    let cases: Vec<MirrorCase> = (0..count)
+        .map(|k| MirrorCase {
+            position: if k < boxes.len() {
+                boxes[k].0
+            } else {
+                positions[k % positions.len()]
+            },
+            extents: if k < boxes.len() {
+                boxes[k].1
+            } else {
+                Vec3::ONE
+            },
+            grid: grid[k % grid.len()],
+        })
+        .collect();
+
+    for lod in lods {
+        for mode in [DistanceMode::Smooth, DistanceMode::Debug] {
+            let settings = RenderSettings {
+                lod,
+                lod_mode: mode,
+                ..RenderSettings::default()
+            };
+            let results = run_mirror_check(&gpu, &terrain, &view, &settings, &cases)
+                .expect("mirror check runs");
+            for (k, (case, got)) in cases.iter().zip(&results).enumerate() {
+                // Factor: the position's factor (box cases too: any position serves).
+                let want = tess_factor(case.position, &lod, mode);
+                assert!(
+                    (1.0..=64.0).contains(&got.tess_factor),
+                    "case {k}: GPU factor {} out of range",
+                    got.tess_factor
+                );
+                let finite = case.position.is_finite() && case.position.length().is_finite();
+                if finite {
+                    assert!(
+                        (got.tess_factor - want).abs() <= 1e-5 * want,
+                        "case {k} {:?} {mode:?} at {}: GLSL {} vs Rust {want}",
+                        lod,
+                        case.position,
+                        got.tess_factor
+                    );
+                }
+                let outside =
+                    aabb_outside_frustum(case.position, case.extents, &view.frustum.planes);
+                assert_eq!(
+                    got.outside_frustum, outside,
+                    "case {k}: frustum test at {}",
+                    case.position
+                );
+                let height = map.interpolate(f64::from(case.grid.x), f64::from(case.grid.y)) as f32;
+                assert!(
+                    (got.height - height).abs() <= 1e-6 * (hi - lo).max(hi.abs()),
+                    "case {k}: height at {}: GLSL {} vs Rust {height}",
+                    case.grid,
+                    got.height
+                );
+                if case.grid.fract() == Vec2::ZERO
+                    && case.grid.cmple(Vec2::new(w, d)).all()
+                    && case.grid.cmpge(Vec2::ZERO).all()
+                {
+                    assert_eq!(got.height, height, "case {k}: a sample is exact");
+                }
+            }
+        }
+    }
+    assert_eq!(
+        gpu.validation_messages(),
+        0,
+        "{:#?}",
+        gpu.instance.validation_log().messages()
+    );
+    assert_eq!(gpu.device.memory_in_use(), 0);
+}
