@@ -8,29 +8,34 @@
 
 layout(local_size_x = 64) in;
 
-// Per case: a position (camera-relative for the factor, the box centre for
-// the frustum test), then the box extents, then continuous sample
-// coordinates (column, row) in xy.
+// Per case: a position (camera-relative for the factors, the box centre for
+// the frustum test), the box extents, continuous sample coordinates
+// (column, row) in xy, and the 7 per-level errors for the error-bounded
+// factor (at the position's distance) in two vec4s.
 layout(std430, set = 0, binding = BINDING_MIRROR_CASES) readonly buffer Cases {
     vec4 cases[];
 };
 
-// Per case: factor, 1 if the box is outside the frustum, sampled height.
+// Per case: distance factor, 1 if the box is outside the frustum, sampled
+// height, error-bounded factor.
 layout(std430, set = 0, binding = BINDING_MIRROR_RESULTS) writeonly buffer Results {
     vec4 results[];
 };
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
-    if (3u * i + 2u >= uint(cases.length())) {
+    if (5u * i + 4u >= uint(cases.length())) {
         return;
     }
-    vec4 position = cases[3u * i];
-    vec4 extents = cases[3u * i + 1u];
-    vec4 grid = cases[3u * i + 2u];
+    vec4 position = cases[5u * i];
+    vec4 extents = cases[5u * i + 1u];
+    vec4 grid = cases[5u * i + 2u];
+    vec4 e0 = cases[5u * i + 3u];
+    vec4 e1 = cases[5u * i + 4u];
+    float errors[ERROR_LEVEL_COUNT] = float[ERROR_LEVEL_COUNT](e0.x, e0.y, e0.z, e0.w, e1.x, e1.y, e1.z);
     results[i] = vec4(
         tess_factor(position.xyz),
         aabb_outside_frustum(position.xyz, extents.xyz) ? 1.0 : 0.0,
         sample_height(grid.xy),
-        0.0);
+        error_tess_factor(errors, length(position.xyz)));
 }

@@ -10,6 +10,11 @@ layout(location = 0) in vec3 in_rel[];
 layout(location = 1) in vec2 in_grid[];
 layout(location = 2) in vec2 in_bounds_y[];
 
+// Errors of each patch at 1, 2, ..., 64 segments (error LOD only).
+layout(std430, set = 0, binding = BINDING_ERROR_TABLE) readonly buffer ErrorTable {
+    float patch_errors[];
+};
+
 layout(location = 0) out vec3 out_rel[];
 layout(location = 1) out vec2 out_grid[];
 layout(location = 2) patch out float out_inside_factor;
@@ -38,15 +43,48 @@ void main() {
         return;
     }
 
-    // Edge factors from edge midpoints, so both patches sharing an edge
-    // compute the same value; inside factors from the centre. Vulkan's quad
-    // edges are u=0 (left, 0-2), v=0 (top, 0-1), u=1 (right, 1-3) and v=1
-    // (bottom, 2-3). Mirror: terrain::lod::patch_tess_factors.
-    gl_TessLevelOuter[0] = tess_factor(0.5 * (in_rel[0] + in_rel[2]));
-    gl_TessLevelOuter[1] = tess_factor(0.5 * (in_rel[0] + in_rel[1]));
-    gl_TessLevelOuter[2] = tess_factor(0.5 * (in_rel[1] + in_rel[3]));
-    gl_TessLevelOuter[3] = tess_factor(0.5 * (in_rel[2] + in_rel[3]));
-    float inside = tess_factor(0.25 * (in_rel[0] + in_rel[1] + in_rel[2] + in_rel[3]));
+    vec3 midpoints[4] = vec3[4](
+        0.5 * (in_rel[0] + in_rel[2]),
+        0.5 * (in_rel[0] + in_rel[1]),
+        0.5 * (in_rel[1] + in_rel[3]),
+        0.5 * (in_rel[2] + in_rel[3]));
+    vec3 centre = 0.25 * (in_rel[0] + in_rel[1] + in_rel[2] + in_rel[3]);
+    float inside;
+    if (frame.modes.w == LOD_METRIC_ERROR) {
+        // This patch and its neighbours across the left, top, right and
+        // bottom edges; an edge uses the larger error of the two patches,
+        // so both compute the same factor for it.
+        // Mirror: terrain::lod::patch_error_factors.
+        ivec2 grid_size = ivec2(frame.error_lod.zw);
+        ivec2 here = ivec2(in_grid[0]) / int(frame.modes.z);
+        int p = here.y * grid_size.x + here.x;
+        float own[ERROR_LEVEL_COUNT];
+        for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
+            own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
+        }
+        ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(1, 0), ivec2(0, 1));
+        for (int e = 0; e < 4; ++e) {
+            ivec2 there = here + across[e];
+            float shared_errors[ERROR_LEVEL_COUNT] = own;
+            if (all(greaterThanEqual(there, ivec2(0))) && all(lessThan(there, grid_size))) {
+                int q = there.y * grid_size.x + there.x;
+                for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
+                    shared_errors[k] = max(own[k], patch_errors[q * int(ERROR_LEVEL_COUNT) + k]);
+                }
+            }
+            gl_TessLevelOuter[e] = error_tess_factor(shared_errors, length(midpoints[e]));
+        }
+        inside = error_tess_factor(own, length(centre));
+    } else {
+        // Edge factors from edge midpoints, so both patches sharing an edge
+        // compute the same value; inside factors from the centre. Vulkan's
+        // quad edges are u=0 (left, 0-2), v=0 (top, 0-1), u=1 (right, 1-3)
+        // and v=1 (bottom, 2-3). Mirror: terrain::lod::patch_tess_factors.
+        for (int e = 0; e < 4; ++e) {
+            gl_TessLevelOuter[e] = tess_factor(midpoints[e]);
+        }
+        inside = tess_factor(centre);
+    }
     gl_TessLevelInner[0] = inside;
     gl_TessLevelInner[1] = inside;
     out_inside_factor = inside;

@@ -26,8 +26,12 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     // x, y: lowest and highest height (colour ramp); z: 1 when frustum
     // culling is on.
     vec4 height_range;
-    // x: LOD mode, y: shading mode, z: cells per patch.
+    // x: LOD mode, y: shading mode, z: cells per patch, w: LOD metric
+    // (LOD_METRIC_DISTANCE or LOD_METRIC_ERROR).
     uvec4 modes;
+    // x: largest projected error in pixels (error LOD), y: viewport height
+    // over 2 tan(fov / 2), z, w: patch columns and rows.
+    vec4 error_lod;
 } frame;
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with
@@ -100,4 +104,33 @@ float tess_factor(vec3 rel) {
         exponent = floor(exponent + 0.5);
     }
     return clamp_tess_factor(exp2(exponent));
+}
+
+// Error-bounded tessellation factor: the smallest level whose error
+// projects to at most error_lod.x pixels at `distance`, interpolated in log
+// space from the level before so it moves continuously with distance.
+// errors[k] is the error of 2^k segments. Mirror: terrain::lod::error_tess_factor.
+float error_tess_factor(float errors[ERROR_LEVEL_COUNT], float distance) {
+    float scale = frame.error_lod.y / max(distance, 1.17549435e-38);
+    if (isnan(scale)) {
+        return MIN_TESS_FACTOR;
+    }
+    float tau = max(frame.error_lod.x, 1.17549435e-38);
+    float factor = MAX_TESS_FACTOR;
+    for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
+        if (errors[k] * scale <= tau) {
+            if (k == 0) {
+                factor = MIN_TESS_FACTOR;
+            } else {
+                float coarse = errors[k - 1] * scale;
+                float fine = errors[k] * scale;
+                float t = fine > 0.0
+                    ? lod_saturate((log(coarse) - log(tau)) / (log(coarse) - log(fine)))
+                    : lod_saturate((coarse - tau) / coarse);
+                factor = exp2(float(k - 1) + t);
+            }
+            break;
+        }
+    }
+    return clamp_tess_factor(factor);
 }

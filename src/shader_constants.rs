@@ -8,6 +8,15 @@ pub const BINDING_FRAME: u32 = 0;
 /// Descriptor binding of the heightmap (set 0): R32_SFLOAT, read with texelFetch.
 pub const BINDING_HEIGHTMAP: u32 = 1;
 
+/// Storage buffer of the per-patch error table (tess path, error LOD).
+pub const BINDING_ERROR_TABLE: u32 = 4;
+/// Levels per patch in the error table (factors 1, 2, ..., 64).
+pub const ERROR_LEVEL_COUNT: u32 = 7;
+/// LOD metric: distance.
+pub const LOD_METRIC_DISTANCE: u32 = 0;
+/// LOD metric: projected error.
+pub const LOD_METRIC_ERROR: u32 = 1;
+
 /// Storage buffer of inputs of the GLSL mirror check (compute, tests only).
 pub const BINDING_MIRROR_CASES: u32 = 2;
 /// Storage buffer of results of the GLSL mirror check.
@@ -39,6 +48,10 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
     vec![
         ("BINDING_FRAME", BINDING_FRAME.to_string()),
         ("BINDING_HEIGHTMAP", BINDING_HEIGHTMAP.to_string()),
+        ("BINDING_ERROR_TABLE", BINDING_ERROR_TABLE.to_string()),
+        ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
+        ("LOD_METRIC_DISTANCE", uint(LOD_METRIC_DISTANCE)),
+        ("LOD_METRIC_ERROR", uint(LOD_METRIC_ERROR)),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),
         ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),

@@ -8,9 +8,9 @@ use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec2, Vec3};
 use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
-use vkterrain::render::{FrameView, RenderSettings};
+use vkterrain::render::{FrameView, LodMetric, RenderSettings};
 use vkterrain::terrain::camera::aabb_outside_frustum;
-use vkterrain::terrain::lod::tess_factor;
+use vkterrain::terrain::lod::{error_tess_factor, tess_factor};
 use vkterrain::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
 use vkterrain::vk::Gpu;
 
@@ -96,6 +96,17 @@ fn glsl_formulas_match_their_rust_mirrors() {
     grid.extend((0..300).map(|k| Vec2::new((k as f32 * 1.337) % w, (k as f32 * 0.9137) % d)));
     grid.extend([Vec2::new(-5.0, 3.0), Vec2::new(w + 10.0, d + 10.0)]);
 
+    // Per-level errors: a real patch's, a flat one's, one with equal levels,
+    // and a tiny one.
+    let table = terrain.error_table();
+    let patch = |p: usize| -> [f32; 7] { table.patch(p).try_into().unwrap() };
+    let error_sets = [
+        patch(40),
+        patch(77),
+        [0.0; 7],
+        [5.0, 5.0, 5.0, 2.0, 0.5, 0.0, 0.0],
+        [1e-3; 7],
+    ];
     let count = positions.len().max(boxes.len()).max(grid.len());
     let cases: Vec<MirrorCase> = (0..count)
         .map(|k| MirrorCase {
@@ -110,14 +121,16 @@ fn glsl_formulas_match_their_rust_mirrors() {
                 Vec3::ONE
             },
             grid: grid[k % grid.len()],
+            errors: error_sets[k % error_sets.len()],
         })
         .collect();
 
-    for lod in lods {
+    for (lod, pixels) in lods.into_iter().zip([1.0f32, 0.25, 8.0]) {
         for mode in [DistanceMode::Smooth, DistanceMode::Debug] {
             let settings = RenderSettings {
                 lod,
                 lod_mode: mode,
+                lod_metric: LodMetric::Error(pixels),
                 ..RenderSettings::default()
             };
             let results = run_mirror_check(&gpu, &terrain, &view, &settings, &cases)
@@ -138,6 +151,26 @@ fn glsl_formulas_match_their_rust_mirrors() {
                         lod,
                         case.position,
                         got.tess_factor
+                    );
+                }
+                let want = error_tess_factor(
+                    &case.errors,
+                    case.position.length(),
+                    view.pixels_per_radian,
+                    pixels,
+                );
+                assert!(
+                    (1.0..=64.0).contains(&got.error_tess_factor),
+                    "case {k}: error factor {}",
+                    got.error_tess_factor
+                );
+                if finite {
+                    assert!(
+                        (got.error_tess_factor - want).abs() <= 1e-4 * want,
+                        "case {k} at {} with {:?}, {pixels} px: GLSL {} vs Rust {want}",
+                        case.position,
+                        case.errors,
+                        got.error_tess_factor
                     );
                 }
                 let outside =

@@ -591,3 +591,74 @@ fn gpu_tests_fail_without_a_device_unless_skipped() {
     assert!(skipped.status.success());
     assert!(String::from_utf8_lossy(&skipped.stderr).contains("VKTERRAIN_SKIP_GPU=1: skipping"));
 }
+
+#[test]
+fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
+    if skip_gpu() {
+        return;
+    }
+    for (name, terrain) in [
+        ("dem", dem_terrain(16, DVec2::ZERO)),
+        ("cliff", cliff_terrain()),
+        ("default", default_terrain(32)),
+    ] {
+        let cams = crack_cameras(&terrain);
+        let mut small = GpuScene::new(terrain.clone(), 192, 128, false);
+        let mut large = GpuScene::new(terrain, 384, 256, false);
+        for (view, cam) in &cams {
+            let mut last = u64::MAX;
+            for pixels in [0.5f32, 2.0, 8.0] {
+                let settings = RenderSettings {
+                    lod_metric: vkterrain::render::LodMetric::Error(pixels),
+                    ..flat_settings(&large.terrain, DistanceMode::Smooth)
+                };
+                let frame = large.render(cam, &settings);
+                let holes = enclosed_background(&frame.readback.rgba, 384, 256, |p| p[0] < 128);
+                assert!(
+                    holes.is_empty(),
+                    "{name}/{view}/{pixels} px: {} holes",
+                    holes.len()
+                );
+                let tes = frame.measurements.statistics.unwrap().tes_invocations;
+                assert!(
+                    tes <= last,
+                    "{name}/{view}: {pixels} px made {tes} vertices, more than {last}"
+                );
+                last = tes;
+                // Half the pixels each way: the same error budget needs fewer vertices.
+                let smaller = small
+                    .render(cam, &settings)
+                    .measurements
+                    .statistics
+                    .unwrap()
+                    .tes_invocations;
+                assert!(
+                    smaller <= tes,
+                    "{name}/{view}/{pixels} px: {smaller} at 192x128 vs {tes} at 384x256"
+                );
+            }
+        }
+        small.finish();
+        large.finish();
+    }
+}
+
+#[test]
+fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
+    use vkterrain::terrain::lod::patch_error_factors;
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let table = terrain.error_table();
+    let grid = terrain.grid();
+    let id = grid.patch_id(grid.patch_count() / 2);
+    let own: [f32; 7] = table.patch(grid.patch_index(id)).try_into().unwrap();
+    let eye = Vec3::new(0.0, 3000.0, -9000.0);
+    let corners = terrain.patch_corners(id).map(|c| c - eye);
+    let inside =
+        |ppr: f32, px: f32| patch_error_factors(corners, &own, [None; 4], ppr, px).inside[0];
+    // Narrower field of view or more pixels: more pixels per radian.
+    assert!(inside(1000.0, 1.0) > inside(500.0, 1.0));
+    assert!(inside(1000.0, 1.0) > inside(1000.0, 4.0));
+    // A 32-cell patch is exact at 32 segments: no scale asks for more.
+    assert!((inside(1e9, 1.0) - 32.0).abs() < 1e-3);
+    assert_eq!(inside(1e-3, 1.0), 1.0);
+}

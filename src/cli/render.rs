@@ -128,7 +128,8 @@ pub struct ViewArgs {
     #[arg(long)]
     pub no_cull: bool,
 
-    /// How the geomip path picks levels: by distance, or by projected error.
+    /// How levels are chosen: by distance, or by projected error (the tess
+    /// path's factors and the geomip path's levels alike).
     #[arg(long, value_enum, default_value_t = LodArg::Distance)]
     pub lod: LodArg,
 
@@ -163,9 +164,6 @@ impl ViewArgs {
             scene.lod.max_exp = max;
         }
         scene.lod.validate()?;
-        if self.lod == LodArg::Error && self.path == PathArg::Tess {
-            bail!("--lod error chooses levels on the geomip path; the tess path's factors are by distance");
-        }
         Ok(())
     }
 

@@ -25,6 +25,8 @@ pub struct MirrorCase {
     pub extents: Vec3,
     /// Continuous sample coordinates (column, row) for height sampling.
     pub grid: Vec2,
+    /// Per-level errors for the error-bounded factor at `position`'s distance.
+    pub errors: [f32; 7],
 }
 
 /// What the GPU computed for one case.
@@ -33,6 +35,7 @@ pub struct MirrorResult {
     pub tess_factor: f32,
     pub outside_frustum: bool,
     pub height: f32,
+    pub error_tess_factor: f32,
 }
 
 const LOCAL_SIZE: u32 = 64;
@@ -54,13 +57,15 @@ pub fn run_mirror_check(
     let inputs: Vec<[f32; 4]> = cases
         .iter()
         .flat_map(|c| {
+            let e = c.errors;
             [
-                c.position.extend(0.0),
-                c.extents.extend(0.0),
-                c.grid.extend(0.0).extend(0.0),
+                c.position.extend(0.0).to_array(),
+                c.extents.extend(0.0).to_array(),
+                c.grid.extend(0.0).extend(0.0).to_array(),
+                [e[0], e[1], e[2], e[3]],
+                [e[4], e[5], e[6], 0.0],
             ]
         })
-        .map(|v| v.to_array())
         .collect();
     let uniforms = FrameUniforms::new(terrain, view, settings);
     let results_size = (cases.len() * size_of::<[f32; 4]>()) as u64;
@@ -164,6 +169,7 @@ pub fn run_mirror_check(
                 tess_factor: v[0],
                 outside_frustum: v[1] != 0.0,
                 height: v[2],
+                error_tess_factor: v[3],
             })
             .collect())
     });

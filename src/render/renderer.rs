@@ -19,7 +19,7 @@ use ash::vk;
 
 use super::shaders;
 use super::uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings};
-use crate::shader_constants::{BINDING_FRAME, BINDING_HEIGHTMAP};
+use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_HEIGHTMAP};
 use crate::terrain::{geomip, ErrorTable, Terrain};
 use crate::vk::commands::Recorder;
 use crate::vk::memory::{Buffer, Image};
@@ -155,6 +155,8 @@ pub struct TerrainRenderer {
     tess: Option<TessGeometry>,
     geomip: Option<GeomipGeometry>,
     brute: Option<BruteGeometry>,
+    /// Per-patch errors for the tess path's error-bounded factors.
+    error_table: Option<Buffer>,
     color_format: vk::Format,
     max_patches_per_draw: Option<u32>,
     frames: Vec<FrameSlot>,
@@ -229,25 +231,41 @@ impl TerrainRenderer {
             stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
                 | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
         }
-        let set_layout = device.create_descriptor_set_layout(
-            &[
-                (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
-                (
-                    BINDING_HEIGHTMAP,
-                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                    stages,
-                ),
-            ],
-            "terrain.set_layout",
-        )?;
+        let mut bindings = vec![
+            (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
+            (
+                BINDING_HEIGHTMAP,
+                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stages,
+            ),
+        ];
+        let mut pool_sizes = vec![
+            (vk::DescriptorType::UNIFORM_BUFFER, 1),
+            (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+        ];
+        // The tess path's error-bounded factors read the per-patch error
+        // table (7 floats a patch).
+        let error_table = if wants(RenderPath::Tess) {
+            bindings.push((
+                BINDING_ERROR_TABLE,
+                vk::DescriptorType::STORAGE_BUFFER,
+                vk::ShaderStageFlags::TESSELLATION_CONTROL,
+            ));
+            pool_sizes.push((vk::DescriptorType::STORAGE_BUFFER, 1));
+            Some(device.upload_buffer(
+                "terrain.error_table",
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytemuck::cast_slice(terrain.error_table().as_slice()),
+            )?)
+        } else {
+            None
+        };
+        let set_layout = device.create_descriptor_set_layout(&bindings, "terrain.set_layout")?;
         let pipeline_layout =
             device.create_pipeline_layout(&[set_layout], "terrain.pipeline_layout")?;
         let (descriptor_pool, sets) = device.allocate_descriptor_sets(
             set_layout,
-            &[
-                (vk::DescriptorType::UNIFORM_BUFFER, 1),
-                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
-            ],
+            &pool_sizes,
             frames_in_flight,
             "terrain.frame_set",
         )?;
@@ -265,6 +283,9 @@ impl TerrainRenderer {
                 size_of::<FrameUniforms>() as u64,
             );
             device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
+            if let Some(errors) = &error_table {
+                device.write_storage_buffer(set, BINDING_ERROR_TABLE, errors.raw, errors.desc.size);
+            }
             let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
             frames.push(FrameSlot {
                 uniforms,
@@ -281,6 +302,7 @@ impl TerrainRenderer {
             tess: None,
             geomip: None,
             brute: None,
+            error_table,
             color_format,
             max_patches_per_draw: device.caps.max_patches_per_draw,
             frames,
@@ -471,6 +493,9 @@ impl TerrainRenderer {
         }
         if let Some(brute) = self.brute {
             brute.pipelines.destroy(device);
+        }
+        if let Some(errors) = self.error_table {
+            device.destroy_buffer(errors);
         }
         device.destroy_pipeline_layout(self.pipeline_layout);
         // The pool frees its sets; the layout goes after them.

@@ -7,7 +7,8 @@ use glam::{DVec3, Mat4, Vec3, Vec4};
 
 use super::renderer::RenderPath;
 use crate::shader_constants::{
-    LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
+    LOD_METRIC_DISTANCE, LOD_METRIC_ERROR, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT,
+    SHADE_LOD_COLORS,
 };
 use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
 use crate::terrain::{DistanceLod, DistanceMode, Terrain};
@@ -24,10 +25,11 @@ pub struct FrameUniforms {
     pub light: [f32; 4],
     pub height_range: [f32; 4],
     pub modes: [u32; 4],
+    pub error_lod: [f32; 4],
 }
 
 // std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
-const _: () = assert!(size_of::<FrameUniforms>() == 272);
+const _: () = assert!(size_of::<FrameUniforms>() == 288);
 const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
 const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
 const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
@@ -36,6 +38,7 @@ const _: () = assert!(offset_of!(FrameUniforms, spacing_size) == 208);
 const _: () = assert!(offset_of!(FrameUniforms, light) == 224);
 const _: () = assert!(offset_of!(FrameUniforms, height_range) == 240);
 const _: () = assert!(offset_of!(FrameUniforms, modes) == 256);
+const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
 
 /// How the fragment shader colours the terrain.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
@@ -217,7 +220,19 @@ impl FrameUniforms {
                     Shading::Flat => SHADE_FLAT,
                 },
                 info.cells_per_patch(),
-                0,
+                match settings.lod_metric {
+                    LodMetric::Distance => LOD_METRIC_DISTANCE,
+                    LodMetric::Error(_) => LOD_METRIC_ERROR,
+                },
+            ],
+            error_lod: [
+                match settings.lod_metric {
+                    LodMetric::Error(pixels) => pixels,
+                    LodMetric::Distance => 0.0,
+                },
+                view.pixels_per_radian,
+                terrain.grid().patch_cols() as f32,
+                terrain.grid().patch_rows() as f32,
             ],
         }
     }

@@ -164,3 +164,89 @@ pub fn patch_tess_factors(
         inside: [inside, inside],
     }
 }
+
+/// Error-bounded tessellation factor (the tess path's `--lod error`).
+///
+/// `errors[k]` is the largest geometric error of tessellating with 2^k
+/// segments (the error table's levels, non-increasing in k). At `distance`
+/// an error e covers e * pixels_per_radian / distance pixels. The factor is
+/// the smallest level whose projected error is at most `pixel_error`,
+/// interpolated in log space between it and the level before, so it moves
+/// continuously with distance: exactly 2^k where level k's error projects
+/// to `pixel_error`. Finite in [1, 64] for any input.
+pub fn error_tess_factor(
+    errors: &[f32; 7],
+    distance: f32,
+    pixels_per_radian: f32,
+    pixel_error: f32,
+) -> f32 {
+    let scale = pixels_per_radian / distance.max(f32::MIN_POSITIVE);
+    if scale.is_nan() {
+        return MIN_TESS_FACTOR;
+    }
+    let tau = pixel_error.max(f32::MIN_POSITIVE);
+    let projected = |k: usize| errors[k] * scale;
+    let mut factor = MAX_TESS_FACTOR;
+    for k in 0..7 {
+        if projected(k) <= tau {
+            factor = if k == 0 {
+                MIN_TESS_FACTOR
+            } else {
+                let (coarse, fine) = (projected(k - 1), projected(k));
+                // Fraction of the way from level k-1 (error coarse > tau) to
+                // level k (error fine <= tau), in log space.
+                let t = if fine > 0.0 {
+                    saturate((coarse.ln() - tau.ln()) / (coarse.ln() - fine.ln()))
+                } else {
+                    saturate((coarse - tau) / coarse)
+                };
+                ((k - 1) as f32 + t).exp2()
+            };
+            break;
+        }
+    }
+    clamp_tess_factor(factor)
+}
+
+/// Per-level errors of an edge shared by two patches: the larger of each.
+pub fn shared_edge_errors(a: &[f32; 7], b: Option<&[f32; 7]>) -> [f32; 7] {
+    match b {
+        Some(b) => std::array::from_fn(|k| a[k].max(b[k])),
+        None => *a,
+    }
+}
+
+/// Error-bounded factors of one patch: each edge from the errors it shares
+/// with the neighbour across it (left, top, right, bottom; None at the
+/// terrain's border) at the edge midpoint's distance, the inside from the
+/// patch's own errors at its centre. `corners` are eye-relative.
+pub fn patch_error_factors(
+    corners: [Vec3; 4],
+    own: &[f32; 7],
+    neighbours: [Option<&[f32; 7]>; 4],
+    pixels_per_radian: f32,
+    pixel_error: f32,
+) -> PatchTessFactors {
+    let [ul, ur, ll, lr] = corners;
+    let midpoints = [
+        edge_midpoint(ul, ll),
+        edge_midpoint(ul, ur),
+        edge_midpoint(ur, lr),
+        edge_midpoint(ll, lr),
+    ];
+    let edges = std::array::from_fn(|i| {
+        let errors = shared_edge_errors(own, neighbours[i]);
+        error_tess_factor(
+            &errors,
+            midpoints[i].length(),
+            pixels_per_radian,
+            pixel_error,
+        )
+    });
+    let centre = 0.25 * (ul + ur + ll + lr);
+    let inside = error_tess_factor(own, centre.length(), pixels_per_radian, pixel_error);
+    PatchTessFactors {
+        edges,
+        inside: [inside, inside],
+    }
+}
