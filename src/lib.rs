@@ -3,6 +3,7 @@
 //! Layers, each using only those below it:
 //! - [`cli`]: the command line.
 //! - [`app`]: the window demo (winit and a swapchain).
+//! - [`bench`]: speed against error: the screen-space error measurement.
 //! - [`render`]: the terrain renderer, drawing into a target it is given.
 //! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
 //! - [`scene`]: what to load.
@@ -11,6 +12,7 @@
 //! - [`shader_constants`]: constants shared with GLSL.
 
 pub mod app;
+pub mod bench;
 pub mod cli;
 pub mod output;
 pub mod render;

@@ -3,7 +3,8 @@
 
 use std::path::PathBuf;
 
-use glam::{DVec3, Vec4};
+use glam::DVec3;
+use vkterrain::bench::error::DepthView;
 use vkterrain::render::{
     Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, TerrainRenderer,
 };
@@ -107,34 +108,23 @@ pub fn camera(eye: [f64; 3], target: [f64; 3], fov: f32) -> Camera {
     }
 }
 
+/// The frame's depth as the error measurement reads it.
+pub fn depth_view(frame: &HeadlessFrame) -> DepthView<'_> {
+    DepthView {
+        width: frame.readback.width as usize,
+        height: frame.readback.height as usize,
+        depth: &frame.readback.depth,
+        view_proj: frame.view.view_proj.as_dmat4(),
+    }
+}
+
 /// World position seen at each pixel centre, from the depth buffer; None
 /// where the pixel shows the background (depth 0 with reversed Z).
 pub fn world_positions(frame: &HeadlessFrame, camera: &Camera) -> Vec<Option<DVec3>> {
-    let (w, h) = (
-        frame.readback.width as usize,
-        frame.readback.height as usize,
-    );
-    let inverse = frame.view.view_proj.as_dmat4().inverse();
-    frame
-        .readback
-        .depth
-        .iter()
-        .enumerate()
-        .map(|(i, &d)| {
-            if d <= 0.0 {
-                return None;
-            }
-            let (px, py) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
-            let ndc = Vec4::new(
-                (px / w as f64 * 2.0 - 1.0) as f32,
-                (py / h as f64 * 2.0 - 1.0) as f32,
-                d,
-                1.0,
-            )
-            .as_dvec4();
-            let p = inverse * ndc;
-            Some(camera.eye + p.truncate() / p.w)
-        })
+    let view = depth_view(frame);
+    let inverse = view.view_proj.inverse();
+    (0..view.depth.len())
+        .map(|i| view.position(&inverse, i).map(|p| camera.eye + p))
         .collect()
 }
 

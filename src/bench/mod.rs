@@ -1,0 +1,4 @@
+//! Speed against error: measuring the screen-space error of a render
+//! against the brute reference.
+
+pub mod error;
