@@ -129,20 +129,28 @@ pub fn run_mirror_check(
         "mirror.set",
     )?;
     let set = sets[0];
-    device.write_uniform_buffer(
+    device.write_buffer(
         set,
         BINDING_FRAME,
+        vk::DescriptorType::UNIFORM_BUFFER,
         frame.raw,
         size_of::<FrameUniforms>() as u64,
     );
     device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
-    device.write_storage_buffer(
+    device.write_buffer(
         set,
         BINDING_MIRROR_CASES,
+        vk::DescriptorType::STORAGE_BUFFER,
         input.raw,
         (inputs.len() * 16) as u64,
     );
-    device.write_storage_buffer(set, BINDING_MIRROR_RESULTS, output.raw, results_size);
+    device.write_buffer(
+        set,
+        BINDING_MIRROR_RESULTS,
+        vk::DescriptorType::STORAGE_BUFFER,
+        output.raw,
+        results_size,
+    );
     let pipeline =
         device.create_compute_pipeline(shaders::MIRROR_CHECK_COMP, layout, "mirror.pipeline");
 

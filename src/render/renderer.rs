@@ -276,15 +276,22 @@ impl TerrainRenderer {
                 vk::BufferUsageFlags::UNIFORM_BUFFER,
                 bytemuck::bytes_of(&FrameUniforms::default()),
             )?;
-            device.write_uniform_buffer(
+            device.write_buffer(
                 set,
                 BINDING_FRAME,
+                vk::DescriptorType::UNIFORM_BUFFER,
                 uniforms.raw,
                 size_of::<FrameUniforms>() as u64,
             );
             device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
             if let Some(errors) = &error_table {
-                device.write_storage_buffer(set, BINDING_ERROR_TABLE, errors.raw, errors.desc.size);
+                device.write_buffer(
+                    set,
+                    BINDING_ERROR_TABLE,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    errors.raw,
+                    errors.desc.size,
+                );
             }
             let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
             frames.push(FrameSlot {

@@ -82,10 +82,13 @@ impl Device {
         unsafe { self.raw.destroy_descriptor_pool(pool, None) };
     }
 
-    pub fn write_uniform_buffer(
+    /// Points a uniform- or storage-buffer binding of `set` at `range`
+    /// bytes of `buffer`.
+    pub fn write_buffer(
         &self,
         set: vk::DescriptorSet,
         binding: u32,
+        kind: vk::DescriptorType,
         buffer: vk::Buffer,
         range: u64,
     ) {
@@ -95,26 +98,7 @@ impl Device {
         let write = vk::WriteDescriptorSet::default()
             .dst_set(set)
             .dst_binding(binding)
-            .descriptor_type(vk::DescriptorType::UNIFORM_BUFFER)
-            .buffer_info(&info);
-        // SAFETY: set and buffer belong to this device; the set is not in use.
-        unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
-    }
-
-    pub fn write_storage_buffer(
-        &self,
-        set: vk::DescriptorSet,
-        binding: u32,
-        buffer: vk::Buffer,
-        range: u64,
-    ) {
-        let info = [vk::DescriptorBufferInfo::default()
-            .buffer(buffer)
-            .range(range)];
-        let write = vk::WriteDescriptorSet::default()
-            .dst_set(set)
-            .dst_binding(binding)
-            .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+            .descriptor_type(kind)
             .buffer_info(&info);
         // SAFETY: set and buffer belong to this device; the set is not in use.
         unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
