@@ -22,7 +22,9 @@ pub mod render;
 #[command(
     name = "vkterrain",
     version,
-    about = "Heightmap terrain renderer on Vulkan"
+    about = "Heightmap terrain renderer on Vulkan",
+    after_help = "Without a command: the default scene in a window, or, with no display \
+                  (DISPLAY and WAYLAND_DISPLAY unset), rendered headless to vkterrain-default.png."
 )]
 pub struct Cli {
     /// Without a command: the default scene in a window, or headless to
