@@ -582,7 +582,13 @@ impl Running {
         if let Some(frozen) = &self.frozen {
             view = view.with_frustum_of(frozen);
         }
-        self.patches_drawn = renderer.prepare(slot, &options.terrain, &view, &self.settings)?;
+        renderer.prepare(slot, &options.terrain, &view, &self.settings)?;
+        // Every path draws what the frustum test keeps, or all with culling off.
+        self.patches_drawn = if self.settings.cull {
+            view.patches_in_frustum(&options.terrain)
+        } else {
+            options.terrain.grid().patch_count()
+        };
 
         if capture && swapchain.readable && self.screenshot_buffer.is_none() {
             self.screenshot_buffer = Some(device.create_buffer(

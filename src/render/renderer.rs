@@ -245,7 +245,11 @@ impl TerrainRenderer {
         ];
         // The tess path's error-bounded factors read the per-patch error
         // table (7 floats a patch).
-        let error_table = if wants(RenderPath::Tess) {
+        // Both the tess path's error-bounded factors and the geomip path's
+        // error LOD need the table; it is computed once for either.
+        let table =
+            (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_table());
+        let error_table = if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
             bindings.push((
                 BINDING_ERROR_TABLE,
                 vk::DescriptorType::STORAGE_BUFFER,
@@ -255,7 +259,7 @@ impl TerrainRenderer {
             Some(device.upload_buffer(
                 "terrain.error_table",
                 vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(terrain.error_table().as_slice()),
+                bytemuck::cast_slice(table.as_slice()),
             )?)
         } else {
             None
@@ -317,28 +321,16 @@ impl TerrainRenderer {
         // From here on, a failure tears down what was built.
         let built = (|| {
             if wants(RenderPath::Tess) {
-                let pipelines =
-                    build_pipelines(device, &renderer, RenderPath::Tess, options.wireframe)?;
-                let control_points = device.upload_buffer(
-                    "terrain.control_points",
-                    vk::BufferUsageFlags::VERTEX_BUFFER,
-                    bytemuck::cast_slice(terrain.control_points()),
-                );
-                let indices = device.upload_buffer(
-                    "terrain.patch_indices",
-                    vk::BufferUsageFlags::INDEX_BUFFER,
-                    bytemuck::cast_slice(terrain.indices()),
-                );
-                renderer.tess = Some(TessGeometry {
-                    control_points: control_points?,
-                    indices: indices?,
-                    index_count: terrain.indices().len() as u32,
-                    pipelines,
-                });
+                renderer.tess = Some(build_tess(device, &renderer, terrain, options.wireframe)?);
             }
-            if wants(RenderPath::Geomip) {
-                renderer.geomip =
-                    Some(build_geomip(device, &renderer, terrain, options.wireframe)?);
+            if let (true, Some(table)) = (wants(RenderPath::Geomip), table) {
+                renderer.geomip = Some(build_geomip(
+                    device,
+                    &renderer,
+                    terrain,
+                    table,
+                    options.wireframe,
+                )?);
             }
             if wants(RenderPath::Brute) {
                 renderer.brute = Some(BruteGeometry {
@@ -366,30 +358,16 @@ impl TerrainRenderer {
         self.color_format
     }
 
-    pub fn frames_in_flight(&self) -> usize {
-        self.frames.len()
-    }
-
-    /// Whether `path` was built.
-    pub fn has_path(&self, path: RenderPath) -> bool {
-        match path {
-            RenderPath::Tess => self.tess.is_some(),
-            RenderPath::Geomip => self.geomip.is_some(),
-            RenderPath::Brute => self.brute.is_some(),
-        }
-    }
-
     /// Writes the uniforms of frame slot `slot` (its previous frame must
     /// have completed) and, for the geomip path, chooses this frame's patch
-    /// levels. Returns how many patches the frame draws (for the tess path,
-    /// the CPU's count of patches in the frustum).
+    /// levels.
     pub fn prepare(
         &mut self,
         slot: usize,
         terrain: &Terrain,
         view: &FrameView,
         settings: &RenderSettings,
-    ) -> Result<usize> {
+    ) -> Result<()> {
         let uniforms = FrameUniforms::new(terrain, view, settings);
         self.frames[slot]
             .uniforms
@@ -399,10 +377,9 @@ impl TerrainRenderer {
         if settings.path == RenderPath::Geomip {
             if let Some(geomip) = self.geomip.as_mut() {
                 geomip.choose(terrain, view, settings);
-                return Ok(geomip.draws.len());
             }
         }
-        Ok(view.patches_in_frustum(terrain))
+        Ok(())
     }
 
     /// Records the terrain draw of `settings.path` into `target` (already in
@@ -625,63 +602,114 @@ fn create_pipeline(
     })
 }
 
-fn build_geomip(
+/// Uploads two buffers; if the second fails the first is freed, so the
+/// caller gets the real error and nothing is left allocated.
+fn upload_two(
+    device: &Device,
+    a: (&str, vk::BufferUsageFlags, &[u8]),
+    b: (&str, vk::BufferUsageFlags, &[u8]),
+) -> Result<(Buffer, Buffer)> {
+    let first = device.upload_buffer(a.0, a.1, a.2)?;
+    match device.upload_buffer(b.0, b.1, b.2) {
+        Ok(second) => Ok((first, second)),
+        Err(e) => {
+            device.destroy_buffer(first);
+            Err(e)
+        }
+    }
+}
+
+fn build_tess(
     device: &Device,
     renderer: &TerrainRenderer,
     terrain: &Terrain,
     wireframe: bool,
+) -> Result<TessGeometry> {
+    let (control_points, indices) = upload_two(
+        device,
+        (
+            "terrain.control_points",
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            bytemuck::cast_slice(terrain.control_points()),
+        ),
+        (
+            "terrain.patch_indices",
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            bytemuck::cast_slice(terrain.indices()),
+        ),
+    )?;
+    match build_pipelines(device, renderer, RenderPath::Tess, wireframe) {
+        Ok(pipelines) => Ok(TessGeometry {
+            control_points,
+            indices,
+            index_count: terrain.indices().len() as u32,
+            pipelines,
+        }),
+        Err(e) => {
+            device.destroy_buffer(control_points);
+            device.destroy_buffer(indices);
+            Err(e)
+        }
+    }
+}
+
+fn build_geomip(
+    device: &Device,
+    renderer: &TerrainRenderer,
+    terrain: &Terrain,
+    errors: ErrorTable,
+    wireframe: bool,
 ) -> Result<GeomipGeometry> {
     let n = terrain.grid().cells_per_patch();
     let variants = geomip::IndexVariants::build(n);
-    let layout = device.create_pipeline_layout_with_push(
-        &[renderer.set_layout],
-        vk::ShaderStageFlags::VERTEX,
-        size_of::<GeomipConstants>() as u32,
-        "terrain.pipeline_layout.geomip",
-    )?;
-    let built = (|| {
-        let pipelines = build_pipelines_with(
-            device,
-            layout,
-            renderer.color_format,
-            RenderPath::Geomip,
-            wireframe,
-        )?;
-        let template = device.upload_buffer(
+    let (template, indices) = upload_two(
+        device,
+        (
             "terrain.geomip_vertex_template",
             vk::BufferUsageFlags::VERTEX_BUFFER,
             bytemuck::cast_slice(&geomip::vertex_template(n)),
-        );
-        let indices = device.upload_buffer(
+        ),
+        (
             "terrain.geomip_indices",
             vk::BufferUsageFlags::INDEX_BUFFER,
             bytemuck::cast_slice(&variants.indices),
-        );
-        match (template, indices) {
-            (Ok(template), Ok(indices)) => Ok((pipelines, template, indices)),
-            (template, indices) => {
-                pipelines.destroy(device);
-                for b in [template, indices].into_iter().flatten() {
-                    device.destroy_buffer(b);
+        ),
+    )?;
+    let layout_and_pipelines = device
+        .create_pipeline_layout_with_push(
+            &[renderer.set_layout],
+            vk::ShaderStageFlags::VERTEX,
+            size_of::<GeomipConstants>() as u32,
+            "terrain.pipeline_layout.geomip",
+        )
+        .and_then(|layout| {
+            match build_pipelines_with(
+                device,
+                layout,
+                renderer.color_format,
+                RenderPath::Geomip,
+                wireframe,
+            ) {
+                Ok(pipelines) => Ok((layout, pipelines)),
+                Err(e) => {
+                    device.destroy_pipeline_layout(layout);
+                    Err(e)
                 }
-                Err(VkError::Unsupported(
-                    "uploading the geomip buffers failed".into(),
-                ))
             }
-        }
-    })();
-    match built {
-        Ok((pipelines, template, indices)) => Ok(GeomipGeometry {
+        });
+    match layout_and_pipelines {
+        Ok((layout, pipelines)) => Ok(GeomipGeometry {
             template,
             indices,
             variants: variants.ranges,
             layout,
             pipelines,
             draws: Vec::new(),
-            errors: terrain.error_table(),
+            errors,
         }),
         Err(e) => {
-            device.destroy_pipeline_layout(layout);
+            device.destroy_buffer(template);
+            device.destroy_buffer(indices);
             Err(e)
         }
     }
