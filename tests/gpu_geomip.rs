@@ -104,14 +104,7 @@ fn no_cracks_along_a_path_on_the_default_scene() {
 
 #[test]
 fn no_cracks_along_a_path_on_the_real_dem() {
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        16,
-        DVec2::ZERO,
-    )
-    .unwrap();
-    check_path("dem", Terrain::new(info, 0.0).unwrap());
+    check_path("dem", dem_terrain(16, DVec2::ZERO));
 }
 
 #[test]
@@ -131,14 +124,7 @@ fn full_resolution_geomip_is_brute() {
     if skip_gpu() {
         return;
     }
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        32,
-        DVec2::ZERO,
-    )
-    .unwrap();
-    let terrain = Terrain::new(info, 0.0).unwrap();
+    let terrain = dem_terrain(32, DVec2::ZERO);
     let cam = camera([-9000.0, 4000.0, -12000.0], [0.0, 500.0, 0.0], 55.0);
     let mut scene = GpuScene::new(terrain, 320, 240, false);
     // d0 beyond any distance: every patch at level 0.
@@ -221,14 +207,7 @@ fn geomorphing_removes_popping() {
     if skip_gpu() {
         return;
     }
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        32,
-        DVec2::ZERO,
-    )
-    .unwrap();
-    let terrain = Terrain::new(info, 0.0).unwrap();
+    let terrain = dem_terrain(32, DVec2::ZERO);
     let id = terrain.grid().patch_id(terrain.grid().patch_count() / 2);
     let (centre, _) = terrain.patch_aabb(id);
     let top = f64::from(terrain.y_bounds()[terrain.grid().patch_index(id)][1]);
@@ -252,14 +231,7 @@ fn error_mode_is_crack_free_and_follows_the_tolerance() {
     if skip_gpu() {
         return;
     }
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        16,
-        DVec2::ZERO,
-    )
-    .unwrap();
-    let terrain = Terrain::new(info, 0.0).unwrap();
+    let terrain = dem_terrain(16, DVec2::ZERO);
     let mut scene = GpuScene::new(terrain, 256, 192, false);
     let cameras = [
         camera([-9000.0, 2500.0, -12000.0], [0.0, 400.0, 0.0], 60.0),

@@ -11,7 +11,7 @@ use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
 use vkterrain::render::{FrameView, LodMetric, RenderSettings};
 use vkterrain::terrain::camera::aabb_outside_frustum;
 use vkterrain::terrain::lod::{error_tess_factor, tess_factor};
-use vkterrain::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
+use vkterrain::terrain::{DistanceLod, DistanceMode};
 use vkterrain::vk::Gpu;
 
 #[test]
@@ -20,14 +20,7 @@ fn glsl_formulas_match_their_rust_mirrors() {
         return;
     }
     let gpu = Gpu::new(true).expect("a Vulkan device (set VKTERRAIN_SKIP_GPU=1 to skip)");
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        32,
-        DVec2::ZERO,
-    )
-    .unwrap();
-    let terrain = Terrain::new(info, 0.0).unwrap();
+    let terrain = dem_terrain(32, DVec2::ZERO);
     let map = terrain.info().heightmap().clone();
     let (lo, hi) = map.min_max();
     let view = FrameView::new(

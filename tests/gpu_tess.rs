@@ -21,17 +21,6 @@ fn default_terrain(cells_per_patch: u32) -> Terrain {
     Terrain::new(scene.terrain_info().unwrap(), 0.0).unwrap()
 }
 
-fn dem_terrain(cells_per_patch: u32, origin: DVec2) -> Terrain {
-    let info = TerrainInfo::new(
-        dem("jacksboro_fault_dem.png", None),
-        DEM_SPACING,
-        cells_per_patch,
-        origin,
-    )
-    .unwrap();
-    Terrain::new(info, 0.0).unwrap()
-}
-
 /// A step from 0 to 300 halfway across a 129x97 map: vertical walls between
 /// patches at different levels.
 fn cliff_terrain() -> Terrain {

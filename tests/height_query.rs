@@ -12,13 +12,7 @@ fn infos() -> Vec<TerrainInfo> {
     vec![
         dem_info(32),
         // The same DEM a million units from the world origin.
-        TerrainInfo::new(
-            dem("jacksboro_fault_dem.png", None),
-            DEM_SPACING,
-            32,
-            DVec2::new(1e6, -1e6),
-        )
-        .unwrap(),
+        dem_info_at(32, DVec2::new(1e6, -1e6)),
         TerrainInfo::new(
             noise_map(37, 100, 7),
             DVec2::new(0.3, 2.0),

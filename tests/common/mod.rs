@@ -27,13 +27,24 @@ pub fn dem(file: &str, size: Option<(u64, u64)>) -> Heightmap {
 }
 
 pub fn dem_info(cells_per_patch: u32) -> TerrainInfo {
+    dem_info_at(cells_per_patch, DVec2::ZERO)
+}
+
+/// The DEM with its real spacing, centred on `origin`.
+pub fn dem_info_at(cells_per_patch: u32, origin: DVec2) -> TerrainInfo {
     TerrainInfo::new(
         dem("jacksboro_fault_dem.png", None),
         DEM_SPACING,
         cells_per_patch,
-        DVec2::ZERO,
+        origin,
     )
     .expect("valid terrain parameters")
+}
+
+/// The DEM as a terrain with its real spacing, centred on `origin`.
+pub fn dem_terrain(cells_per_patch: u32, origin: DVec2) -> vkterrain::terrain::Terrain {
+    vkterrain::terrain::Terrain::new(dem_info_at(cells_per_patch, origin), 0.0)
+        .expect("valid margin")
 }
 
 /// A deterministic pseudo-random heightmap: rough noise plus a slope, so
