@@ -16,8 +16,10 @@ layout(std430, set = 0, binding = BINDING_MIRROR_CASES) readonly buffer Cases {
     vec4 cases[];
 };
 
-// Per case: distance factor, 1 if the box is outside the frustum, sampled
-// height, error-bounded factor.
+// Per case, two vec4s: distance factor, 1 if the box is outside the
+// frustum, sampled height, error-bounded factor; then the distance to the
+// box (position +- extents) and to the strip on the segment from position
+// to position + extents (x, z) between heights position.y -+ extents.y.
 layout(std430, set = 0, binding = BINDING_MIRROR_RESULTS) writeonly buffer Results {
     vec4 results[];
 };
@@ -33,9 +35,14 @@ void main() {
     vec4 e0 = cases[5u * i + 3u];
     vec4 e1 = cases[5u * i + 4u];
     float errors[ERROR_LEVEL_COUNT] = float[ERROR_LEVEL_COUNT](e0.x, e0.y, e0.z, e0.w, e1.x, e1.y, e1.z);
-    results[i] = vec4(
+    results[2u * i] = vec4(
         tess_factor(position.xyz),
         aabb_outside_frustum(position.xyz, extents.xyz) ? 1.0 : 0.0,
         sample_height(grid.xy),
         error_tess_factor(errors, length(position.xyz)));
+    results[2u * i + 1u] = vec4(
+        box_distance(position.xyz - extents.xyz, position.xyz + extents.xyz),
+        edge_distance(position.xz, position.xz + extents.xz,
+                      position.y - extents.y, position.y + extents.y),
+        0.0, 0.0);
 }

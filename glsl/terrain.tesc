@@ -53,7 +53,10 @@ void main() {
     if (frame.modes.w == LOD_METRIC_ERROR) {
         // This patch and its neighbours across the left, top, right and
         // bottom edges; an edge uses the larger error of the two patches,
-        // so both compute the same factor for it.
+        // so both compute the same factor for it. Errors are projected from
+        // the nearest point that can hold them: for an edge, the strip on
+        // it between the terrain's lowest and highest heights (what both
+        // patches know alike); for the inside, the patch's box.
         // Mirror: terrain::lod::patch_error_factors.
         ivec2 grid_size = ivec2(frame.error_lod.zw);
         ivec2 here = ivec2(in_grid[0]) / int(frame.modes.z);
@@ -63,6 +66,9 @@ void main() {
             own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
         }
         ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(1, 0), ivec2(0, 1));
+        ivec2 ends[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
+        float y_lo = frame.height_range.x - frame.eye_local.y;
+        float y_hi = frame.height_range.y - frame.eye_local.y;
         for (int e = 0; e < 4; ++e) {
             ivec2 there = here + across[e];
             float shared_errors[ERROR_LEVEL_COUNT] = own;
@@ -72,9 +78,10 @@ void main() {
                     shared_errors[k] = max(own[k], patch_errors[q * int(ERROR_LEVEL_COUNT) + k]);
                 }
             }
-            gl_TessLevelOuter[e] = error_tess_factor(shared_errors, length(midpoints[e]));
+            float d = edge_distance(in_rel[ends[e].x].xz, in_rel[ends[e].y].xz, y_lo, y_hi);
+            gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d);
         }
-        inside = error_tess_factor(own, length(centre));
+        inside = error_tess_factor(own, box_distance(box_min, box_max));
     } else {
         // Edge factors from edge midpoints, so both patches sharing an edge
         // compute the same value; inside factors from the centre. Vulkan's

@@ -106,6 +106,24 @@ float tess_factor(vec3 rel) {
     return clamp_tess_factor(exp2(exponent));
 }
 
+// Distance from the eye (the origin: positions are camera-relative) to the
+// box [lo, hi]. Mirror: terrain::lod::box_distance.
+float box_distance(vec3 lo, vec3 hi) {
+    return length(max(max(lo, -hi), vec3(0.0)));
+}
+
+// Distance from the eye to the vertical strip standing on the segment a-b
+// (camera-relative x, z) between heights y_lo and y_hi (camera-relative).
+// Mirror: terrain::lod::edge_distance.
+float edge_distance(vec2 a, vec2 b, float y_lo, float y_hi) {
+    vec2 ab = b - a;
+    float len2 = dot(ab, ab);
+    float t = len2 > 0.0 ? clamp(-dot(a, ab) / len2, 0.0, 1.0) : 0.0;
+    vec2 p = a + t * ab;
+    float dy = max(max(y_lo, -y_hi), 0.0);
+    return sqrt(dot(p, p) + dy * dy);
+}
+
 // Error-bounded tessellation factor: the smallest level whose error
 // projects to at most error_lod.x pixels at `distance`, interpolated in log
 // space from the level before so it moves continuously with distance.

@@ -15,36 +15,46 @@ fn surface(info: &TerrainInfo, col: f64, row: f64) -> f64 {
 }
 
 /// Straightforward floating-point recomputation: tessellate, displace, and
-/// compare every sample with the bilinear surface of its sub-quad; then make
-/// each level at least as large as every finer one.
+/// at every sample, cell centre and quad centre add the distance to the
+/// bilinear surface of its quad and a quarter of that quad's twist; then
+/// make each level at least as large as every finer one.
 fn brute_force(info: &TerrainInfo, grid: &PatchGrid) -> Vec<f32> {
-    let map = info.heightmap();
     let mut out = Vec::new();
     for p in 0..grid.patch_count() {
         let rect = grid.sample_rect(grid.patch_id(p));
         let (nx, nz) = (rect.cells_x() as f64, rect.cells_z() as f64);
+        let (c0, r0) = (rect.col0 as f64, rect.row0 as f64);
         let mut raw = Vec::new();
         for &level in &ERROR_LEVELS {
             let l = f64::from(level);
-            let vertex = |i: f64, j: f64| {
-                surface(
-                    info,
-                    rect.col0 as f64 + j * nx / l,
-                    rect.row0 as f64 + i * nz / l,
-                )
-            };
-            let mut worst = 0.0f64;
-            for r in rect.row0..=rect.row1 {
-                for c in rect.col0..=rect.col1 {
-                    let v = (r - rect.row0) as f64 * l / nz;
-                    let u = (c - rect.col0) as f64 * l / nx;
-                    let (i, j) = (v.floor().min(l - 1.0), u.floor().min(l - 1.0));
-                    let (fv, fu) = (v - i, u - j);
-                    let top = vertex(i, j) * (1.0 - fu) + vertex(i, j + 1.0) * fu;
-                    let bottom = vertex(i + 1.0, j) * (1.0 - fu) + vertex(i + 1.0, j + 1.0) * fu;
-                    let surface = top * (1.0 - fv) + bottom * fv;
-                    worst = worst.max((f64::from(map.get(r, c)) - surface).abs());
+            let vertex = |i: f64, j: f64| surface(info, c0 + j * nx / l, r0 + i * nz / l);
+            // Points as patch-relative (col, row).
+            let mut points = Vec::new();
+            for r in 0..=rect.cells_z() {
+                for c in 0..=rect.cells_x() {
+                    points.push((c as f64, r as f64));
+                    if r < rect.cells_z() && c < rect.cells_x() {
+                        points.push((c as f64 + 0.5, r as f64 + 0.5));
+                    }
                 }
+            }
+            for i in 0..level {
+                for j in 0..level {
+                    points.push(((f64::from(j) + 0.5) * nx / l, (f64::from(i) + 0.5) * nz / l));
+                }
+            }
+            let mut worst = 0.0f64;
+            for (col, row) in points {
+                let (u, v) = (col * l / nx, row * l / nz);
+                let (i, j) = (v.floor().min(l - 1.0), u.floor().min(l - 1.0));
+                let (fv, fu) = (v - i, u - j);
+                let (v00, v01) = (vertex(i, j), vertex(i, j + 1.0));
+                let (v10, v11) = (vertex(i + 1.0, j), vertex(i + 1.0, j + 1.0));
+                let top = v00 * (1.0 - fu) + v01 * fu;
+                let bottom = v10 * (1.0 - fu) + v11 * fu;
+                let bilinear = top * (1.0 - fv) + bottom * fv;
+                let here = surface(info, c0 + col, r0 + row);
+                worst = worst.max((here - bilinear).abs() + 0.25 * (v00 + v11 - v01 - v10).abs());
             }
             raw.push(worst);
         }
@@ -110,8 +120,23 @@ fn non_increasing_as_the_level_rises() {
         nonzero += levels.iter().filter(|&&e| e > 0.0).count();
         let rect = grid.sample_rect(grid.patch_id(p));
         if rect.cells_x() == 32 && rect.cells_z() == 32 {
-            // Levels 32 and 64 put a vertex on every sample.
-            assert_eq!(&levels[5..], &[0.0, 0.0], "patch {p}");
+            // Level 32 puts a vertex on every sample: what is left is a cell
+            // folded along the other diagonal, half its twist at worst.
+            let map = dem("jacksboro_fault_dem.png", None);
+            let mut fold = 0.0f32;
+            for r in rect.row0..rect.row1 {
+                for c in rect.col0..rect.col1 {
+                    let twist = map.get(r, c) + map.get(r + 1, c + 1)
+                        - map.get(r, c + 1)
+                        - map.get(r + 1, c);
+                    fold = fold.max(0.5 * twist.abs());
+                }
+            }
+            assert!(
+                (levels[5] - fold).abs() <= 1e-3,
+                "patch {p}: {} vs {fold}",
+                levels[5]
+            );
         }
     }
     assert!(nonzero > grid.patch_count() * 4);
@@ -122,9 +147,13 @@ fn a_single_spike_is_seen_at_coarse_levels() {
     let spike =
         Heightmap::from_fn(33, 33, |r, c| if (r, c) == (16, 16) { 10.0 } else { 0.0 }).unwrap();
     let (table, _, _) = table_for(spike, 32);
-    // Level 1: a flat quad, the spike is 10 above it. Level 2 puts a vertex on
-    // the spike, and its neighbour (16, 15) sits 10 * 15/16 below the slope.
-    assert_eq!(table.patch(0)[0], 10.0);
-    assert_eq!(table.patch(0)[1], 9.375);
-    assert_eq!(table.patch(0)[5], 0.0);
+    let levels = table.patch(0);
+    // Level 1: a flat quad, the spike 10 above it.
+    assert!(levels[0] >= 10.0);
+    // Level 32: a vertex on every sample; the four cells around the spike
+    // have a twist of 10, and the wrong diagonal misses by half of it.
+    assert_eq!(levels[5], 5.0);
+    // Level 64: half-cell quads; those on the spike cells' folds twist by
+    // 5 and miss by a quarter of the fold.
+    assert_eq!(levels[6], 2.5);
 }

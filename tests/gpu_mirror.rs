@@ -10,7 +10,7 @@ use glam::{DVec2, Vec2, Vec3};
 use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
 use vkterrain::render::{FrameView, LodMetric, RenderSettings};
 use vkterrain::terrain::camera::aabb_outside_frustum;
-use vkterrain::terrain::lod::{error_tess_factor, tess_factor};
+use vkterrain::terrain::lod::{box_distance, edge_distance, error_tess_factor, tess_factor};
 use vkterrain::terrain::{DistanceLod, DistanceMode};
 use vkterrain::vk::Gpu;
 
@@ -108,10 +108,12 @@ fn glsl_formulas_match_their_rust_mirrors() {
             } else {
                 positions[k % positions.len()]
             },
+            // Also a long edge, and a degenerate one (a point) for the
+            // distance checks.
             extents: if k < boxes.len() {
                 boxes[k].1
             } else {
-                Vec3::ONE
+                [Vec3::ONE, Vec3::new(400.0, 30.0, -250.0), Vec3::ZERO][k % 3]
             },
             grid: grid[k % grid.len()],
             errors: error_sets[k % error_sets.len()],
@@ -164,6 +166,22 @@ fn glsl_formulas_match_their_rust_mirrors() {
                         case.position,
                         case.errors,
                         got.error_tess_factor
+                    );
+                }
+                if finite && case.extents.is_finite() {
+                    let (p, e) = (case.position, case.extents);
+                    let want = box_distance(p - e, p + e);
+                    assert!(
+                        (got.box_distance - want).abs() <= 1e-5 * want.max(1.0),
+                        "case {k}: box distance at {p} +- {e}: GLSL {} vs Rust {want}",
+                        got.box_distance
+                    );
+                    let xz = Vec2::new(p.x, p.z);
+                    let want = edge_distance(xz, xz + Vec2::new(e.x, e.z), p.y - e.y, p.y + e.y);
+                    assert!(
+                        (got.edge_distance - want).abs() <= 1e-5 * want.max(1.0),
+                        "case {k}: edge distance at {p}, {e}: GLSL {} vs Rust {want}",
+                        got.edge_distance
                     );
                 }
                 let outside =

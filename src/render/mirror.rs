@@ -36,6 +36,11 @@ pub struct MirrorResult {
     pub outside_frustum: bool,
     pub height: f32,
     pub error_tess_factor: f32,
+    /// Distance to the box `position` +- `extents`.
+    pub box_distance: f32,
+    /// Distance to the strip on the segment from `position` to `position +
+    /// extents` (x, z) between heights `position.y` -+ `extents.y`.
+    pub edge_distance: f32,
 }
 
 const LOCAL_SIZE: u32 = 64;
@@ -68,7 +73,7 @@ pub fn run_mirror_check(
         })
         .collect();
     let uniforms = FrameUniforms::new(terrain, view, settings);
-    let results_size = (cases.len() * size_of::<[f32; 4]>()) as u64;
+    let results_size = (cases.len() * 2 * size_of::<[f32; 4]>()) as u64;
 
     let heightmap = device.upload_r32f_image(
         "mirror.heightmap",
@@ -172,12 +177,14 @@ pub fn run_mirror_check(
             .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
         let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
         Ok(values
-            .into_iter()
+            .chunks_exact(2)
             .map(|v| MirrorResult {
-                tess_factor: v[0],
-                outside_frustum: v[1] != 0.0,
-                height: v[2],
-                error_tess_factor: v[3],
+                tess_factor: v[0][0],
+                outside_frustum: v[0][1] != 0.0,
+                height: v[0][2],
+                error_tess_factor: v[0][3],
+                box_distance: v[1][0],
+                edge_distance: v[1][1],
             })
             .collect())
     });

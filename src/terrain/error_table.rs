@@ -3,14 +3,23 @@
 //! At level L a patch is cut into L x L equal quads (the evaluation shader's
 //! bilinear interpolation of the patch corners) whose vertices take the
 //! surface height at their position (`Heightmap::interpolate`, what the
-//! displacement in the evaluation shader samples). Between vertices the
-//! surface is taken as the bilinear interpolation of the four vertex heights:
-//! how the tessellator splits each quad into triangles is up to the driver,
-//! and bilinear is the symmetric choice between its two diagonals.
+//! displacement in the evaluation shader samples). How the tessellator
+//! splits each quad into two triangles is up to the driver, so the error
+//! must hold for either diagonal. Either split differs from the bilinear
+//! interpolation of the quad's four vertex heights by at most a quarter of
+//! the quad's twist |v00 + v11 - v01 - v10| (at its centre), so the error of
+//! a level is bounded by the largest
 //!
-//! The error of a level is the largest vertical distance, over every sample
-//! the patch covers, between the sample's height and that surface: the
-//! height of the seed article's "max-error vertex".
+//! |surface(p) - bilinear(p)| + |twist of p's quad| / 4
+//!
+//! over the points p where the reference surface (the heightmap split as
+//! `height_at` splits it) and a level's triangles can differ most: every
+//! sample, every cell centre (on the reference's fold) and every quad centre
+//! (where a wrong diagonal is furthest off). So even the finest levels carry
+//! an error: with a vertex on every sample the tessellator may still fold a
+//! cell along the other diagonal than the reference, which costs half the
+//! cell's twist. That is the seed article's "max-error vertex" height, made
+//! to hold whatever the triangulation.
 //!
 //! A coarser level can measure less than a finer one on some data (a sample
 //! may happen to sit near a coarse interpolation and away from a finer one),
@@ -20,7 +29,7 @@
 //! non-increasing as the level rises, and bounds the error of every level at
 //! or above it.
 //!
-//! Sample and vertex positions are rational (`k * cells / L`), so cell indices
+//! Vertex positions are rational (`k * cells / L`), so their cell indices
 //! and fractions come from exact integer arithmetic.
 
 use rayon::prelude::*;
@@ -83,13 +92,11 @@ fn split(k: usize, cells: usize, level: usize) -> (usize, usize) {
     (n / level, n % level)
 }
 
-/// Largest |sample - level surface| over the samples of one patch.
+/// Error bound of one level over one patch: the largest, over the
+/// evaluation points, of |surface - bilinear| + |twist| / 4 (see the module
+/// documentation).
 fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
     let (nx, nz) = (rect.cells_x(), rect.cells_z());
-    if level % nx == 0 && level % nz == 0 {
-        // Every sample is a vertex of this level, whose height is the sample.
-        return 0.0;
-    }
     // Vertex heights of the level, (level + 1)^2, row-major.
     let stride = level + 1;
     let mut vertices = Vec::with_capacity(stride * stride);
@@ -102,29 +109,42 @@ fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
             vertices.push(map.interpolate(col, row));
         }
     }
+    let (l, fx, fz) = (level as f64, nx as f64, nz as f64);
+    // The bound at patch-relative sample coordinates (col, row) whose
+    // surface height is `surface`.
+    let bound = |col: f64, row: f64, surface: f64| {
+        let (u, v) = (col * l / fx, row * l / fz);
+        let j = (u as usize).min(level - 1);
+        let i = (v as usize).min(level - 1);
+        let (fu, fv) = (u - j as f64, v - i as f64);
+        let v00 = vertices[i * stride + j];
+        let v01 = vertices[i * stride + j + 1];
+        let v10 = vertices[(i + 1) * stride + j];
+        let v11 = vertices[(i + 1) * stride + j + 1];
+        let top = v00 + fu * (v01 - v00);
+        let bottom = v10 + fu * (v11 - v10);
+        let bilinear = top + fv * (bottom - top);
+        (surface - bilinear).abs() + 0.25 * (v00 + v11 - v01 - v10).abs()
+    };
     let mut worst = 0.0f64;
     for r in 0..=nz {
-        // Sample row r sits at vertex row r * level / nz.
-        let (vi, vn) = split(r, level, nz);
-        let (vi, fv) = if vi == level {
-            (level - 1, 1.0)
-        } else {
-            (vi, vn as f64 / nz as f64)
-        };
         let row = map.row(rect.row0 + r);
-        let top = &vertices[vi * stride..(vi + 1) * stride];
-        let bottom = &vertices[(vi + 1) * stride..(vi + 2) * stride];
         for c in 0..=nx {
-            let (vj, un) = split(c, level, nx);
-            let (vj, fu) = if vj == level {
-                (level - 1, 1.0)
-            } else {
-                (vj, un as f64 / nx as f64)
-            };
-            let t = top[vj] + fu * (top[vj + 1] - top[vj]);
-            let b = bottom[vj] + fu * (bottom[vj + 1] - bottom[vj]);
-            let surface = t + fv * (b - t);
-            worst = worst.max((f64::from(row[rect.col0 + c]) - surface).abs());
+            worst = worst.max(bound(c as f64, r as f64, f64::from(row[rect.col0 + c])));
+        }
+    }
+    for r in 0..nz {
+        for c in 0..nx {
+            let (col, row) = (c as f64 + 0.5, r as f64 + 0.5);
+            let surface = map.interpolate(rect.col0 as f64 + col, rect.row0 as f64 + row);
+            worst = worst.max(bound(col, row, surface));
+        }
+    }
+    for i in 0..level {
+        for j in 0..level {
+            let (col, row) = ((j as f64 + 0.5) * fx / l, (i as f64 + 0.5) * fz / l);
+            let surface = map.interpolate(rect.col0 as f64 + col, rect.row0 as f64 + row);
+            worst = worst.max(bound(col, row, surface));
         }
     }
     worst

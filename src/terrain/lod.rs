@@ -5,7 +5,7 @@
 //! Positions given to these functions are relative to the eye (the shader
 //! works in camera-relative coordinates), so the eye is the origin.
 
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 pub use crate::shader_constants::{MAX_TESS_EXPONENT, MAX_TESS_FACTOR, MIN_TESS_FACTOR};
 
@@ -216,35 +216,61 @@ pub fn shared_edge_errors(a: &[f32; 7], b: Option<&[f32; 7]>) -> [f32; 7] {
     }
 }
 
+/// Distance from the eye (the origin: points are eye-relative) to the box
+/// `[lo, hi]`; 0 inside it.
+pub fn box_distance(lo: Vec3, hi: Vec3) -> f32 {
+    lo.max(-hi).max(Vec3::ZERO).length()
+}
+
+/// Distance from the eye (the origin) to the vertical strip standing on the
+/// segment `a`-`b` (eye-relative x, z) between heights `y_lo` and `y_hi`
+/// (eye-relative). A degenerate segment is its point.
+pub fn edge_distance(a: Vec2, b: Vec2, y_lo: f32, y_hi: f32) -> f32 {
+    let ab = b - a;
+    let len2 = ab.dot(ab);
+    let t = if len2 > 0.0 {
+        (-a.dot(ab) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let p = a + t * ab;
+    let dy = y_lo.max(-y_hi).max(0.0);
+    (p.dot(p) + dy * dy).sqrt()
+}
+
 /// Error-bounded factors of one patch: each edge from the errors it shares
 /// with the neighbour across it (left, top, right, bottom; None at the
-/// terrain's border) at the edge midpoint's distance, the inside from the
-/// patch's own errors at its centre. `corners` are eye-relative.
+/// terrain's border), the inside from the patch's own errors. Each is
+/// projected from the nearest point that can carry it, so no part of the
+/// patch is nearer than the distance its factor assumes:
+/// - an edge from the strip standing on it between the terrain's lowest and
+///   highest heights (`height_range`), which both patches sharing it know
+///   alike, so they agree on its factor;
+/// - the inside from the patch's box: its corners' x and z, `bounds_y`.
+///
+/// `corners` and both height pairs are eye-relative.
 pub fn patch_error_factors(
     corners: [Vec3; 4],
+    bounds_y: [f32; 2],
+    height_range: [f32; 2],
     own: &[f32; 7],
     neighbours: [Option<&[f32; 7]>; 4],
     pixels_per_radian: f32,
     pixel_error: f32,
 ) -> PatchTessFactors {
     let [ul, ur, ll, lr] = corners;
-    let midpoints = [
-        edge_midpoint(ul, ll),
-        edge_midpoint(ul, ur),
-        edge_midpoint(ur, lr),
-        edge_midpoint(ll, lr),
-    ];
+    let xz = |v: Vec3| Vec2::new(v.x, v.z);
+    let ends = [(ul, ll), (ul, ur), (ur, lr), (ll, lr)];
     let edges = std::array::from_fn(|i| {
         let errors = shared_edge_errors(own, neighbours[i]);
-        error_tess_factor(
-            &errors,
-            midpoints[i].length(),
-            pixels_per_radian,
-            pixel_error,
-        )
+        let (a, b) = ends[i];
+        let d = edge_distance(xz(a), xz(b), height_range[0], height_range[1]);
+        error_tess_factor(&errors, d, pixels_per_radian, pixel_error)
     });
-    let centre = 0.25 * (ul + ur + ll + lr);
-    let inside = error_tess_factor(own, centre.length(), pixels_per_radian, pixel_error);
+    // Lower-left has the smallest x and z, upper-right the largest.
+    let lo = Vec3::new(ll.x, bounds_y[0], ll.z);
+    let hi = Vec3::new(ur.x, bounds_y[1], ur.z);
+    let inside = error_tess_factor(own, box_distance(lo, hi), pixels_per_radian, pixel_error);
     PatchTessFactors {
         edges,
         inside: [inside, inside],
