@@ -1,4 +1,7 @@
-//! Speed against error: measuring the screen-space error of a render
-//! against the brute reference.
+//! Speed against error: the screen-space error measurement, the
+//! benchmark's cameras and configurations, and its report.
 
+pub mod cameras;
 pub mod error;
+pub mod report;
+pub mod run;

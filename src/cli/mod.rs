@@ -15,6 +15,7 @@ use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{PatchId, Terrain, TerrainInfo};
 use args::{parse_point, TerrainArgs};
 
+pub mod bench;
 pub mod demo;
 pub mod render;
 
@@ -45,6 +46,10 @@ pub enum Command {
     Height(HeightCmd),
     /// Size, height range and patch grid of a heightmap, as JSON.
     Inspect(InspectCmd),
+    /// Speed against error: every path from the same cameras, measured
+    /// against the brute reference (results.csv/json, pareto.png,
+    /// BENCHMARKS.md).
+    Bench(bench::BenchCmd),
     /// Generate a fractal, eroded heightmap as a 16-bit PNG (the default
     /// scene's heightmap is `generate --out assets/heightmaps/default.png`).
     Generate(render::GenerateCmd),
@@ -91,6 +96,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
         Some(Command::Height(cmd)) => height(cmd, out),
         Some(Command::Inspect(cmd)) => inspect(cmd, out),
         Some(Command::Generate(cmd)) => render::generate(cmd, out),
+        Some(Command::Bench(cmd)) => bench::bench(cmd, out),
     }
 }
 

@@ -118,6 +118,8 @@ struct GeomipGeometry {
     draws: Vec<GeomipDraw>,
     /// Per-patch errors of each level, for choosing levels by projected error.
     errors: ErrorTable,
+    /// Levels set from outside (`set_geomip_levels`) instead of chosen.
+    given: Option<Vec<u8>>,
 }
 
 /// One patch of the geomip path: its index list and push constants.
@@ -379,6 +381,37 @@ impl TerrainRenderer {
                 geomip.choose(terrain, view, settings);
             }
         }
+        Ok(())
+    }
+
+    /// Makes the geomip path draw every patch at the given level (one per
+    /// patch, in patch order), without geomorphing, instead of choosing
+    /// levels; `None` goes back to choosing. Levels are balanced first, so
+    /// the stitched sides still meet. This is how the benchmark's oracle
+    /// draws its per-patch levels.
+    pub fn set_geomip_levels(&mut self, terrain: &Terrain, levels: Option<&[u8]>) -> Result<()> {
+        let geomip = self.geomip.as_mut().ok_or_else(|| {
+            VkError::Unsupported("the geomip path was not built for this renderer".into())
+        })?;
+        let grid = terrain.grid();
+        let count = geomip::level_count(grid.cells_per_patch());
+        geomip.given = match levels {
+            None => None,
+            Some(levels) => {
+                if levels.len() != grid.patch_count()
+                    || levels.iter().any(|&l| usize::from(l) >= count)
+                {
+                    return Err(VkError::Unsupported(format!(
+                        "{} geomip levels given for {} patches of at most {count} levels",
+                        levels.len(),
+                        grid.patch_count()
+                    )));
+                }
+                let mut levels = levels.to_vec();
+                geomip::balance(&mut levels, grid);
+                Some(levels)
+            }
+        };
         Ok(())
     }
 
@@ -706,6 +739,7 @@ fn build_geomip(
             pipelines,
             draws: Vec::new(),
             errors,
+            given: None,
         }),
         Err(e) => {
             device.destroy_buffer(template);
@@ -719,7 +753,13 @@ impl GeomipGeometry {
     /// Levels by distance, balanced; the visible patches become this
     /// frame's draws, with their morph factors.
     fn choose(&mut self, terrain: &Terrain, view: &FrameView, settings: &RenderSettings) {
-        let grid = terrain.grid();
+        if let Some(levels) = &self.given {
+            let chosen = geomip::PatchLevels {
+                morph: vec![0.0; levels.len()],
+                levels: levels.clone(),
+            };
+            return self.set_draws(terrain, view, settings, &chosen);
+        }
         let chosen = match settings.lod_metric {
             LodMetric::Distance => {
                 geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
@@ -732,6 +772,19 @@ impl GeomipGeometry {
                 pixels,
             ),
         };
+        self.set_draws(terrain, view, settings, &chosen);
+    }
+
+    /// The visible patches at their `chosen` levels become this frame's
+    /// draws.
+    fn set_draws(
+        &mut self,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+        chosen: &geomip::PatchLevels,
+    ) {
+        let grid = terrain.grid();
         self.draws.clear();
         for p in 0..grid.patch_count() {
             let id = grid.patch_id(p);
@@ -743,7 +796,7 @@ impl GeomipGeometry {
             let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
             let (first, count) = self.variants[level * 16 + usize::from(coarser)];
             let (interior, sides) = if settings.geomorph {
-                geomip::patch_morph(&chosen, grid, id)
+                geomip::patch_morph(chosen, grid, id)
             } else {
                 (0.0, [0.0; 4])
             };

@@ -1,0 +1,538 @@
+//! What a benchmark run writes: results.csv, results.json, pareto.png and
+//! BENCHMARKS.md. Rows of earlier runs in the same directory are kept,
+//! except those of the same scene on the same device, which the new run
+//! replaces; so one directory can hold the default scene and the DEM, on
+//! lavapipe and on a real GPU, in one report.
+
+use std::collections::BTreeSet;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use plotters::prelude::*;
+
+use super::run::{Row, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
+use crate::output::write_atomically;
+
+/// Target of `--lod error --pixel-error 1`: its measured p99.
+pub const TARGET_P99_PX: f64 = 1.0;
+pub const TARGET_TRIANGLES_VS_BRUTE: f64 = 20.0;
+pub const TARGET_GPU_VS_BRUTE: f64 = 5.0;
+pub const TARGET_DISTANCE_VS_ERROR: f64 = 2.0;
+pub const TARGET_ERROR_VS_ORACLE: f64 = 1.5;
+
+/// Rows already in `dir`, less those `fresh` replaces (same scene and
+/// device), followed by `fresh`.
+pub fn merge(dir: &Path, fresh: Vec<Row>) -> Result<Vec<Row>> {
+    let path = dir.join("results.json");
+    let mut rows: Vec<Row> = match std::fs::read_to_string(&path) {
+        Ok(text) => serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: not the results of an earlier run; remove it or choose another --out",
+                path.display()
+            )
+        })?,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
+    };
+    let replaced: BTreeSet<(String, String)> = fresh
+        .iter()
+        .map(|r| (r.scene.clone(), r.device.clone()))
+        .collect();
+    rows.retain(|r| !replaced.contains(&(r.scene.clone(), r.device.clone())));
+    rows.extend(fresh);
+    Ok(rows)
+}
+
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    write_atomically(path, |tmp| {
+        std::fs::write(tmp, text).with_context(|| format!("{}: cannot write", path.display()))
+    })
+}
+
+fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
+    v.map_or_else(String::new, |v| v.to_string())
+}
+
+/// One CSV field, quoted when it holds a comma or a quote.
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+pub fn csv(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
+         triangles,tes_invocations,gpu_memory_bytes,max_px,p99_px,mean_px,error_pixels,\
+         mismatched_pixels\n",
+    );
+    for r in rows {
+        let fields = [
+            csv_field(&r.scene),
+            csv_field(&r.device),
+            csv_field(&r.driver),
+            r.width.to_string(),
+            r.height.to_string(),
+            csv_field(&r.camera),
+            r.frames.to_string(),
+            r.path.clone(),
+            opt(r.lod.as_deref()),
+            opt(r.tau),
+            csv_field(&r.config),
+            opt(r.gpu_ms.map(|v| format!("{v:.3}"))),
+            format!("{:.3}", r.cpu_ms),
+            opt(r.triangles),
+            opt(r.tes_invocations),
+            r.gpu_memory_bytes.to_string(),
+            format!("{:.4}", r.max_px),
+            format!("{:.4}", r.p99_px),
+            format!("{:.4}", r.mean_px),
+            r.error_pixels.to_string(),
+            r.mismatched_pixels.to_string(),
+        ];
+        out.push_str(&fields.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Writes every output into `dir` (and BENCHMARKS.md also to `publish`).
+pub fn write_all(dir: &Path, rows: &[Row], notes: &str, publish: Option<&Path>) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
+    write_text(
+        &dir.join("results.json"),
+        &(serde_json::to_string_pretty(rows)? + "\n"),
+    )?;
+    write_text(&dir.join("results.csv"), &csv(rows))?;
+    let png = dir.join("pareto.png");
+    write_atomically(&png, |tmp| pareto(rows, tmp))?;
+    write_text(
+        &dir.join("BENCHMARKS.md"),
+        &markdown(rows, notes, "pareto.png"),
+    )?;
+    if let Some(target) = publish {
+        let link = relative_link(target, &png);
+        write_text(target, &markdown(rows, notes, &link))?;
+    }
+    Ok(())
+}
+
+/// `to` as a link from the directory of `from` (both made absolute).
+fn relative_link(from: &Path, to: &Path) -> String {
+    let absolute = |p: &Path| -> PathBuf {
+        let p = if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            std::env::current_dir().unwrap_or_default().join(p)
+        };
+        p.components().collect()
+    };
+    let base = absolute(from);
+    let base = base.parent().unwrap_or(Path::new("/"));
+    let to = absolute(to);
+    let common = base
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let ups = base.components().count() - common;
+    let mut parts: Vec<String> = vec!["..".into(); ups];
+    parts.extend(
+        to.components()
+            .skip(common)
+            .map(|c| c.as_os_str().to_string_lossy().into_owned()),
+    );
+    parts.join("/")
+}
+
+/// Scene, device and camera of a group of rows, in first-seen order.
+fn groups(rows: &[Row]) -> Vec<(String, String, String)> {
+    let mut seen = Vec::new();
+    for r in rows {
+        let key = (r.scene.clone(), r.device.clone(), r.camera.clone());
+        if !seen.contains(&key) {
+            seen.push(key);
+        }
+    }
+    seen
+}
+
+/// What the targets come to on one camera's rows.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TargetCheck {
+    pub error_p99: Option<f64>,
+    pub triangles_vs_brute: Option<f64>,
+    pub gpu_vs_brute: Option<f64>,
+    /// Triangles of the cheapest distance setting with p99 at most error
+    /// mode's, over error mode's; None when no distance setting got there.
+    pub distance_vs_error: Option<f64>,
+    /// The distance setting closest to error mode's p99 when none reaches it.
+    pub best_distance_p99: Option<f64>,
+    pub error_vs_oracle: Option<f64>,
+}
+
+/// The targets, read from the rows of one scene, device and camera: error
+/// mode at tau = 1 against brute, the distance sweep and the oracle.
+pub fn check_targets(rows: &[&Row]) -> TargetCheck {
+    let find = |path: &str, lod: Option<&str>| {
+        rows.iter()
+            .find(|r| r.path == path && r.lod.as_deref() == lod && r.tau == Some(1.0))
+            .copied()
+    };
+    let brute = rows.iter().find(|r| r.path == "brute").copied();
+    let error = find("tess", Some("error"));
+    let oracle = find("oracle", None);
+    let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
+        _ => None,
+    };
+    let tris = |r: Option<&Row>| r.and_then(|r| r.triangles).map(|t| t as f64);
+    let mut check = TargetCheck {
+        error_p99: error.map(|e| e.p99_px),
+        triangles_vs_brute: ratio(tris(brute), tris(error)),
+        gpu_vs_brute: ratio(brute.and_then(|b| b.gpu_ms), error.and_then(|e| e.gpu_ms)),
+        error_vs_oracle: ratio(tris(error), tris(oracle)),
+        ..TargetCheck::default()
+    };
+    if let Some(e) = error {
+        let distance = rows
+            .iter()
+            .filter(|r| r.path == "tess" && r.lod.as_deref() == Some("distance"));
+        let cheapest = distance
+            .clone()
+            .filter(|r| r.p99_px <= e.p99_px)
+            .filter_map(|r| r.triangles)
+            .min();
+        check.distance_vs_error = ratio(cheapest.map(|t| t as f64), tris(Some(e)));
+        if check.distance_vs_error.is_none() {
+            check.best_distance_p99 = distance.map(|r| r.p99_px).min_by(f64::total_cmp);
+        }
+    }
+    check
+}
+
+fn verdict(value: Option<f64>, target: f64, at_least: bool, unit: &str) -> String {
+    match value {
+        None => "n/a".into(),
+        Some(v) => {
+            let met = if at_least { v >= target } else { v <= target };
+            if met {
+                format!("{v:.2}{unit} (met)")
+            } else {
+                let by = if at_least { target / v } else { v / target };
+                format!("{v:.2}{unit} (**missed**, {by:.2}x off)")
+            }
+        }
+    }
+}
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1}", bytes as f64 / (1024.0 * 1024.0))
+}
+
+/// BENCHMARKS.md: definitions, the targets, every row, and the notes.
+pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
+    let mut md = String::new();
+    let w = &mut md;
+    let _ = writeln!(w, "# Benchmarks: speed against error\n");
+    let _ = writeln!(
+        w,
+        "Generated by `vkterrain bench` (`scripts/bench` reruns it on the default scene and the \
+         Jacksboro DEM and copies this file to the repository root); edit `benches/notes.md` \
+         for the prose at the end, not this file.\n"
+    );
+    let devices: BTreeSet<(String, String)> = rows
+        .iter()
+        .map(|r| (r.device.clone(), r.driver.clone()))
+        .collect();
+    let _ = writeln!(w, "Devices:\n");
+    for (device, driver) in &devices {
+        let _ = writeln!(w, "- {device}, driver {driver}");
+    }
+    let _ = writeln!(
+        w,
+        "\n![GPU time and triangles against p99 error]({pareto_link})\n"
+    );
+    let _ = writeln!(w, "{}", definitions());
+
+    let _ = writeln!(w, "## Targets\n");
+    let _ = writeln!(
+        w,
+        "Read from the rows below: tess error mode at tau = 1 px against brute, against the \
+         cheapest tess distance setting whose p99 is at most error mode's, and against the \
+         oracle at tau = 1 px.\n"
+    );
+    let _ = writeln!(
+        w,
+        "| scene | device | camera | error mode p99 (<= {TARGET_P99_PX} px) | brute / error triangles (>= {TARGET_TRIANGLES_VS_BRUTE}x) | brute / error GPU time (>= {TARGET_GPU_VS_BRUTE}x) | distance / error triangles at <= its error (>= {TARGET_DISTANCE_VS_ERROR}x) | error / oracle triangles (<= {TARGET_ERROR_VS_ORACLE}x) |"
+    );
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
+    for (scene, device, camera) in groups(rows) {
+        let group: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.scene == scene && r.device == device && r.camera == camera)
+            .collect();
+        let c = check_targets(&group);
+        let distance = match (c.distance_vs_error, c.best_distance_p99) {
+            (Some(v), _) => verdict(Some(v), TARGET_DISTANCE_VS_ERROR, true, "x"),
+            (None, Some(p)) => format!("no setting reaches it (best p99 {p:.2} px)"),
+            (None, None) => "n/a".into(),
+        };
+        let _ = writeln!(
+            w,
+            "| {scene} | {device} | {camera} | {} | {} | {} | {distance} | {} |",
+            verdict(c.error_p99, TARGET_P99_PX, false, " px"),
+            verdict(c.triangles_vs_brute, TARGET_TRIANGLES_VS_BRUTE, true, "x"),
+            verdict(c.gpu_vs_brute, TARGET_GPU_VS_BRUTE, true, "x"),
+            verdict(c.error_vs_oracle, TARGET_ERROR_VS_ORACLE, false, "x"),
+        );
+    }
+    let _ = writeln!(w);
+    if !notes.trim().is_empty() {
+        let _ = writeln!(w, "{}\n", notes.trim());
+    }
+
+    let _ = writeln!(w, "## Results\n");
+    for (scene, device, camera) in groups(rows) {
+        let group: Vec<&Row> = rows
+            .iter()
+            .filter(|r| r.scene == scene && r.device == device && r.camera == camera)
+            .collect();
+        let first = group[0];
+        let _ = writeln!(
+            w,
+            "### {scene}, {camera} ({} frame{}, {}x{}), {device}\n",
+            first.frames,
+            if first.frames == 1 { "" } else { "s" },
+            first.width,
+            first.height
+        );
+        let _ = writeln!(
+            w,
+            "| config | triangles | TES invocations | GPU ms | CPU ms | GPU MiB | max px | p99 px | mean px | mismatched |"
+        );
+        let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        for r in group {
+            let _ = writeln!(
+                w,
+                "| {} | {} | {} | {} | {:.2} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
+                r.config,
+                opt(r.triangles),
+                opt(r.tes_invocations),
+                r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
+                r.cpu_ms,
+                mib(r.gpu_memory_bytes),
+                r.max_px,
+                r.p99_px,
+                r.mean_px,
+                100.0 * r.mismatched_pixels as f64 / r.error_pixels.max(1) as f64,
+            );
+        }
+        let _ = writeln!(w);
+    }
+    md
+}
+
+fn definitions() -> String {
+    format!(
+        "## What is measured\n\n\
+**Screen-space error.** The reference is the brute path (every heightmap sample a vertex, \
+split like `height_at`), rendered from the same camera at the same size. For each pixel, both \
+depth buffers are turned back into the camera-relative positions their surfaces show at the \
+pixel's centre: R on the reference, T on the tested render. Both lie on the pixel's view ray. \
+The pixel's error is the vertical separation seen face-on at the reference's distance, \
+|T.y - R.y| * K / |R - eye| pixels, where K = viewport height / (2 tan(fov_y / 2)). This is the \
+quantity the LOD choices bound: a height error e at distance d covers e * K / d pixels, so tau \
+and the measured figures are in the same unit. A pixel that is terrain in one render and sky \
+in the other is a coverage mismatch; its error is the distance in pixels to the nearest pixel \
+where the tested render shows what the reference shows there (how far the silhouette moved), \
+searched up to 32 pixels and counted as 32 beyond. Pixels that are sky in both are left out. \
+max, p99 and mean are over every remaining pixel of every frame of a row; p99 is the \
+ceil(0.99 n)-th smallest error, taken from a histogram of 1000 logarithmic bins per decade \
+(within 0.12 % of the exact value).\n\n\
+Where one surface hides another (a ridge in front of a valley), a pixel's two positions can lie \
+on different hills, and its error is large even when both surfaces are close: such pixels are \
+counted as they are, never filtered out.\n\n\
+**Speed.** `gpu_ms` is the time between timestamps written before and after the terrain draw, \
+the median of {TIMED_FRAMES} frames after {WARM_UP} untimed ones for a fixed view, and of all \
+frames but the first {WARM_UP} for the flythrough. `cpu_ms` is the median time to choose \
+levels, write uniforms and record the frame's commands. `triangles` are clipping primitives and \
+`tes_invocations` tessellation evaluation invocations, from pipeline statistics (the mean per \
+frame over the flythrough). `gpu_memory_bytes` is the device memory of the renderer of the \
+row's path (heightmap, buffers, uniforms) plus the render target.\n\n\
+**Oracle.** For each camera frame, the geomip geometry is drawn with every patch at one uniform \
+level, for each level in turn, and measured against brute. Each pixel's error is charged to \
+the patch under its reference surface point. Per patch, the oracle takes the coarsest level at \
+which at most {:.0} % of the patch's pixels exceed tau (its per-patch 99th percentile is at \
+most tau); unseen patches take the coarsest level. Neighbours are then refined to within one \
+level of each other so the stitched edges meet, and that mix is rendered and measured like any \
+other row. Its triangle count is what measured error alone says a level choice could get \
+away with.\n",
+        100.0 * ORACLE_EXCEED_FRACTION
+    )
+}
+
+/// What a plot's y axis shows of a row.
+type Measure = dyn Fn(&Row) -> Option<f64>;
+
+/// A point series of the plot: name, colour, (p99, value) points.
+type Series = (String, RGBColor, Vec<(f64, f64)>);
+
+/// Which rows a scene's plot shows: the flythrough's when there is one,
+/// otherwise the first camera's.
+fn plotted<'a>(rows: &'a [Row], scene: &str, device: &str) -> Vec<&'a Row> {
+    let of_scene: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.scene == scene && r.device == device)
+        .collect();
+    let camera = of_scene
+        .iter()
+        .find(|r| r.frames > 1)
+        .or(of_scene.first())
+        .map(|r| r.camera.clone())
+        .unwrap_or_default();
+    of_scene
+        .into_iter()
+        .filter(|r| r.camera == camera)
+        .collect()
+}
+
+fn series(rows: &[&Row], value: impl Fn(&Row) -> Option<f64>) -> Vec<Series> {
+    let families: [(&str, &str, Option<&str>, RGBColor); 6] = [
+        ("brute", "brute", None, RGBColor(0, 0, 0)),
+        (
+            "tess distance",
+            "tess",
+            Some("distance"),
+            RGBColor(31, 119, 180),
+        ),
+        ("tess error", "tess", Some("error"), RGBColor(214, 39, 40)),
+        (
+            "geomip distance",
+            "geomip",
+            Some("distance"),
+            RGBColor(44, 160, 44),
+        ),
+        (
+            "geomip error",
+            "geomip",
+            Some("error"),
+            RGBColor(255, 127, 14),
+        ),
+        ("oracle", "oracle", None, RGBColor(148, 103, 189)),
+    ];
+    families
+        .iter()
+        .map(|&(name, path, lod, colour)| {
+            let mut points: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.path == path && r.lod.as_deref() == lod)
+                .filter_map(|r| Some((r.p99_px.max(PLOT_MIN_P99), value(r)?)))
+                .filter(|p| p.1 > 0.0)
+                .collect();
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (name.to_string(), colour, points)
+        })
+        .filter(|s| !s.2.is_empty())
+        .collect()
+}
+
+/// p99 of 0 (brute against itself) is drawn here on the log axis.
+const PLOT_MIN_P99: f64 = 0.01;
+
+static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
+
+fn register_font() -> Result<()> {
+    static REGISTERED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    let ok = *REGISTERED.get_or_init(|| {
+        plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).is_ok()
+    });
+    anyhow::ensure!(ok, "the built-in plot font could not be loaded");
+    Ok(())
+}
+
+/// pareto.png: per scene and device, triangles and GPU time against p99
+/// error, log-log, one colour per configuration family.
+pub fn pareto(rows: &[Row], path: &Path) -> Result<()> {
+    register_font()?;
+    let panels: Vec<(String, String)> = {
+        let mut seen = Vec::new();
+        for r in rows {
+            let key = (r.scene.clone(), r.device.clone());
+            if !seen.contains(&key) {
+                seen.push(key);
+            }
+        }
+        seen
+    };
+    let (w, h) = (1400u32, 520 * panels.len().max(1) as u32);
+    let mut pixels = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, (w, h)).into_drawing_area();
+        let cells = root.split_evenly((panels.len().max(1), 2));
+        for (i, (scene, device)) in panels.iter().enumerate() {
+            let shown = plotted(rows, scene, device);
+            let camera = shown.first().map(|r| r.camera.clone()).unwrap_or_default();
+            let measures: [(&str, Box<Measure>); 2] = [
+                (
+                    "triangles per frame",
+                    Box::new(|r: &Row| r.triangles.map(|t| t as f64)),
+                ),
+                ("GPU ms per frame", Box::new(|r: &Row| r.gpu_ms)),
+            ];
+            for (j, (label, value)) in measures.iter().enumerate() {
+                let data = series(&shown, value);
+                let points = data.iter().flat_map(|s| s.2.iter());
+                let (x_max, y_min, y_max) = points.fold((1.0f64, f64::MAX, 0.0f64), |a, p| {
+                    (a.0.max(p.0), a.1.min(p.1), a.2.max(p.1))
+                });
+                if y_max <= 0.0 {
+                    continue;
+                }
+                let area = &cells[i * 2 + j];
+                let mut chart = ChartBuilder::on(area)
+                    .caption(
+                        format!("{scene}, {camera}: {label} ({device})"),
+                        ("sans-serif", 16),
+                    )
+                    .margin(12)
+                    .x_label_area_size(40)
+                    .y_label_area_size(70)
+                    .build_cartesian_2d(
+                        (PLOT_MIN_P99 * 0.8..x_max * 1.5).log_scale(),
+                        (y_min * 0.7..y_max * 1.4).log_scale(),
+                    )?;
+                chart
+                    .configure_mesh()
+                    .x_desc("p99 screen-space error (px)")
+                    .y_desc(*label)
+                    .label_style(("sans-serif", 13))
+                    .draw()?;
+                for (name, colour, pts) in data {
+                    let style = ShapeStyle::from(colour).filled();
+                    chart
+                        .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(1)))?
+                        .label(name)
+                        .legend(move |(x, y)| Circle::new((x + 8, y), 4, style));
+                    chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, style)))?;
+                }
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .label_font(("sans-serif", 13))
+                    .position(SeriesLabelPosition::UpperRight)
+                    .draw()?;
+            }
+        }
+        root.present()?;
+    }
+    let image = image::RgbImage::from_raw(w, h, pixels).expect("buffer of w * h pixels");
+    image
+        .save_with_format(path, image::ImageFormat::Png)
+        .with_context(|| format!("{}: cannot write the plot", path.display()))
+}

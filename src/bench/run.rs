@@ -1,0 +1,624 @@
+//! The benchmark run: every configuration rendered from the same cameras,
+//! timed by GPU timestamps, counted by pipeline statistics, and measured
+//! against the brute path's render of the same frame.
+
+use glam::DMat4;
+use serde::{Deserialize, Serialize};
+
+use super::cameras::{flythrough, named_views, FLYTHROUGH};
+use super::error::{pixel_errors, DepthView, ErrorHistogram};
+use crate::render::{
+    Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
+    TerrainRenderer,
+};
+use crate::terrain::camera::Camera;
+use crate::terrain::{geomip, DistanceLod, Terrain};
+use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
+use crate::vk::Gpu;
+
+/// Pixel tolerances of the error-driven configurations.
+pub const TAUS: [f32; 6] = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
+/// `--quick`'s shorter list.
+pub const QUICK_TAUS: [f32; 3] = [0.5, 1.0, 4.0];
+/// Frames timed per named view, after `WARM_UP` untimed ones.
+pub const TIMED_FRAMES: usize = 10;
+pub const WARM_UP: usize = 2;
+/// Share of a patch's pixels the oracle lets exceed tau (its per-patch
+/// 99th percentile is then at most tau).
+pub const ORACLE_EXCEED_FRACTION: f64 = 0.01;
+
+/// One way of drawing the terrain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Config {
+    /// Every sample a vertex: the reference.
+    Brute,
+    /// Tessellation factors by distance.
+    TessDistance(DistanceLod),
+    /// Tessellation factors bounding the projected error to tau pixels.
+    TessError(f32),
+    /// Geomip levels by distance, the first level reaching this far.
+    GeomipDistance(f32),
+    /// Geomip levels bounding the projected error to tau pixels.
+    GeomipError(f32),
+    /// Per patch, the coarsest uniform level whose measured error is within
+    /// tau pixels (see `oracle_levels`).
+    Oracle(f32),
+}
+
+impl Config {
+    pub fn path(&self) -> &'static str {
+        match self {
+            Config::Brute => "brute",
+            Config::TessDistance(_) | Config::TessError(_) => "tess",
+            Config::GeomipDistance(_) | Config::GeomipError(_) => "geomip",
+            Config::Oracle(_) => "oracle",
+        }
+    }
+
+    pub fn lod(&self) -> Option<&'static str> {
+        match self {
+            Config::Brute | Config::Oracle(_) => None,
+            Config::TessDistance(_) | Config::GeomipDistance(_) => Some("distance"),
+            Config::TessError(_) | Config::GeomipError(_) => Some("error"),
+        }
+    }
+
+    pub fn tau(&self) -> Option<f32> {
+        match *self {
+            Config::TessError(t) | Config::GeomipError(t) | Config::Oracle(t) => Some(t),
+            _ => None,
+        }
+    }
+
+    /// A short description naming every parameter.
+    pub fn label(&self) -> String {
+        match self {
+            Config::Brute => "brute".into(),
+            Config::TessDistance(l) => format!(
+                "tess distance {}-{} m, factors 2^{}-2^{}",
+                l.min_dist, l.max_dist, l.min_exp, l.max_exp
+            ),
+            Config::TessError(t) => format!("tess error {t} px"),
+            Config::GeomipDistance(d) => format!("geomip distance {d} m"),
+            Config::GeomipError(t) => format!("geomip error {t} px"),
+            Config::Oracle(t) => format!("oracle {t} px"),
+        }
+    }
+
+    fn render_path(&self) -> RenderPath {
+        match self {
+            Config::Brute => RenderPath::Brute,
+            Config::TessDistance(_) | Config::TessError(_) => RenderPath::Tess,
+            _ => RenderPath::Geomip,
+        }
+    }
+
+    fn settings(&self, scene_lod: DistanceLod) -> RenderSettings {
+        let base = RenderSettings {
+            path: self.render_path(),
+            lod: scene_lod,
+            shading: Shading::Lit,
+            geomorph: true,
+            cull: true,
+            ..RenderSettings::default()
+        };
+        match *self {
+            Config::Brute => base,
+            Config::TessDistance(lod) => RenderSettings { lod, ..base },
+            Config::TessError(t) | Config::GeomipError(t) => RenderSettings {
+                lod_metric: LodMetric::Error(t),
+                ..base
+            },
+            Config::GeomipDistance(d) => RenderSettings {
+                lod: DistanceLod {
+                    min_dist: d,
+                    ..scene_lod
+                },
+                ..base
+            },
+            Config::Oracle(_) => RenderSettings {
+                geomorph: false,
+                ..base
+            },
+        }
+    }
+}
+
+/// The configurations of a run, brute first. The distance sweeps scale the
+/// scene's LOD distances; `tessellation` false leaves the tess path out.
+pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<Config> {
+    let scaled = |s: f32, min_exp: f32| DistanceLod {
+        min_dist: scene_lod.min_dist * s,
+        max_dist: scene_lod.max_dist * s,
+        min_exp,
+        max_exp: scene_lod.max_exp,
+    };
+    let taus: &[f32] = if quick { &QUICK_TAUS } else { &TAUS };
+    let mut configs = vec![Config::Brute];
+    if tessellation {
+        let sweep: &[(f32, f32)] = if quick {
+            &[(0.5, 0.0), (1.0, 0.0), (4.0, 0.0)]
+        } else {
+            &[
+                (0.25, 0.0),
+                (0.5, 0.0),
+                (1.0, 0.0),
+                (2.0, 0.0),
+                (4.0, 0.0),
+                (8.0, 0.0),
+                (1.0, 2.0),
+                (4.0, 2.0),
+            ]
+        };
+        configs.extend(sweep.iter().map(|&(s, e)| {
+            Config::TessDistance(scaled(s, e.max(scene_lod.min_exp).min(scene_lod.max_exp)))
+        }));
+        configs.extend(taus.iter().map(|&t| Config::TessError(t)));
+    }
+    let geomip_scales: &[f32] = if quick { &[1.0] } else { &[0.5, 1.0, 2.0, 4.0] };
+    configs.extend(
+        geomip_scales
+            .iter()
+            .map(|&s| Config::GeomipDistance(scene_lod.min_dist * s)),
+    );
+    configs.extend(taus.iter().map(|&t| Config::GeomipError(t)));
+    configs.extend(taus.iter().map(|&t| Config::Oracle(t)));
+    configs
+}
+
+/// What the run covers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BenchOptions {
+    pub width: u32,
+    pub height: u32,
+    /// One view and a short sweep.
+    pub quick: bool,
+    /// Frames of the flythrough (0: none).
+    pub flythrough_frames: usize,
+}
+
+/// One configuration seen from one camera (or the whole flythrough).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Row {
+    pub scene: String,
+    pub device: String,
+    pub driver: String,
+    pub width: u32,
+    pub height: u32,
+    pub camera: String,
+    /// Frames the error is measured over (the flythrough's length, or 1).
+    pub frames: usize,
+    /// brute, tess, geomip or oracle.
+    pub path: String,
+    /// distance, error, or null.
+    pub lod: Option<String>,
+    pub tau: Option<f32>,
+    pub config: String,
+    /// Median GPU time of the timed frames; null without timestamps.
+    pub gpu_ms: Option<f64>,
+    /// Median CPU time to prepare and record a frame.
+    pub cpu_ms: f64,
+    /// Clipping primitives per frame (mean over the flythrough); null
+    /// without pipeline statistics.
+    pub triangles: Option<u64>,
+    pub tes_invocations: Option<u64>,
+    /// Device memory of this path's renderer plus the render target.
+    pub gpu_memory_bytes: u64,
+    pub max_px: f64,
+    pub p99_px: f64,
+    pub mean_px: f64,
+    /// Pixels measured (terrain in either render), over all frames.
+    pub error_pixels: usize,
+    /// Of those, terrain in one render and sky in the other.
+    pub mismatched_pixels: usize,
+}
+
+/// Progress reports: renders done of the total, and what runs now.
+pub trait Progress {
+    fn start(&mut self, total: u64);
+    fn advance(&mut self, message: &str);
+}
+
+/// Figures of one configuration, gathered over a camera sequence.
+#[derive(Default)]
+struct Gathered {
+    gpu_ms: Vec<f64>,
+    cpu_ms: Vec<f64>,
+    triangles: Vec<u64>,
+    tes_invocations: Vec<u64>,
+    errors: ErrorHistogram,
+}
+
+fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    values.sort_by(f64::total_cmp);
+    let n = values.len();
+    Some(if n % 2 == 1 {
+        values[n / 2]
+    } else {
+        0.5 * (values[n / 2 - 1] + values[n / 2])
+    })
+}
+
+fn mean_count(values: &[u64]) -> Option<u64> {
+    (!values.is_empty())
+        .then(|| (values.iter().sum::<u64>() as f64 / values.len() as f64).round() as u64)
+}
+
+/// A renderer of one path and the device memory it holds.
+struct PathRenderer {
+    path: RenderPath,
+    renderer: TerrainRenderer,
+    bytes: u64,
+}
+
+/// The GPU objects of a run.
+pub struct Bench<'a> {
+    gpu: &'a Gpu,
+    terrain: &'a Terrain,
+    scene_lod: DistanceLod,
+    headless: Option<Headless>,
+    target_bytes: u64,
+    renderers: Vec<PathRenderer>,
+}
+
+impl<'a> Bench<'a> {
+    /// Builds one renderer per path the configurations use, each measured
+    /// for its memory, and the offscreen target.
+    pub fn new(
+        gpu: &'a Gpu,
+        terrain: &'a Terrain,
+        scene_lod: DistanceLod,
+        configs: &[Config],
+        width: u32,
+        height: u32,
+    ) -> anyhow::Result<Self> {
+        let mut bench = Bench {
+            gpu,
+            terrain,
+            scene_lod,
+            headless: None,
+            target_bytes: 0,
+            renderers: Vec::new(),
+        };
+        let before = gpu.device.memory_in_use();
+        bench.headless = Some(Headless::new(gpu, width, height)?);
+        bench.target_bytes = gpu.device.memory_in_use() - before;
+        for path in [RenderPath::Brute, RenderPath::Tess, RenderPath::Geomip] {
+            if !configs.iter().any(|c| c.render_path() == path) {
+                continue;
+            }
+            let before = gpu.device.memory_in_use();
+            let renderer = TerrainRenderer::new(
+                gpu,
+                terrain,
+                OFFSCREEN_COLOR_FORMAT,
+                1,
+                &RendererOptions {
+                    paths: vec![path],
+                    wireframe: false,
+                },
+            )?;
+            bench.renderers.push(PathRenderer {
+                path,
+                renderer,
+                bytes: gpu.device.memory_in_use() - before,
+            });
+        }
+        Ok(bench)
+    }
+
+    fn renderer(&mut self, path: RenderPath) -> &mut PathRenderer {
+        self.renderers
+            .iter_mut()
+            .find(|r| r.path == path)
+            .expect("a renderer is built for every configuration's path")
+    }
+
+    fn render(
+        &mut self,
+        camera: &Camera,
+        config: &Config,
+        levels: Option<&[u8]>,
+    ) -> anyhow::Result<HeadlessFrame> {
+        let (gpu, terrain) = (self.gpu, self.terrain);
+        let settings = config.settings(self.scene_lod);
+        let headless = self.headless.as_mut().expect("built in new");
+        let target = self
+            .renderers
+            .iter_mut()
+            .find(|r| r.path == settings.path)
+            .expect("a renderer is built for every configuration's path");
+        if settings.path == RenderPath::Geomip {
+            target.renderer.set_geomip_levels(terrain, levels)?;
+        }
+        Ok(headless.render(gpu, &mut target.renderer, terrain, camera, &settings)?)
+    }
+
+    /// Renders `config` `repeats` times from `camera`; timings of samples
+    /// past the warm-up go into `gathered`, counts of the last render too.
+    #[allow(clippy::too_many_arguments)]
+    fn render_gathered(
+        &mut self,
+        camera: &Camera,
+        config: &Config,
+        levels: Option<&[u8]>,
+        first_sample: usize,
+        repeats: usize,
+        gathered: &mut Gathered,
+        progress: &mut dyn Progress,
+        message: &str,
+    ) -> anyhow::Result<HeadlessFrame> {
+        let mut last = None;
+        for r in 0..repeats {
+            let frame = self.render(camera, config, levels)?;
+            progress.advance(message);
+            if first_sample + r >= WARM_UP {
+                gathered.gpu_ms.extend(frame.measurements.gpu_ms);
+                gathered.cpu_ms.push(frame.cpu_ms);
+            }
+            last = Some(frame);
+        }
+        let frame = last.expect("at least one repeat");
+        if let Some(s) = frame.measurements.statistics {
+            gathered.triangles.push(s.clipping_primitives);
+            gathered.tes_invocations.push(s.tes_invocations);
+        }
+        Ok(frame)
+    }
+
+    /// Renders the oracle's uniform levels from `camera` and picks, for
+    /// each tau and each patch, the coarsest level at which at most
+    /// `ORACLE_EXCEED_FRACTION` of the patch's pixels are over tau pixels.
+    /// A pixel belongs to the patch under its reference surface point (or
+    /// the tested one where the reference shows sky); a patch no pixel
+    /// belongs to gets the coarsest level.
+    fn oracle_levels(
+        &mut self,
+        camera: &Camera,
+        reference: &HeadlessFrame,
+        taus: &[f32],
+        progress: &mut dyn Progress,
+        message: &str,
+    ) -> anyhow::Result<Vec<Vec<u8>>> {
+        let terrain = self.terrain;
+        let grid = terrain.grid();
+        let patches = grid.patch_count();
+        let count = geomip::level_count(grid.cells_per_patch());
+        let k = f64::from(reference.view.pixels_per_radian);
+        let reference_view = depth_view(reference);
+        let reference_patch = pixel_patches(terrain, camera, &reference_view);
+        // [patch][level]: pixels, and pixels over each tau.
+        let mut pixels = vec![0u32; patches * count];
+        let mut over = vec![0u32; patches * count * taus.len()];
+        for level in 0..count {
+            let uniform = vec![level as u8; patches];
+            let frame = self.render(camera, &Config::Oracle(0.0), Some(&uniform))?;
+            progress.advance(message);
+            let tested = depth_view(&frame);
+            let tested_patch = pixel_patches(terrain, camera, &tested);
+            for e in pixel_errors(&tested, &reference_view, k) {
+                let Some(p) = reference_patch[e.index].or(tested_patch[e.index]) else {
+                    continue;
+                };
+                let cell = p * count + level;
+                pixels[cell] += 1;
+                for (t, &tau) in taus.iter().enumerate() {
+                    if e.px > f64::from(tau) {
+                        over[cell * taus.len() + t] += 1;
+                    }
+                }
+            }
+        }
+        Ok((0..taus.len())
+            .map(|t| {
+                (0..patches)
+                    .map(|p| {
+                        (0..count)
+                            .rev()
+                            .find(|&l| {
+                                let cell = p * count + l;
+                                f64::from(over[cell * taus.len() + t])
+                                    <= ORACLE_EXCEED_FRACTION * f64::from(pixels[cell])
+                            })
+                            .unwrap_or(0) as u8
+                    })
+                    .collect()
+            })
+            .collect())
+    }
+
+    /// Every configuration over one camera sequence: `repeats` renders of
+    /// each camera (the first `WARM_UP` samples of a configuration are not
+    /// timed), errors pooled over the sequence.
+    fn sequence(
+        &mut self,
+        name: &str,
+        cameras: &[Camera],
+        repeats: usize,
+        configs: &[Config],
+        progress: &mut dyn Progress,
+    ) -> anyhow::Result<Vec<(Config, Gathered)>> {
+        let mut gathered: Vec<(Config, Gathered)> =
+            configs.iter().map(|&c| (c, Gathered::default())).collect();
+        let oracle_taus: Vec<f32> = configs
+            .iter()
+            .filter_map(|c| match c {
+                Config::Oracle(t) => Some(*t),
+                _ => None,
+            })
+            .collect();
+        for (f, camera) in cameras.iter().enumerate() {
+            let first_sample = f * repeats;
+            let message = if cameras.len() > 1 {
+                format!("{name} {}/{}", f + 1, cameras.len())
+            } else {
+                name.to_string()
+            };
+            // The reference first; its own error row is measured too (0).
+            let brute = gathered
+                .iter()
+                .position(|(c, _)| *c == Config::Brute)
+                .expect("brute is always configured");
+            let reference = self.render_gathered(
+                camera,
+                &Config::Brute,
+                None,
+                first_sample,
+                repeats,
+                &mut gathered[brute].1,
+                progress,
+                &message,
+            )?;
+            let reference_view = depth_view(&reference);
+            let k = f64::from(reference.view.pixels_per_radian);
+            gathered[brute]
+                .1
+                .errors
+                .add(&pixel_errors(&reference_view, &reference_view, k));
+            let oracle = if oracle_taus.is_empty() {
+                Vec::new()
+            } else {
+                self.oracle_levels(camera, &reference, &oracle_taus, progress, &message)?
+            };
+            for (config, g) in gathered.iter_mut() {
+                let levels = match config {
+                    Config::Brute => continue,
+                    Config::Oracle(t) => {
+                        let i = oracle_taus.iter().position(|x| x == t).expect("listed");
+                        Some(oracle[i].as_slice())
+                    }
+                    _ => None,
+                };
+                let frame = self.render_gathered(
+                    camera,
+                    config,
+                    levels,
+                    first_sample,
+                    repeats,
+                    g,
+                    progress,
+                    &message,
+                )?;
+                g.errors
+                    .add(&pixel_errors(&depth_view(&frame), &reference_view, k));
+            }
+        }
+        Ok(gathered)
+    }
+
+    /// Runs every configuration over the named views (one with `quick`) and
+    /// the flythrough.
+    pub fn run(
+        &mut self,
+        scene: &str,
+        configs: &[Config],
+        options: &BenchOptions,
+        progress: &mut dyn Progress,
+    ) -> anyhow::Result<Vec<Row>> {
+        let info = self.terrain.info();
+        let mut views: Vec<(String, Vec<Camera>, usize)> = named_views(info)
+            .into_iter()
+            .map(|v| (v.name.to_string(), vec![v.camera], WARM_UP + TIMED_FRAMES))
+            .collect();
+        if options.quick {
+            views.truncate(1);
+        }
+        if options.flythrough_frames > 0 {
+            views.push((
+                FLYTHROUGH.to_string(),
+                flythrough(info, options.flythrough_frames),
+                1,
+            ));
+        }
+        let level_count = geomip::level_count(self.terrain.grid().cells_per_patch()) as u64;
+        let oracles = configs
+            .iter()
+            .filter(|c| matches!(c, Config::Oracle(_)))
+            .count() as u64;
+        let per_frame = |repeats: u64| {
+            repeats * configs.len() as u64 + if oracles > 0 { level_count } else { 0 }
+        };
+        progress.start(
+            views
+                .iter()
+                .map(|(_, cams, repeats)| cams.len() as u64 * per_frame(*repeats as u64))
+                .sum(),
+        );
+        let caps = &self.gpu.device.caps;
+        let (device, driver) = (
+            caps.device_name.clone(),
+            format!("{} ({})", caps.driver_name, caps.driver_info),
+        );
+        let mut rows = Vec::new();
+        for (name, cameras, repeats) in &views {
+            for (config, mut g) in self.sequence(name, cameras, *repeats, configs, progress)? {
+                let stats = g.errors.stats();
+                let bytes = self.renderer(config.render_path()).bytes + self.target_bytes;
+                rows.push(Row {
+                    scene: scene.to_string(),
+                    device: device.clone(),
+                    driver: driver.clone(),
+                    width: options.width,
+                    height: options.height,
+                    camera: name.clone(),
+                    frames: cameras.len(),
+                    path: config.path().into(),
+                    lod: config.lod().map(Into::into),
+                    tau: config.tau(),
+                    config: config.label(),
+                    gpu_ms: median(&mut g.gpu_ms),
+                    cpu_ms: median(&mut g.cpu_ms).unwrap_or(0.0),
+                    triangles: mean_count(&g.triangles),
+                    tes_invocations: mean_count(&g.tes_invocations),
+                    gpu_memory_bytes: bytes,
+                    max_px: stats.max_px,
+                    p99_px: stats.p99_px,
+                    mean_px: stats.mean_px,
+                    error_pixels: stats.pixels,
+                    mismatched_pixels: stats.mismatched,
+                });
+            }
+        }
+        Ok(rows)
+    }
+
+    /// Frees everything; the device's memory in use is back where it was.
+    pub fn destroy(mut self) {
+        let device = &self.gpu.device;
+        if let Some(h) = self.headless.take() {
+            h.destroy(self.gpu);
+        }
+        for r in self.renderers.drain(..) {
+            r.renderer.destroy(device);
+        }
+    }
+}
+
+fn depth_view(frame: &HeadlessFrame) -> DepthView<'_> {
+    DepthView {
+        width: frame.readback.width as usize,
+        height: frame.readback.height as usize,
+        depth: &frame.readback.depth,
+        view_proj: frame.view.view_proj.as_dmat4(),
+    }
+}
+
+/// The patch under each pixel's surface point (None for sky).
+fn pixel_patches(terrain: &Terrain, camera: &Camera, view: &DepthView) -> Vec<Option<usize>> {
+    let info = terrain.info();
+    let grid = terrain.grid();
+    let inverse: DMat4 = view.view_proj.inverse();
+    let (max_col, max_row) = (info.cols() - 2, info.rows() - 2);
+    (0..view.width * view.height)
+        .map(|i| {
+            let p = camera.eye + view.position(&inverse, i)?;
+            let g = info.world_to_grid(p.x, p.z);
+            let col = (g.x.floor().max(0.0) as usize).min(max_col);
+            let row = (g.y.floor().max(0.0) as usize).min(max_row);
+            Some(grid.patch_index(grid.patch_of_cell(row, col)))
+        })
+        .collect()
+}

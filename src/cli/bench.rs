@@ -1,0 +1,244 @@
+//! `bench`: speed against error, every path from the same cameras.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::args::{SizeArgs, TerrainArgs};
+use crate::bench::report::{self, check_targets};
+use crate::bench::run::{configs, Bench, BenchOptions, Progress};
+use crate::scene::HeightmapSource;
+use crate::terrain::Terrain;
+use crate::vk::{DisabledFeatures, Gpu};
+
+fn parse_frames(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .parse()
+        .map_err(|_| format!("{s:?} is not a frame count"))?;
+    if n == 1 || n == 2 {
+        return Err(format!(
+            "{n} flythrough frames leave none to time after the warm-up: give 0 or at least 3"
+        ));
+    }
+    if n > 100_000 {
+        return Err(format!("{n} flythrough frames is more than 100000"));
+    }
+    Ok(n)
+}
+
+#[derive(clap::Args, Debug)]
+pub struct BenchCmd {
+    #[command(flatten)]
+    pub terrain: TerrainArgs,
+
+    #[command(flatten)]
+    pub size: SizeArgs,
+
+    /// One view and a short sweep, without the flythrough: a few minutes on
+    /// lavapipe.
+    #[arg(long)]
+    pub quick: bool,
+
+    /// Frames of the flythrough (0 leaves it out).
+    #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
+    pub frames: usize,
+
+    /// Directory for results.csv, results.json, pareto.png and
+    /// BENCHMARKS.md. Rows already there for other scenes or devices are
+    /// kept in the report.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Also write BENCHMARKS.md to this path, with its link to the plot
+    /// made relative to it (scripts/bench uses the repository root).
+    #[arg(long, value_name = "PATH")]
+    pub publish: Option<PathBuf>,
+
+    /// Markdown appended after the targets (the explanations of misses).
+    #[arg(long, value_name = "PATH")]
+    pub notes: Option<PathBuf>,
+
+    /// Name of the scene in the results (default: the scene or heightmap
+    /// file's name, or "default").
+    #[arg(long, value_name = "NAME")]
+    pub name: Option<String>,
+
+    /// Render nothing: rewrite the report, plot and CSV from DIR's
+    /// results.json (after editing the notes, say).
+    #[arg(long)]
+    pub report_only: bool,
+
+    /// Turn on the Vulkan validation layer (slows every figure down).
+    #[arg(long)]
+    pub validate: bool,
+
+    /// Behave as if the device lacked tessellation shaders (no tess rows).
+    #[arg(long)]
+    pub no_tessellation: bool,
+}
+
+/// The progress bar; where stderr is no terminal (a log file, CI) the bar
+/// is hidden and a line is printed every 5 % instead.
+struct Bar {
+    bar: ProgressBar,
+    last_logged: u64,
+}
+
+impl Progress for Bar {
+    fn start(&mut self, total: u64) {
+        self.bar.set_length(total);
+    }
+
+    fn advance(&mut self, message: &str) {
+        self.bar.set_message(message.to_string());
+        self.bar.inc(1);
+        if self.bar.is_hidden() {
+            let (done, total) = (self.bar.position(), self.bar.length().unwrap_or(0).max(1));
+            let percent = done * 100 / total;
+            if percent >= self.last_logged + 5 || done == total {
+                self.last_logged = percent;
+                eprintln!(
+                    "bench: {done}/{total} renders ({percent} %), {message}, {:.0} s",
+                    self.bar.elapsed().as_secs_f64()
+                );
+            }
+        }
+    }
+}
+
+pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
+    let scene = cmd.terrain.scene()?;
+    let name = cmd.name.clone().unwrap_or_else(|| {
+        let file = cmd.terrain.scene.as_ref().or(match &scene.heightmap {
+            HeightmapSource::File(p) => Some(p),
+            HeightmapSource::Embedded { .. } => None,
+        });
+        file.and_then(|p| p.file_stem())
+            .map_or("default".into(), |s| s.to_string_lossy().into_owned())
+    });
+    let notes = match &cmd.notes {
+        Some(path) => std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read the notes", path.display()))?,
+        None => String::new(),
+    };
+    // Refuse an unusable results file before the long run, not after.
+    let earlier = report::merge(&cmd.out, Vec::new())?;
+    if cmd.report_only {
+        if earlier.is_empty() {
+            bail!("{}: no results.json to report on", cmd.out.display());
+        }
+        report::write_all(&cmd.out, &earlier, &notes, cmd.publish.as_deref())?;
+        writeln!(
+            out,
+            "rewrote the report of {} rows in {}",
+            earlier.len(),
+            cmd.out.display()
+        )?;
+        return Ok(());
+    }
+    let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
+    let gpu = Gpu::with_disabled(
+        cmd.validate,
+        &DisabledFeatures {
+            tessellation_shader: cmd.no_tessellation,
+        },
+    )
+    .context("starting Vulkan")?;
+    let tessellation = gpu.device.caps.tessellation_shader;
+    if !tessellation {
+        writeln!(
+            out,
+            "{}: tessellationShader is unavailable, so the tess rows are left out",
+            gpu.device.caps.device_name
+        )?;
+    }
+    let configs = configs(scene.lod, cmd.quick, tessellation);
+    let options = BenchOptions {
+        width: cmd.size.width,
+        height: cmd.size.height,
+        quick: cmd.quick,
+        flythrough_frames: if cmd.quick { 0 } else { cmd.frames },
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let mut progress = Bar {
+        bar,
+        last_logged: 0,
+    };
+    let mut bench = Bench::new(
+        &gpu,
+        &terrain,
+        scene.lod,
+        &configs,
+        options.width,
+        options.height,
+    )?;
+    let rows = bench.run(&name, &configs, &options, &mut progress);
+    bench.destroy();
+    progress.bar.finish_and_clear();
+    let rows = rows?;
+    let messages = gpu.validation_messages();
+    if messages > 0 {
+        bail!(
+            "the validation layer reported {messages} messages, first: {}",
+            gpu.instance
+                .validation_log()
+                .messages()
+                .first()
+                .map_or("", String::as_str)
+        );
+    }
+
+    let all = report::merge(&cmd.out, rows.clone())?;
+    report::write_all(&cmd.out, &all, &notes, cmd.publish.as_deref())?;
+    writeln!(
+        out,
+        "{} rows on {} ({}x{}, {}), {} validation messages{}",
+        rows.len(),
+        name,
+        options.width,
+        options.height,
+        gpu.device.caps.device_name,
+        messages,
+        if gpu.instance.validation_enabled() {
+            ""
+        } else {
+            " (validation off)"
+        }
+    )?;
+    let mut cameras: Vec<&str> = Vec::new();
+    for r in &rows {
+        if !cameras.contains(&r.camera.as_str()) {
+            cameras.push(&r.camera);
+        }
+    }
+    for camera in cameras {
+        let group: Vec<_> = rows.iter().filter(|r| r.camera == camera).collect();
+        let c = check_targets(&group);
+        let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.2}"));
+        writeln!(
+            out,
+            "  {camera}: error mode tau=1 p99 {} px; brute/error triangles {}x, GPU {}x; \
+             distance/error triangles {}x; error/oracle triangles {}x",
+            f(c.error_p99),
+            f(c.triangles_vs_brute),
+            f(c.gpu_vs_brute),
+            f(c.distance_vs_error),
+            f(c.error_vs_oracle),
+        )?;
+    }
+    writeln!(
+        out,
+        "wrote {}/results.csv, results.json, pareto.png and BENCHMARKS.md{}",
+        cmd.out.display(),
+        cmd.publish
+            .as_ref()
+            .map_or(String::new(), |p| format!(", and {}", p.display()))
+    )?;
+    Ok(())
+}

@@ -1,0 +1,313 @@
+//! The benchmark's CPU side: cameras, configurations, pooled statistics,
+//! targets and the report files.
+
+mod common;
+
+use common::*;
+use glam::DVec2;
+use vkterrain::bench::cameras::{flythrough, named_views};
+use vkterrain::bench::error::{ErrorHistogram, PixelError};
+use vkterrain::bench::report::{check_targets, csv, markdown, merge};
+use vkterrain::bench::run::{configs, Config, Row, QUICK_TAUS, TAUS};
+use vkterrain::terrain::{DistanceLod, TerrainInfo};
+
+fn terrains() -> Vec<(&'static str, TerrainInfo)> {
+    vec![
+        ("dem", dem_info(32)),
+        (
+            "noise off-centre",
+            TerrainInfo::new(
+                noise_map(70, 45, 9),
+                DVec2::new(3.0, 5.0),
+                16,
+                DVec2::new(1e5, -2e5),
+            )
+            .unwrap(),
+        ),
+        (
+            "flat",
+            TerrainInfo::new(
+                vkterrain::terrain::Heightmap::from_fn(33, 33, |_, _| 4.0).unwrap(),
+                DVec2::ONE,
+                8,
+                DVec2::ZERO,
+            )
+            .unwrap(),
+        ),
+    ]
+}
+
+#[test]
+fn named_views_stand_above_the_ground_and_look_at_the_terrain() {
+    for (name, info) in terrains() {
+        let views = named_views(&info);
+        let names: Vec<&str> = views.iter().map(|v| v.name).collect();
+        assert_eq!(names, ["grazing", "overview", "valley"]);
+        for v in views {
+            let c = v.camera;
+            let ground = f64::from(info.clamped_height_at(c.eye.x, c.eye.z));
+            assert!(
+                c.eye.y > ground,
+                "{name}/{}: eye {} under ground {ground}",
+                v.name,
+                c.eye
+            );
+            assert!(c.eye.distance(c.target) > 1.0, "{name}/{}", v.name);
+            let t = info.clamp_to_terrain(DVec2::new(c.target.x, c.target.z));
+            assert!(
+                (t - DVec2::new(c.target.x, c.target.z)).length() < 1e-6,
+                "{name}/{}: target off the terrain",
+                v.name
+            );
+        }
+    }
+}
+
+#[test]
+fn the_grazing_view_is_low_and_level() {
+    let info = dem_info(32);
+    let v = named_views(&info)[0].camera;
+    let ground = f64::from(info.clamped_height_at(v.eye.x, v.eye.z));
+    let (lo, hi) = info.heightmap().min_max();
+    // 3 % of the relief plus one cell above the ground.
+    let lift = 0.03 * f64::from(hi - lo) + info.spacing().max_element();
+    assert!(
+        (v.eye.y - ground - lift).abs() < 1e-3,
+        "{} vs {lift}",
+        v.eye.y - ground
+    );
+    assert!((v.eye.y - v.target.y).abs() < 1e-9);
+}
+
+#[test]
+fn the_flythrough_is_a_smooth_closed_loop_above_the_ground() {
+    for (name, info) in terrains() {
+        let frames = flythrough(&info, 200);
+        assert_eq!(frames.len(), 200);
+        let size = info.world_width().max(info.world_depth());
+        let (lo, hi) = info.heightmap().min_max();
+        let steps: Vec<glam::DVec3> = frames
+            .iter()
+            .zip(frames.iter().cycle().skip(1))
+            .map(|(a, b)| b.eye - a.eye)
+            .collect();
+        // Every step, the last back to the first included, is short.
+        let longest = steps.iter().map(|d| d.x.hypot(d.z)).fold(0.0, f64::max);
+        assert!(longest < 0.02 * size, "{name}: a step of {longest}");
+        if name == "dem" {
+            // Over real ground the altitude changes smoothly too.
+            let climb = steps.iter().map(|d| d.y.abs()).fold(0.0, f64::max);
+            assert!(
+                climb < 0.05 * f64::from(hi - lo),
+                "{name}: a climb of {climb}"
+            );
+        }
+        for c in &frames {
+            let ground = f64::from(info.clamped_height_at(c.eye.x, c.eye.z));
+            assert!(c.eye.y > ground, "{name}: under ground at {}", c.eye);
+            assert!(c.eye.distance(c.target) > 0.0);
+        }
+    }
+    assert!(flythrough(&dem_info(32), 0).is_empty());
+    // Even three frames make usable cameras.
+    let three = flythrough(&dem_info(32), 3);
+    assert!(three.iter().all(|c| c.eye != c.target));
+}
+
+#[test]
+fn configurations_cover_every_path_and_tolerance() {
+    let lod = DistanceLod {
+        min_dist: 100.0,
+        max_dist: 4000.0,
+        min_exp: 0.0,
+        max_exp: 6.0,
+    };
+    let full = configs(lod, false, true);
+    assert_eq!(full[0], Config::Brute);
+    let count = |f: &dyn Fn(&Config) -> bool| full.iter().filter(|c| f(c)).count();
+    assert_eq!(count(&|c| matches!(c, Config::TessDistance(_))), 8);
+    for (path, lod_name) in [("tess", "error"), ("geomip", "error"), ("oracle", "")] {
+        let taus: Vec<f32> = full
+            .iter()
+            .filter(|c| c.path() == path && c.lod().unwrap_or("") == lod_name)
+            .filter_map(|c| c.tau())
+            .collect();
+        assert_eq!(taus, TAUS, "{path} {lod_name}");
+    }
+    assert_eq!(count(&|c| matches!(c, Config::GeomipDistance(_))), 4);
+    // The distance sweep spans the scene's distances from 1/4 to 8 times.
+    let dists: Vec<f32> = full
+        .iter()
+        .filter_map(|c| match c {
+            Config::TessDistance(l) => Some(l.min_dist),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(dists.iter().copied().fold(f32::MAX, f32::min), 25.0);
+    assert_eq!(dists.iter().copied().fold(0.0, f32::max), 800.0);
+
+    let quick = configs(lod, true, true);
+    assert!(quick.len() < full.len());
+    assert!(quick
+        .iter()
+        .filter_map(|c| c.tau())
+        .all(|t| QUICK_TAUS.contains(&t)));
+    // Without tessellation there are no tess rows, the rest remains.
+    let fallback = configs(lod, false, false);
+    assert!(fallback.iter().all(|c| c.path() != "tess"));
+    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len());
+    // Labels name the parameters, and differ.
+    let labels: std::collections::BTreeSet<String> = full.iter().map(Config::label).collect();
+    assert_eq!(labels.len(), full.len());
+}
+
+#[test]
+fn pooled_histogram_matches_exact_statistics() {
+    // Errors spread over six decades, with zeros and mismatches.
+    let errors: Vec<PixelError> = (0..100_000)
+        .map(|i| {
+            let x =
+                ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as f64 / (1u64 << 53) as f64;
+            PixelError {
+                index: i,
+                px: if i % 97 == 0 {
+                    0.0
+                } else {
+                    1e-3 * 10f64.powf(6.0 * x)
+                },
+                mismatched: i % 1000 == 0,
+            }
+        })
+        .collect();
+    let mut histogram = ErrorHistogram::default();
+    // Pooled in two halves, as frames are.
+    histogram.add(&errors[..40_000]);
+    histogram.add(&errors[40_000..]);
+    let stats = histogram.stats();
+    let mut sorted: Vec<f64> = errors.iter().map(|e| e.px).collect();
+    sorted.sort_by(f64::total_cmp);
+    let p99 = sorted[(0.99 * sorted.len() as f64).ceil() as usize - 1];
+    let mean = sorted.iter().sum::<f64>() / sorted.len() as f64;
+    assert_eq!(stats.pixels, 100_000);
+    assert_eq!(stats.mismatched, 100);
+    assert_eq!(stats.max_px, sorted[sorted.len() - 1]);
+    assert!((stats.mean_px - mean).abs() <= 1e-9 * mean);
+    assert!(
+        (stats.p99_px - p99).abs() <= 1.2e-3 * p99,
+        "{} vs {p99}",
+        stats.p99_px
+    );
+    assert_eq!(ErrorHistogram::default().stats().pixels, 0);
+}
+
+fn row(
+    camera: &str,
+    path: &str,
+    lod: Option<&str>,
+    tau: Option<f32>,
+    tris: u64,
+    gpu: f64,
+    p99: f64,
+) -> Row {
+    Row {
+        scene: "s".into(),
+        device: "d".into(),
+        driver: "v".into(),
+        width: 64,
+        height: 32,
+        camera: camera.into(),
+        frames: 1,
+        path: path.into(),
+        lod: lod.map(Into::into),
+        tau,
+        config: format!("{path} {lod:?} {tau:?}, {tris}"),
+        gpu_ms: Some(gpu),
+        cpu_ms: 0.1,
+        triangles: Some(tris),
+        tes_invocations: Some(tris / 2),
+        gpu_memory_bytes: 1 << 20,
+        max_px: 2.0 * p99,
+        p99_px: p99,
+        mean_px: 0.1 * p99,
+        error_pixels: 1000,
+        mismatched_pixels: 3,
+    }
+}
+
+fn sample_rows() -> Vec<Row> {
+    vec![
+        row("v", "brute", None, None, 100_000, 50.0, 0.0),
+        row("v", "tess", Some("distance"), None, 30_000, 20.0, 0.5),
+        row("v", "tess", Some("distance"), None, 8_000, 8.0, 0.9),
+        row("v", "tess", Some("distance"), None, 2_000, 2.0, 3.0),
+        row("v", "tess", Some("error"), Some(1.0), 4_000, 5.0, 0.8),
+        row("v", "oracle", None, Some(1.0), 3_000, 4.0, 0.7),
+    ]
+}
+
+#[test]
+fn targets_are_read_from_the_rows() {
+    let rows = sample_rows();
+    let refs: Vec<&Row> = rows.iter().collect();
+    let c = check_targets(&refs);
+    assert_eq!(c.error_p99, Some(0.8));
+    assert_eq!(c.triangles_vs_brute, Some(25.0));
+    assert_eq!(c.gpu_vs_brute, Some(10.0));
+    // The cheapest distance setting at p99 <= 0.8 is the 30 000 one.
+    assert_eq!(c.distance_vs_error, Some(7.5));
+    assert_eq!(c.error_vs_oracle, Some(4.0 / 3.0));
+    // No distance setting that good: say how close the best came.
+    let worse: Vec<&Row> = refs
+        .iter()
+        .copied()
+        .filter(|r| r.triangles != Some(30_000))
+        .collect();
+    let c = check_targets(&worse);
+    assert_eq!(c.distance_vs_error, None);
+    assert_eq!(c.best_distance_p99, Some(0.9));
+    let md = markdown(&rows, "## Why\n\nBecause.", "pareto.png");
+    assert!(
+        md.contains("|T.y - R.y| * K / |R - eye|"),
+        "the definition is written down"
+    );
+    assert!(md.contains("25.00x (met)"));
+    assert!(md.contains("Because."));
+    assert!(md.contains("![GPU time and triangles against p99 error](pareto.png)"));
+}
+
+#[test]
+fn csv_has_one_line_per_row_and_quotes_commas() {
+    let rows = sample_rows();
+    let text = csv(&rows);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), rows.len() + 1);
+    assert!(lines[0].starts_with("scene,device,driver,width,height,camera,frames,path,lod,tau"));
+    assert!(
+        lines[1].contains("\"brute None None, 100000\""),
+        "{}",
+        lines[1]
+    );
+}
+
+#[test]
+fn merging_replaces_only_the_same_scene_and_device() {
+    let dir = tempfile::tempdir().unwrap();
+    assert!(merge(dir.path(), Vec::new()).unwrap().is_empty());
+    let mut other = sample_rows();
+    for r in &mut other {
+        r.device = "other".into();
+    }
+    let first: Vec<Row> = sample_rows().into_iter().chain(other.clone()).collect();
+    std::fs::write(
+        dir.path().join("results.json"),
+        serde_json::to_string(&first).unwrap(),
+    )
+    .unwrap();
+    let fresh = vec![row("w", "brute", None, None, 5, 1.0, 0.0)];
+    let merged = merge(dir.path(), fresh.clone()).unwrap();
+    assert_eq!(merged.len(), other.len() + 1);
+    assert!(merged.iter().filter(|r| r.device == "d").eq(fresh.iter()));
+    std::fs::write(dir.path().join("results.json"), "{ not rows").unwrap();
+    let err = merge(dir.path(), Vec::new()).unwrap_err();
+    assert!(format!("{err:#}").contains("results.json: not the results of an earlier run"));
+}

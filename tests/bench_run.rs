@@ -1,0 +1,273 @@
+//! The benchmark on a real device (lavapipe in CI), validation on: the rows
+//! it produces, and `vkterrain bench` end to end.
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::gpu::skip_gpu;
+use common::*;
+use glam::DVec2;
+use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row};
+use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
+use vkterrain::vk::Gpu;
+
+struct Count(u64, u64);
+
+impl Progress for Count {
+    fn start(&mut self, total: u64) {
+        self.0 = total;
+    }
+    fn advance(&mut self, _: &str) {
+        self.1 += 1;
+    }
+}
+
+fn rows_of<'a>(rows: &'a [Row], camera: &str, path: &str, lod: Option<&str>) -> Vec<&'a Row> {
+    rows.iter()
+        .filter(|r| r.camera == camera && r.path == path && r.lod.as_deref() == lod)
+        .collect()
+}
+
+#[test]
+fn a_quick_run_measures_every_configuration() {
+    if skip_gpu() {
+        return;
+    }
+    let gpu = Gpu::new(true).expect("a Vulkan device with the validation layer");
+    let info =
+        TerrainInfo::new(noise_map(65, 49, 4), DVec2::new(4.0, 3.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let lod = DistanceLod {
+        min_dist: 20.0,
+        max_dist: 200.0,
+        min_exp: 0.0,
+        max_exp: 4.0,
+    };
+    let configs = configs(lod, true, true);
+    let options = BenchOptions {
+        width: 96,
+        height: 64,
+        quick: true,
+        flythrough_frames: 3,
+    };
+    let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 96, 64).expect("bench objects");
+    let mut progress = Count(0, 0);
+    let rows = bench
+        .run("noise", &configs, &options, &mut progress)
+        .expect("the run");
+    bench.destroy();
+    assert_eq!(gpu.device.memory_in_use(), 0, "memory left allocated");
+    assert_eq!(
+        gpu.validation_messages(),
+        0,
+        "{:#?}",
+        gpu.instance.validation_log().messages()
+    );
+    assert_eq!(
+        progress.0, progress.1,
+        "the progress total is what was rendered"
+    );
+    // One view and the flythrough, every configuration in each.
+    assert_eq!(rows.len(), 2 * configs.len());
+    for camera in ["grazing", "flythrough"] {
+        let brute = rows_of(&rows, camera, "brute", None)[0];
+        assert_eq!(
+            (brute.max_px, brute.p99_px, brute.mismatched_pixels),
+            (0.0, 0.0, 0)
+        );
+        let brute_tris = brute.triangles.expect("lavapipe counts primitives");
+        for r in rows.iter().filter(|r| r.camera == camera) {
+            assert!(
+                r.error_pixels > 500,
+                "{}: {} pixels",
+                r.config,
+                r.error_pixels
+            );
+            assert!(r.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+            assert!(r.triangles.is_some_and(|t| t > 0), "{}", r.config);
+            assert!(r.gpu_memory_bytes > 96 * 64 * 8, "{}", r.config);
+            assert!(
+                r.p99_px <= r.max_px && r.mean_px <= r.max_px,
+                "{}",
+                r.config
+            );
+            assert_eq!(r.frames, if camera == "grazing" { 1 } else { 3 });
+            assert_eq!(
+                r.tes_invocations.unwrap() > 0,
+                r.path == "tess",
+                "{}",
+                r.config
+            );
+        }
+        // Looser tolerances draw no more; the oracle draws no more than brute.
+        for (path, lod) in [
+            ("tess", Some("error")),
+            ("geomip", Some("error")),
+            ("oracle", None),
+        ] {
+            let tris: Vec<u64> = rows_of(&rows, camera, path, lod)
+                .iter()
+                .map(|r| r.triangles.unwrap())
+                .collect();
+            assert_eq!(tris.len(), 3);
+            assert!(
+                tris.windows(2).all(|w| w[0] >= w[1]),
+                "{camera} {path}: {tris:?}"
+            );
+        }
+        for r in rows_of(&rows, camera, "oracle", None) {
+            assert!(r.triangles.unwrap() <= brute_tris, "{}", r.config);
+        }
+    }
+}
+
+fn vkterrain(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+#[test]
+fn bench_command_writes_every_output_and_merges_runs() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = data_path("jacksboro_fault_dem.toml");
+    let scene = scene.to_str().unwrap();
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "--quick",
+            "--validate",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--out",
+            "out",
+        ];
+        args.extend_from_slice(extra);
+        vkterrain(dir.path(), &args)
+    };
+    let out = run(&["--scene", scene]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("rows on jacksboro_fault_dem (64x48"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("0 validation messages"), "{stdout}");
+    for file in ["results.csv", "results.json", "pareto.png", "BENCHMARKS.md"] {
+        assert!(
+            dir.path().join("out").join(file).is_file(),
+            "{file} written"
+        );
+    }
+    let rows: Vec<serde_json::Value> = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("out/results.json")).unwrap(),
+    )
+    .unwrap();
+    let paths: std::collections::BTreeSet<&str> =
+        rows.iter().map(|r| r["path"].as_str().unwrap()).collect();
+    assert_eq!(
+        paths.into_iter().collect::<Vec<_>>(),
+        ["brute", "geomip", "oracle", "tess"]
+    );
+    for r in &rows {
+        for key in [
+            "lod",
+            "tau",
+            "gpu_ms",
+            "cpu_ms",
+            "triangles",
+            "tes_invocations",
+            "gpu_memory_bytes",
+            "max_px",
+            "p99_px",
+            "mean_px",
+            "camera",
+            "device",
+        ] {
+            assert!(r.get(key).is_some(), "{key} in {r}");
+        }
+    }
+    let plot = image::open(dir.path().join("out/pareto.png")).unwrap();
+    assert!(plot.width() >= 1000);
+
+    // A second scene joins the first in one report.
+    let out = run(&["--name", "second", "--scene", scene, "--no-tessellation"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let md = std::fs::read_to_string(dir.path().join("out/BENCHMARKS.md")).unwrap();
+    assert!(md.contains("### jacksboro_fault_dem, grazing"));
+    assert!(md.contains("### second, grazing"));
+    let csv = std::fs::read_to_string(dir.path().join("out/results.csv")).unwrap();
+    assert_eq!(
+        csv.lines().count(),
+        1 + rows.len() + rows.len() - 6,
+        "second run has no tess rows"
+    );
+
+    // The report alone, published elsewhere with its plot link adjusted.
+    std::fs::create_dir(dir.path().join("docs")).unwrap();
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "bench",
+            "--report-only",
+            "--out",
+            "out",
+            "--publish",
+            "docs/B.md",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let published = std::fs::read_to_string(dir.path().join("docs/B.md")).unwrap();
+    assert!(published.contains("](../out/pareto.png)"));
+}
+
+#[test]
+fn bench_refuses_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let fail = |args: &[&str], needle: &str| {
+        let out = vkterrain(dir.path(), args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+    };
+    fail(
+        &["bench", "--out", "o", "--frames", "2"],
+        "give 0 or at least 3",
+    );
+    fail(
+        &["bench", "--out", "o", "--frames", "x"],
+        "not a frame count",
+    );
+    fail(
+        &["bench", "--report-only", "--out", "o"],
+        "no results.json to report on",
+    );
+    std::fs::create_dir(dir.path().join("bad")).unwrap();
+    std::fs::write(dir.path().join("bad/results.json"), "[1, 2]").unwrap();
+    fail(
+        &["bench", "--out", "bad"],
+        "not the results of an earlier run",
+    );
+    fail(&["bench"], "--out");
+}
