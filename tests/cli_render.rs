@@ -328,3 +328,89 @@ fn without_tessellation_render_falls_back_to_geomip_and_says_so() {
         serde_json::from_str(&ok(&vkterrain(dir.path(), &["info", "--no-tessellation"]))).unwrap();
     assert_eq!(info["device"]["tessellation_shader"], false);
 }
+
+#[test]
+fn each_missing_feature_still_renders_and_says_what_is_off() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let cases: [(&str, &[&str], &str); 5] = [
+        ("tessellation", &[], "falling back to the geomip path"),
+        (
+            "fill-mode-non-solid",
+            &["--wireframe"],
+            "drawing filled instead of wireframe",
+        ),
+        (
+            "pipeline-statistics",
+            &[],
+            "triangle counts are not measured",
+        ),
+        ("sampler-anisotropy", &[], ""),
+        ("timestamps", &[], "GPU time is not measured"),
+    ];
+    for (feature, extra, note) in cases {
+        let mut args = vec![
+            "render",
+            "--validate",
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--out",
+            "f.png",
+            "--stats",
+            "s.json",
+            "--without",
+            feature,
+        ];
+        args.extend_from_slice(extra);
+        let stdout = ok(&vkterrain(dir.path(), &args));
+        assert!(stdout.contains(note), "{feature}: {stdout}");
+        assert!(
+            stdout.contains("0 validation messages"),
+            "{feature}: {stdout}"
+        );
+        let s = stats(&dir.path().join("s.json"));
+        let image = image::open(dir.path().join("f.png")).unwrap().to_rgba8();
+        assert!(
+            image.pixels().any(|p| p.0 != image.get_pixel(0, 0).0),
+            "{feature}: the image shows something"
+        );
+        assert_eq!(s["validation_messages"], 0);
+        assert_eq!(
+            s["path"],
+            if feature == "tessellation" {
+                "geomip"
+            } else {
+                "tess"
+            }
+        );
+        // Unavailable figures are null, never zero.
+        assert_eq!(
+            s["triangles"].is_null(),
+            feature == "pipeline-statistics",
+            "{feature}"
+        );
+        assert_eq!(s["gpu_ms"].is_null(), feature == "timestamps", "{feature}");
+        let info: serde_json::Value =
+            serde_json::from_slice(&vkterrain(dir.path(), &["info", "--without", feature]).stdout)
+                .unwrap();
+        let missing = info["missing"].to_string();
+        let name = match feature {
+            "tessellation" => "tessellationShader",
+            "fill-mode-non-solid" => "fillModeNonSolid",
+            "pipeline-statistics" => "pipelineStatisticsQuery",
+            "sampler-anisotropy" => "samplerAnisotropy",
+            _ => "timestamps",
+        };
+        assert!(missing.contains(name), "{feature}: {missing}");
+    }
+    let err = vkterrain(
+        dir.path(),
+        &["render", "--out", "f.png", "--without", "warp-drive"],
+    );
+    assert!(!err.status.success());
+    assert!(String::from_utf8_lossy(&err.stderr).contains("warp-drive"));
+}

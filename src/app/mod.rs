@@ -54,8 +54,8 @@ pub struct DemoOptions {
     pub validate: bool,
     /// Eye height above the ground when walking.
     pub walk_height: f64,
-    /// Behave as if the device lacked tessellation shaders.
-    pub disable_tessellation: bool,
+    /// Features to behave as if the device lacked.
+    pub disabled: DisabledFeatures,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -251,10 +251,7 @@ impl Running {
         let instance =
             Instance::new(validate, surface_extensions(display)?).context("starting Vulkan")?;
         let surface = Surface::new(&instance, display, handle)?;
-        let disabled = DisabledFeatures {
-            tessellation_shader: options.disable_tessellation,
-        };
-        let device = match Device::new(&instance, &[ash::khr::swapchain::NAME], &disabled) {
+        let device = match Device::new(&instance, &[ash::khr::swapchain::NAME], &options.disabled) {
             Ok(d) => d,
             Err(e) => {
                 surface.destroy();

@@ -233,3 +233,44 @@ impl Default for SizeArgs {
         }
     }
 }
+
+/// An optional device feature `--without` can take away.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Feature {
+    /// tessellationShader: the tess path falls back to geomip.
+    Tessellation,
+    /// fillModeNonSolid: no wireframe.
+    FillModeNonSolid,
+    /// pipelineStatisticsQuery: triangle counts are unavailable.
+    PipelineStatistics,
+    /// samplerAnisotropy: textures are filtered without anisotropy.
+    SamplerAnisotropy,
+    /// Timestamp queries: GPU time is unavailable.
+    Timestamps,
+}
+
+/// Features to treat as missing, to run the fallbacks on any device.
+#[derive(Args, Clone, Debug, Default)]
+pub struct FeatureArgs {
+    /// Behave as if the device lacked FEATURE (repeat for more).
+    #[arg(long = "without", value_enum, value_name = "FEATURE")]
+    pub without: Vec<Feature>,
+
+    /// The same as --without tessellation: the tess path falls back to
+    /// geomip, as on a device without tessellation shaders.
+    #[arg(long)]
+    pub no_tessellation: bool,
+}
+
+impl FeatureArgs {
+    pub fn disabled(&self) -> crate::vk::DisabledFeatures {
+        let off = |f| self.without.contains(&f);
+        crate::vk::DisabledFeatures {
+            tessellation_shader: self.no_tessellation || off(Feature::Tessellation),
+            fill_mode_non_solid: off(Feature::FillModeNonSolid),
+            pipeline_statistics_query: off(Feature::PipelineStatistics),
+            sampler_anisotropy: off(Feature::SamplerAnisotropy),
+            timestamps: off(Feature::Timestamps),
+        }
+    }
+}

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::args::{SizeArgs, TerrainArgs};
+use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::report::{self, check_targets};
 use crate::bench::run::{configs, Bench, BenchOptions, Progress};
 use crate::scene::HeightmapSource;
 use crate::terrain::Terrain;
-use crate::vk::{DisabledFeatures, Gpu};
+use crate::vk::Gpu;
 
 fn parse_frames(s: &str) -> Result<usize, String> {
     let n: usize = s
@@ -74,9 +74,11 @@ pub struct BenchCmd {
     #[arg(long)]
     pub validate: bool,
 
-    /// Behave as if the device lacked tessellation shaders (no tess rows).
-    #[arg(long)]
-    pub no_tessellation: bool,
+    /// Features to behave as if the device lacked (without tessellation
+    /// there are no tess rows; without timestamps or statistics those
+    /// columns are empty).
+    #[command(flatten)]
+    pub features: FeatureArgs,
 }
 
 /// The progress bar; where stderr is no terminal (a log file, CI) the bar
@@ -139,13 +141,8 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
-    let gpu = Gpu::with_disabled(
-        cmd.validate,
-        &DisabledFeatures {
-            tessellation_shader: cmd.no_tessellation,
-        },
-    )
-    .context("starting Vulkan")?;
+    let gpu =
+        Gpu::with_disabled(cmd.validate, &cmd.features.disabled()).context("starting Vulkan")?;
     let tessellation = gpu.device.caps.tessellation_shader;
     if !tessellation {
         writeln!(

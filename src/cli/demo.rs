@@ -96,7 +96,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         },
         validate: cmd.validate,
         walk_height: cmd.walk_height,
-        disable_tessellation: cmd.view.no_tessellation,
+        disabled: cmd.view.features.disabled(),
         frames: cmd.frames,
         resize_at: cmd.resize_at,
         screenshot: cmd.screenshot.clone(),

@@ -9,7 +9,9 @@ use clap::ValueEnum;
 use glam::DVec3;
 use serde::Serialize;
 
-use super::args::{parse_color, parse_dvec3, parse_fov, parse_range, SizeArgs, TerrainArgs};
+use super::args::{
+    parse_color, parse_dvec3, parse_fov, parse_range, FeatureArgs, SizeArgs, TerrainArgs,
+};
 use crate::output::{save_png, write_atomically};
 use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
@@ -141,10 +143,8 @@ pub struct ViewArgs {
     #[arg(long)]
     pub no_morph: bool,
 
-    /// Behave as if the device lacked tessellation shaders (the tess path
-    /// then falls back to geomip, as on such a device).
-    #[arg(long)]
-    pub no_tessellation: bool,
+    #[command(flatten)]
+    pub features: FeatureArgs,
 }
 
 impl ViewArgs {
@@ -303,17 +303,27 @@ pub fn render_scene(
     width: u32,
     height: u32,
     validate: bool,
-    disable_tessellation: bool,
+    disabled: &DisabledFeatures,
 ) -> Result<RenderOutput> {
     let info = scene.terrain_info()?;
     let camera = camera.apply(scene.camera_for(&info))?;
     let terrain = Terrain::new(info, 0.0)?;
-    let disabled = DisabledFeatures {
-        tessellation_shader: disable_tessellation,
-    };
-    let gpu = Gpu::with_disabled(validate, &disabled).context("starting Vulkan")?;
+    let gpu = Gpu::with_disabled(validate, disabled).context("starting Vulkan")?;
     let mut notes = Vec::new();
     let settings = &with_fallback(*settings, &gpu.device.caps, &mut notes);
+    let caps = &gpu.device.caps;
+    if !caps.pipeline_statistics_query {
+        notes.push(format!(
+            "{}: pipelineStatisticsQuery is unavailable, so triangle counts are not measured",
+            caps.device_name
+        ));
+    }
+    if caps.timestamp_period_ns.is_none() {
+        notes.push(format!(
+            "{}: timestamp queries are unavailable, so GPU time is not measured",
+            caps.device_name
+        ));
+    }
     let mut renderer = TerrainRenderer::new(
         &gpu,
         &terrain,
@@ -383,7 +393,7 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         cmd.size.width,
         cmd.size.height,
         cmd.validate,
-        cmd.view.no_tessellation,
+        &cmd.view.features.disabled(),
     )?;
     for note in &output.notes {
         writeln!(out, "{note}")?;
@@ -430,9 +440,8 @@ pub struct InfoCmd {
     #[arg(long)]
     pub validate: bool,
 
-    /// Behave as if the device lacked tessellation shaders.
-    #[arg(long)]
-    pub no_tessellation: bool,
+    #[command(flatten)]
+    pub features: FeatureArgs,
 }
 
 #[derive(Serialize)]
@@ -444,10 +453,8 @@ struct InfoReport<'a> {
 }
 
 pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
-    let disabled = DisabledFeatures {
-        tessellation_shader: cmd.no_tessellation,
-    };
-    let gpu = Gpu::with_disabled(cmd.validate, &disabled).context("starting Vulkan")?;
+    let gpu =
+        Gpu::with_disabled(cmd.validate, &cmd.features.disabled()).context("starting Vulkan")?;
     let caps = &gpu.device.caps;
     let optional = [
         (
@@ -458,6 +465,10 @@ pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
         (
             "pipelineStatisticsQuery (triangle counts)",
             caps.pipeline_statistics_query,
+        ),
+        (
+            "samplerAnisotropy (texture filtering)",
+            caps.sampler_anisotropy,
         ),
         ("timestamps (GPU time)", caps.timestamp_period_ns.is_some()),
     ];

@@ -49,13 +49,22 @@ pub enum RenderPath {
     Brute,
 }
 
-/// The tess path needs tessellation shaders; without them, geomip draws the
-/// same terrain. Says so in `notes`.
+/// What the device lacks changes what is drawn: without tessellation
+/// shaders geomip draws the same terrain, without fillModeNonSolid it is
+/// drawn filled. Says so in `notes`.
 pub fn with_fallback(
     settings: RenderSettings,
     caps: &crate::vk::Capabilities,
     notes: &mut Vec<String>,
 ) -> RenderSettings {
+    let mut settings = settings;
+    if settings.wireframe && !caps.fill_mode_non_solid {
+        notes.push(format!(
+            "{}: fillModeNonSolid is unavailable, drawing filled instead of wireframe",
+            caps.device_name
+        ));
+        settings.wireframe = false;
+    }
     if settings.path == RenderPath::Tess && !caps.tessellation_shader {
         notes.push(format!(
             "{}: tessellationShader is unavailable, falling back to the geomip path",

@@ -22,6 +22,9 @@ pub struct Capabilities {
     pub tessellation_shader: bool,
     pub fill_mode_non_solid: bool,
     pub pipeline_statistics_query: bool,
+    /// Anisotropic texture filtering (enabled when present; for textured
+    /// materials).
+    pub sampler_anisotropy: bool,
     /// Nanoseconds per timestamp tick, when the graphics queue has
     /// timestamps.
     pub timestamp_period_ns: Option<f32>,
@@ -57,6 +60,23 @@ pub struct Device {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct DisabledFeatures {
     pub tessellation_shader: bool,
+    pub fill_mode_non_solid: bool,
+    pub pipeline_statistics_query: bool,
+    pub sampler_anisotropy: bool,
+    pub timestamps: bool,
+}
+
+impl DisabledFeatures {
+    /// Clears what is disabled from `caps`.
+    pub fn apply(&self, caps: &mut Capabilities) {
+        caps.tessellation_shader &= !self.tessellation_shader;
+        caps.fill_mode_non_solid &= !self.fill_mode_non_solid;
+        caps.pipeline_statistics_query &= !self.pipeline_statistics_query;
+        caps.sampler_anisotropy &= !self.sampler_anisotropy;
+        if self.timestamps {
+            caps.timestamp_period_ns = None;
+        }
+    }
 }
 
 struct Candidate {
@@ -128,6 +148,7 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 tessellation_shader: features.tessellation_shader != 0,
                 fill_mode_non_solid: features.fill_mode_non_solid != 0,
                 pipeline_statistics_query: features.pipeline_statistics_query != 0,
+                sampler_anisotropy: features.sampler_anisotropy != 0,
                 timestamp_period_ns: timestamps.then_some(props.limits.timestamp_period),
                 timestamp_valid_bits: family.timestamp_valid_bits,
                 max_tessellation_level: props.limits.max_tessellation_generation_level,
@@ -157,7 +178,7 @@ impl Device {
             .filter_map(|&p| inspect(&instance.raw, p))
             .collect();
         for c in &mut candidates {
-            c.caps.tessellation_shader &= !disabled.tessellation_shader;
+            disabled.apply(&mut c.caps);
         }
         let best = candidates
             .into_iter()
@@ -167,7 +188,8 @@ impl Device {
         let features = vk::PhysicalDeviceFeatures::default()
             .tessellation_shader(caps.tessellation_shader)
             .fill_mode_non_solid(caps.fill_mode_non_solid)
-            .pipeline_statistics_query(caps.pipeline_statistics_query);
+            .pipeline_statistics_query(caps.pipeline_statistics_query)
+            .sampler_anisotropy(caps.sampler_anisotropy);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)
             .synchronization2(true);
