@@ -414,3 +414,60 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
     assert!(!err.status.success());
     assert!(String::from_utf8_lossy(&err.stderr).contains("warp-drive"));
 }
+
+#[test]
+fn a_gpu_memory_budget_refuses_the_resource_that_exceeds_it() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // The default scene's 1025x1025 float heightmap alone is 4 MiB.
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--gpu-memory-budget",
+            "3",
+            "--out",
+            "f.png",
+        ],
+    );
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("GPU memory for terrain.heightmap"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("budget of 3145728 bytes"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+    assert!(left.is_empty(), "no output file is left behind: {left:?}");
+    // Within budget it renders.
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--gpu-memory-budget",
+            "64",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--out",
+            "f.png",
+        ],
+    );
+    ok(&out);
+    for bad in ["0", "1.5", "x", "99999999999999999"] {
+        let out = vkterrain(
+            dir.path(),
+            &["render", "--gpu-memory-budget", bad, "--out", "g.png"],
+        );
+        assert!(!out.status.success(), "{bad}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains("--gpu-memory-budget"),
+            "{bad}"
+        );
+    }
+}

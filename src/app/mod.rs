@@ -56,6 +56,8 @@ pub struct DemoOptions {
     pub walk_height: f64,
     /// Features to behave as if the device lacked.
     pub disabled: DisabledFeatures,
+    /// Largest GPU memory to allocate, in bytes.
+    pub memory_budget: Option<u64>,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -258,6 +260,7 @@ impl Running {
                 return Err(e).context("opening the Vulkan device");
             }
         };
+        device.set_memory_budget(options.memory_budget);
         let gpu = Gpu { device, instance };
         if let Err(e) = surface.check_support(&gpu.device) {
             surface.destroy();

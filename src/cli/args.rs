@@ -260,9 +260,35 @@ pub struct FeatureArgs {
     /// geomip, as on a device without tessellation shaders.
     #[arg(long)]
     pub no_tessellation: bool,
+
+    /// Refuse to allocate more than this much GPU memory, with an error
+    /// naming the resource that would exceed it.
+    #[arg(long, value_name = "MIB", value_parser = parse_budget)]
+    pub gpu_memory_budget: Option<u64>,
+}
+
+fn parse_budget(s: &str) -> Result<u64, String> {
+    let mib: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("--gpu-memory-budget {s:?} is not a whole number of MiB"))?;
+    if mib == 0 {
+        return Err("--gpu-memory-budget must be at least 1 MiB".into());
+    }
+    mib.checked_mul(1 << 20)
+        .ok_or_else(|| format!("--gpu-memory-budget {s:?} MiB is too large"))
 }
 
 impl FeatureArgs {
+    /// Opens the device these options describe.
+    pub fn gpu(&self, validate: bool) -> anyhow::Result<crate::vk::Gpu> {
+        use anyhow::Context;
+        let gpu =
+            crate::vk::Gpu::with_disabled(validate, &self.disabled()).context("starting Vulkan")?;
+        gpu.device.set_memory_budget(self.gpu_memory_budget);
+        Ok(gpu)
+    }
+
     pub fn disabled(&self) -> crate::vk::DisabledFeatures {
         let off = |f| self.without.contains(&f);
         crate::vk::DisabledFeatures {

@@ -11,7 +11,6 @@ use crate::bench::report::{self, check_targets};
 use crate::bench::run::{configs, Bench, BenchOptions, Progress};
 use crate::scene::HeightmapSource;
 use crate::terrain::Terrain;
-use crate::vk::Gpu;
 
 fn parse_frames(s: &str) -> Result<usize, String> {
     let n: usize = s
@@ -141,8 +140,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
-    let gpu =
-        Gpu::with_disabled(cmd.validate, &cmd.features.disabled()).context("starting Vulkan")?;
+    let gpu = cmd.features.gpu(cmd.validate)?;
     let tessellation = gpu.device.caps.tessellation_shader;
     if !tessellation {
         writeln!(

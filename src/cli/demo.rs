@@ -97,6 +97,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         validate: cmd.validate,
         walk_height: cmd.walk_height,
         disabled: cmd.view.features.disabled(),
+        memory_budget: cmd.view.features.gpu_memory_budget,
         frames: cmd.frames,
         resize_at: cmd.resize_at,
         screenshot: cmd.screenshot.clone(),

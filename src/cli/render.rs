@@ -23,7 +23,7 @@ use crate::terrain::generate::{generate as generate_heightmap, write_png16, Gene
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{DistanceMode, Terrain};
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
-use crate::vk::{Capabilities, DisabledFeatures, Gpu};
+use crate::vk::Capabilities;
 
 /// Which way the terrain is drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -303,12 +303,12 @@ pub fn render_scene(
     width: u32,
     height: u32,
     validate: bool,
-    disabled: &DisabledFeatures,
+    features: &FeatureArgs,
 ) -> Result<RenderOutput> {
     let info = scene.terrain_info()?;
     let camera = camera.apply(scene.camera_for(&info))?;
     let terrain = Terrain::new(info, 0.0)?;
-    let gpu = Gpu::with_disabled(validate, disabled).context("starting Vulkan")?;
+    let gpu = features.gpu(validate)?;
     let mut notes = Vec::new();
     let settings = &with_fallback(*settings, &gpu.device.caps, &mut notes);
     let caps = &gpu.device.caps;
@@ -393,7 +393,7 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         cmd.size.width,
         cmd.size.height,
         cmd.validate,
-        &cmd.view.features.disabled(),
+        &cmd.view.features,
     )?;
     for note in &output.notes {
         writeln!(out, "{note}")?;
@@ -453,8 +453,7 @@ struct InfoReport<'a> {
 }
 
 pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
-    let gpu =
-        Gpu::with_disabled(cmd.validate, &cmd.features.disabled()).context("starting Vulkan")?;
+    let gpu = cmd.features.gpu(cmd.validate)?;
     let caps = &gpu.device.caps;
     let optional = [
         (

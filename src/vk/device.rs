@@ -53,6 +53,8 @@ pub struct Device {
     /// Bytes allocated per resource name, for memory reports.
     pub(super) memory: Mutex<BTreeMap<String, u64>>,
     pub(super) transient_pool: vk::CommandPool,
+    /// Largest bytes in use allowed; u64::MAX: no limit.
+    pub(super) memory_budget: std::sync::atomic::AtomicU64,
 }
 
 /// Features to treat as missing even where the device has them, to test
@@ -251,6 +253,7 @@ impl Device {
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             memory: Mutex::new(BTreeMap::new()),
             transient_pool,
+            memory_budget: std::sync::atomic::AtomicU64::new(u64::MAX),
         };
         device.set_name(device.raw.handle(), "vkterrain.device");
         device.set_name(device.queue, "vkterrain.queue");

@@ -23,6 +23,17 @@ pub enum VkError {
     #[error("{0}")]
     Unsupported(String),
 
+    #[error(
+        "GPU memory for {name}: {requested} bytes would bring the {in_use} in use past the \
+         budget of {budget} bytes (--gpu-memory-budget)"
+    )]
+    OverBudget {
+        name: String,
+        requested: u64,
+        in_use: u64,
+        budget: u64,
+    },
+
     #[error("GPU memory for {name}: {source}")]
     Allocation {
         name: String,

@@ -65,6 +65,17 @@ impl Device {
         location: MemoryLocation,
         linear: bool,
     ) -> Result<Allocation> {
+        if let Some(budget) = self.memory_budget() {
+            let in_use = self.memory_in_use();
+            if in_use.saturating_add(requirements.size) > budget {
+                return Err(VkError::OverBudget {
+                    name: name.to_string(),
+                    requested: requirements.size,
+                    in_use,
+                    budget,
+                });
+            }
+        }
         let allocation = self
             .allocator
             .lock()
@@ -142,6 +153,22 @@ impl Device {
             .filter(|(_, &b)| b > 0)
             .map(|(n, &b)| (n.clone(), b))
             .collect()
+    }
+
+    /// Refuses allocations that would bring the bytes in use past `budget`
+    /// (None: no limit), with an error naming the resource.
+    pub fn set_memory_budget(&self, budget: Option<u64>) {
+        self.memory_budget.store(
+            budget.unwrap_or(u64::MAX),
+            std::sync::atomic::Ordering::Relaxed,
+        );
+    }
+
+    pub fn memory_budget(&self) -> Option<u64> {
+        let b = self
+            .memory_budget
+            .load(std::sync::atomic::Ordering::Relaxed);
+        (b != u64::MAX).then_some(b)
     }
 
     /// Bytes currently allocated in all.
