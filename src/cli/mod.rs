@@ -18,6 +18,7 @@ use args::{parse_point, TerrainArgs};
 pub mod bench;
 pub mod demo;
 pub mod render;
+pub mod soak;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -50,6 +51,9 @@ pub enum Command {
     /// against the brute reference (results.csv/json, pareto.png,
     /// BENCHMARKS.md).
     Bench(bench::BenchCmd),
+    /// A long headless flythrough that switches paths and LOD modes,
+    /// checking that memory stays flat and validation stays clean.
+    Soak(soak::SoakCmd),
     /// Generate a fractal, eroded heightmap as a 16-bit PNG (the default
     /// scene's heightmap is `generate --out assets/heightmaps/default.png`).
     Generate(render::GenerateCmd),
@@ -97,6 +101,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
         Some(Command::Inspect(cmd)) => inspect(cmd, out),
         Some(Command::Generate(cmd)) => render::generate(cmd, out),
         Some(Command::Bench(cmd)) => bench::bench(cmd, out),
+        Some(Command::Soak(cmd)) => soak::soak(cmd, out),
     }
 }
 

@@ -49,6 +49,24 @@ impl Gpu {
     pub fn validation_messages(&self) -> u32 {
         self.instance.validation_log().count()
     }
+
+    /// Tears everything down and returns how many validation messages were
+    /// reported by the end, the device's destruction included (objects
+    /// still alive then are reported as leaks), with the first ones' text.
+    pub fn shutdown(self) -> (u32, Vec<String>) {
+        let _ = self.device.wait_idle();
+        let this = std::mem::ManuallyDrop::new(self);
+        // SAFETY: `this` is wrapped in ManuallyDrop and never touched again,
+        // so each field is moved out exactly once and dropped exactly once,
+        // in the order `Drop` would use (device, then instance).
+        let (device, instance) =
+            unsafe { (std::ptr::read(&this.device), std::ptr::read(&this.instance)) };
+        drop(device);
+        let log = instance.validation_log();
+        let reported = (log.count(), log.messages());
+        drop(instance);
+        reported
+    }
 }
 
 impl Drop for Gpu {

@@ -1,0 +1,238 @@
+//! `soak`: a long headless flythrough that switches paths and LOD modes on
+//! the way, watching resident memory and the allocator for growth.
+
+use std::io::Write;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
+use crate::bench::cameras::flythrough;
+use crate::render::{
+    with_fallback, Headless, LodMetric, RenderPath, RenderSettings, RendererOptions,
+    TerrainRenderer,
+};
+use crate::terrain::Terrain;
+use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
+
+fn parse_soak_frames(s: &str) -> Result<u64, String> {
+    let n: u64 = s
+        .parse()
+        .map_err(|_| format!("--frames {s:?} is not a frame count"))?;
+    if n == 0 {
+        return Err("--frames must be at least 1".into());
+    }
+    Ok(n)
+}
+
+#[derive(clap::Args, Debug)]
+pub struct SoakCmd {
+    #[command(flatten)]
+    pub terrain: TerrainArgs,
+
+    #[command(flatten)]
+    pub size: SizeArgs,
+
+    #[command(flatten)]
+    pub features: FeatureArgs,
+
+    /// Frames to render.
+    #[arg(long, value_name = "N", value_parser = parse_soak_frames)]
+    pub frames: u64,
+
+    /// Frames of the looping flythrough.
+    #[arg(long, value_name = "N", default_value_t = 400)]
+    pub loop_frames: usize,
+
+    /// Where memory is first measured; growth is counted from here.
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    pub baseline_frame: u64,
+
+    /// Largest allowed growth of resident and allocator memory, percent.
+    #[arg(long, value_name = "PERCENT", default_value_t = 1.0)]
+    pub max_growth: f64,
+
+    /// Where to write the report as JSON.
+    #[arg(long, value_name = "PATH")]
+    pub report: Option<std::path::PathBuf>,
+
+    /// Turn on the Vulkan validation layer.
+    #[arg(long)]
+    pub validate: bool,
+}
+
+/// What a soak run measured.
+#[derive(Serialize, Debug, Clone, PartialEq)]
+pub struct SoakReport {
+    pub device: String,
+    pub frames: u64,
+    pub baseline_frame: u64,
+    pub resident_bytes_at_baseline: u64,
+    pub resident_bytes_at_end: u64,
+    pub allocator_bytes_at_baseline: u64,
+    pub allocator_bytes_at_end: u64,
+    pub resident_growth_percent: f64,
+    pub allocator_growth_percent: f64,
+    pub validation_enabled: bool,
+    pub validation_messages: u32,
+    pub seconds: f64,
+}
+
+/// Resident set size of this process: VmRSS in /proc/self/status (Linux).
+fn resident_bytes() -> Result<u64> {
+    let status =
+        std::fs::read_to_string("/proc/self/status").context("reading /proc/self/status")?;
+    let kib: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .context("/proc/self/status has no VmRSS line")?;
+    Ok(kib * 1024)
+}
+
+/// The settings of frame `i`: the path and LOD mode change every 50 frames,
+/// cycling through every combination the device supports.
+fn settings_for(i: u64, paths: &[RenderPath]) -> RenderSettings {
+    let phase = i / 50;
+    let path = paths[(phase as usize) % paths.len()];
+    let lod_metric = match (phase / paths.len() as u64) % 3 {
+        0 => LodMetric::Distance,
+        1 => LodMetric::Error(1.0),
+        _ => LodMetric::Error(4.0),
+    };
+    RenderSettings {
+        path,
+        lod_metric,
+        geomorph: phase % 2 == 0,
+        ..RenderSettings::default()
+    }
+}
+
+fn growth(from: u64, to: u64) -> f64 {
+    if from == 0 {
+        return 0.0;
+    }
+    100.0 * (to as f64 - from as f64) / from as f64
+}
+
+pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
+    if cmd.loop_frames < 3 {
+        bail!("--loop-frames {} must be at least 3", cmd.loop_frames);
+    }
+    let scene = cmd.terrain.scene()?;
+    let info = scene.terrain_info()?;
+    let cameras = flythrough(&info, cmd.loop_frames);
+    let terrain = Terrain::new(info, 0.0)?;
+    let gpu = cmd.features.gpu(cmd.validate)?;
+    let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
+    if gpu.device.caps.tessellation_shader {
+        paths.insert(0, RenderPath::Tess);
+    }
+    let mut notes = Vec::new();
+    let _ = with_fallback(RenderSettings::default(), &gpu.device.caps, &mut notes);
+    for note in notes {
+        writeln!(out, "{note}")?;
+    }
+    let mut renderer = TerrainRenderer::new(
+        &gpu,
+        &terrain,
+        OFFSCREEN_COLOR_FORMAT,
+        1,
+        &RendererOptions {
+            paths: paths.clone(),
+            wireframe: false,
+        },
+    )
+    .context("preparing the terrain for the GPU")?;
+    let mut headless = match Headless::new(&gpu, cmd.size.width, cmd.size.height) {
+        Ok(h) => h,
+        Err(e) => {
+            renderer.destroy(&gpu.device);
+            return Err(e).context("creating the offscreen target");
+        }
+    };
+    let start = std::time::Instant::now();
+    let baseline_frame = cmd.baseline_frame.min(cmd.frames - 1);
+    let mut baseline = (0, 0);
+    let run = (|| -> Result<()> {
+        for i in 0..cmd.frames {
+            let camera = &cameras[(i % cameras.len() as u64) as usize];
+            let settings = settings_for(i, &paths);
+            headless
+                .render(&gpu, &mut renderer, &terrain, camera, &settings)
+                .with_context(|| format!("frame {i}"))?;
+            if i == baseline_frame {
+                baseline = (resident_bytes()?, gpu.device.memory_in_use());
+            }
+        }
+        Ok(())
+    })();
+    let end = (resident_bytes()?, gpu.device.memory_in_use());
+    headless.destroy(&gpu);
+    renderer.destroy(&gpu.device);
+    run?;
+    let report = SoakReport {
+        device: gpu.device.caps.device_name.clone(),
+        frames: cmd.frames,
+        baseline_frame,
+        resident_bytes_at_baseline: baseline.0,
+        resident_bytes_at_end: end.0,
+        allocator_bytes_at_baseline: baseline.1,
+        allocator_bytes_at_end: end.1,
+        resident_growth_percent: growth(baseline.0, end.0),
+        allocator_growth_percent: growth(baseline.1, end.1),
+        validation_enabled: gpu.instance.validation_enabled(),
+        validation_messages: 0,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    // Leaked objects are reported when the device goes, so the count is
+    // taken after it.
+    let (count, messages) = gpu.shutdown();
+    let report = SoakReport {
+        validation_messages: count,
+        ..report
+    };
+    if let Some(path) = &cmd.report {
+        let json = serde_json::to_string_pretty(&report)? + "\n";
+        crate::output::write_atomically(path, |tmp| {
+            std::fs::write(tmp, json)
+                .with_context(|| format!("{}: cannot write the report", path.display()))
+        })?;
+    }
+    writeln!(
+        out,
+        "{} frames in {:.0} s on {}: resident {} -> {} bytes ({:+.3} %), allocator {} -> {} bytes ({:+.3} %) from frame {}, {} validation messages{}",
+        report.frames,
+        report.seconds,
+        report.device,
+        report.resident_bytes_at_baseline,
+        report.resident_bytes_at_end,
+        report.resident_growth_percent,
+        report.allocator_bytes_at_baseline,
+        report.allocator_bytes_at_end,
+        report.allocator_growth_percent,
+        report.baseline_frame,
+        report.validation_messages,
+        if report.validation_enabled { "" } else { " (validation off)" }
+    )?;
+    if report.validation_messages > 0 {
+        bail!(
+            "the validation layer reported {} messages, first: {}",
+            report.validation_messages,
+            messages.first().map_or("", String::as_str)
+        );
+    }
+    for (what, g) in [
+        ("resident memory", report.resident_growth_percent),
+        ("allocator memory", report.allocator_growth_percent),
+    ] {
+        if g >= cmd.max_growth {
+            bail!(
+                "{what} grew by {g:.3} % from frame {} to the end, over the {} % allowed",
+                report.baseline_frame,
+                cmd.max_growth
+            );
+        }
+    }
+    Ok(())
+}
