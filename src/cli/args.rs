@@ -34,9 +34,14 @@ pub fn parse_size(s: &str) -> Result<(u64, u64), String> {
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("size {s:?} is not of the form WxD (for example 403x344)"))?;
     let dim = |v: &str, name: &str| {
-        v.trim()
+        let n = v
+            .trim()
             .parse::<u64>()
-            .map_err(|_| format!("size {s:?}: {name} {v:?} is not a whole number"))
+            .map_err(|_| format!("size {s:?}: {name} {v:?} is not a whole number"))?;
+        if n < 2 {
+            return Err(format!("size {s:?}: {name} must be at least 2 samples"));
+        }
+        Ok(n)
     };
     Ok((dim(w, "width")?, dim(d, "depth")?))
 }
@@ -82,6 +87,9 @@ pub fn parse_range(s: &str) -> Result<(f32, f32), String> {
         .split_once(',')
         .ok_or_else(|| format!("{s:?} is not of the form MIN,MAX"))?;
     let (a, b) = (parse_f64(a, "min")? as f32, parse_f64(b, "max")? as f32);
+    if !a.is_finite() || !b.is_finite() {
+        return Err(format!("{s:?} is out of range"));
+    }
     if a <= b {
         Ok((a, b))
     } else {
@@ -101,9 +109,10 @@ pub fn parse_color(s: &str) -> Result<[f32; 3], String> {
 
 /// A field of view in degrees, strictly between 0 and 180.
 pub fn parse_fov(s: &str) -> Result<f32, String> {
-    let v = parse_f64(s, "field of view")?;
+    // Checked after narrowing: 1e-50 is positive, but not as an f32.
+    let v = parse_f64(s, "field of view")? as f32;
     if v > 0.0 && v < 180.0 {
-        Ok(v as f32)
+        Ok(v)
     } else {
         Err(format!(
             "field of view {s:?} must be between 0 and 180 degrees"
@@ -299,4 +308,41 @@ impl FeatureArgs {
             timestamps: off(Feature::Timestamps),
         }
     }
+}
+
+/// Feeds untrusted `text` to every numeric argument parser, and as a whole
+/// command line (split at whitespace) to clap, checking that what parses is
+/// finite. The fuzz target (fuzz/) and its regression tests call this.
+pub fn fuzz_parse(text: &str) {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if let Ok(v) = parse_finite(text) {
+        assert!(v.is_finite());
+    }
+    if let Ok((w, d)) = parse_size(text) {
+        assert!(w >= 2 && d >= 2);
+    }
+    for parsed in [parse_point(text), parse_spacing(text)]
+        .into_iter()
+        .flatten()
+    {
+        assert!(finite(&[parsed.x, parsed.y]));
+    }
+    if let Ok(p) = parse_dvec3(text) {
+        assert!(finite(&[p.x, p.y, p.z]));
+    }
+    if let Ok((a, b)) = parse_range(text) {
+        assert!(a.is_finite() && b.is_finite() && a <= b);
+    }
+    if let Ok(c) = parse_color(text) {
+        assert!(c.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+    if let Ok(f) = parse_fov(text) {
+        assert!(f > 0.0 && f < 180.0);
+    }
+    if let Ok(p) = parse_pixels(text) {
+        assert!(p > 0);
+    }
+    use clap::Parser;
+    let args = std::iter::once("vkterrain").chain(text.split_whitespace());
+    let _ = super::Cli::try_parse_from(args);
 }

@@ -657,3 +657,43 @@ fn decode_png(
     };
     Ok((w as usize, h as usize, heights))
 }
+
+/// Loads untrusted `data` as `format` with options drawn from its first
+/// three bytes (a size for headerless data or none, a height scale,
+/// smoothing and luminance), then checks what a successful load promises:
+/// at least 2x2 samples within the sample limit, all finite. Returns whether
+/// it loaded. The fuzz targets (fuzz/) and their regression tests call this.
+pub fn fuzz_load(data: &[u8], format: HeightmapFormat) -> bool {
+    /// Small enough that a fuzzer's size bytes cannot exhaust memory.
+    const FUZZ_MAX_SAMPLES: u64 = 1 << 22;
+    let (head, body) = data.split_at(data.len().min(3));
+    let byte = |i: usize| head.get(i).copied().unwrap_or(0);
+    let opts = LoadOptions {
+        format: Some(format),
+        size: (byte(0) & 1 == 0).then(|| (u64::from(byte(0) >> 1) + 1, u64::from(byte(1)) + 1)),
+        height_scale: [1.0, 65535.0, -3.5, 1e30][usize::from(byte(2) & 3)],
+        height_offset: 0.0,
+        smooth: byte(2) & 4 != 0,
+        luminance: byte(2) & 8 != 0,
+        max_samples: FUZZ_MAX_SAMPLES,
+    };
+    match Heightmap::from_bytes(body, format, &opts, Path::new("fuzz-input")) {
+        Ok(map) => {
+            assert!(
+                map.width() >= 2 && map.depth() >= 2,
+                "a map smaller than 2x2"
+            );
+            assert!(
+                (map.width() * map.depth()) as u64 <= FUZZ_MAX_SAMPLES,
+                "the sample limit was passed"
+            );
+            assert_eq!(map.heights().len(), map.width() * map.depth());
+            assert!(
+                map.heights().iter().all(|h| h.is_finite()),
+                "a non-finite height"
+            );
+            true
+        }
+        Err(_) => false,
+    }
+}
