@@ -3,10 +3,8 @@
 
 mod common;
 
-use std::path::Path;
-use std::process::{Command, Output};
-
 use common::gpu::skip_gpu;
+use common::vkterrain_in as vkterrain;
 use common::*;
 use glam::DVec2;
 use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row};
@@ -121,14 +119,6 @@ fn a_quick_run_measures_every_configuration() {
             assert!(r.triangles.unwrap() <= brute_tris, "{}", r.config);
         }
     }
-}
-
-fn vkterrain(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("the binary runs")
 }
 
 #[test]

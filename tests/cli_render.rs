@@ -7,15 +7,8 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 use common::gpu::skip_gpu;
+use common::vkterrain_in as vkterrain;
 use common::*;
-
-fn vkterrain(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
 
 fn ok(out: &Output) -> String {
     assert!(
