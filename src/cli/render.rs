@@ -283,6 +283,34 @@ pub struct FrameStats {
     pub eye: [f64; 3],
     pub target: [f64; 3],
     pub fov_deg: f32,
+    pub startup: StartupStats,
+}
+
+/// Where the time before the first frame went, in milliseconds.
+#[derive(Serialize, Debug, Clone, Copy, Default, PartialEq)]
+pub struct StartupStats {
+    /// Reading and decoding the heightmap.
+    pub load_ms: f64,
+    /// Per-patch Y bounds and control points.
+    pub bounds_ms: f64,
+    /// The per-patch error table.
+    pub error_table_ms: f64,
+    /// Uploads to the GPU and pipeline creation (the rest of building the
+    /// renderer).
+    pub gpu_setup_ms: f64,
+    /// Resident memory of the process after the first frame, in bytes
+    /// (Linux; 0 where unknown).
+    pub resident_bytes: u64,
+}
+
+/// Resident set size of this process: VmRSS in /proc/self/status (Linux).
+pub fn resident_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kib: u64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmRSS:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())?;
+    Some(kib * 1024)
 }
 
 /// Everything one headless render produces.
@@ -305,9 +333,14 @@ pub fn render_scene(
     validate: bool,
     features: &FeatureArgs,
 ) -> Result<RenderOutput> {
+    let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
+    let started = std::time::Instant::now();
     let info = scene.terrain_info()?;
+    let load_ms = ms(started);
     let camera = camera.apply(scene.camera_for(&info))?;
+    let started = std::time::Instant::now();
     let terrain = Terrain::new(info, 0.0)?;
+    let bounds_ms = ms(started);
     let gpu = features.gpu(validate)?;
     let mut notes = Vec::new();
     let settings = &with_fallback(*settings, &gpu.device.caps, &mut notes);
@@ -324,6 +357,7 @@ pub fn render_scene(
             caps.device_name
         ));
     }
+    let started = std::time::Instant::now();
     let mut renderer = TerrainRenderer::new(
         &gpu,
         &terrain,
@@ -335,6 +369,8 @@ pub fn render_scene(
         },
     )
     .context("preparing the terrain for the GPU")?;
+    let error_table_ms = renderer.error_table_ms();
+    let gpu_setup_ms = ms(started) - error_table_ms;
     let mut headless = match Headless::new(&gpu, width, height) {
         Ok(h) => h,
         Err(e) => {
@@ -372,6 +408,13 @@ pub fn render_scene(
         eye: camera.eye.to_array(),
         target: camera.target.to_array(),
         fov_deg: camera.fov_y_deg,
+        startup: StartupStats {
+            load_ms,
+            bounds_ms,
+            error_table_ms,
+            gpu_setup_ms,
+            resident_bytes: resident_bytes().unwrap_or(0),
+        },
     };
     let validation_log = gpu.instance.validation_log().messages();
     Ok(RenderOutput {

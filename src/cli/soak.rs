@@ -78,16 +78,8 @@ pub struct SoakReport {
     pub seconds: f64,
 }
 
-/// Resident set size of this process: VmRSS in /proc/self/status (Linux).
 fn resident_bytes() -> Result<u64> {
-    let status =
-        std::fs::read_to_string("/proc/self/status").context("reading /proc/self/status")?;
-    let kib: u64 = status
-        .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))
-        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
-        .context("/proc/self/status has no VmRSS line")?;
-    Ok(kib * 1024)
+    super::render::resident_bytes().context("reading VmRSS from /proc/self/status")
 }
 
 /// The settings of frame `i`: the path and LOD mode change every 50 frames,

@@ -171,6 +171,9 @@ pub struct TerrainRenderer {
     color_format: vk::Format,
     max_patches_per_draw: Option<u32>,
     frames: Vec<FrameSlot>,
+    /// Milliseconds spent computing the error table in `new` (0 when no
+    /// path needs it).
+    error_table_ms: f64,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -258,8 +261,10 @@ impl TerrainRenderer {
         // table (7 floats a patch).
         // Both the tess path's error-bounded factors and the geomip path's
         // error LOD need the table; it is computed once for either.
+        let table_start = std::time::Instant::now();
         let table =
             (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_table());
+        let error_table_ms = table_start.elapsed().as_secs_f64() * 1e3;
         let error_table = if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
             bindings.push((
                 BINDING_ERROR_TABLE,
@@ -328,6 +333,7 @@ impl TerrainRenderer {
             color_format,
             max_patches_per_draw: device.caps.max_patches_per_draw,
             frames,
+            error_table_ms,
         };
         // From here on, a failure tears down what was built.
         let built = (|| {
@@ -363,6 +369,11 @@ impl TerrainRenderer {
                 Err(e)
             }
         }
+    }
+
+    /// Milliseconds `new` spent computing the per-patch error table.
+    pub fn error_table_ms(&self) -> f64 {
+        self.error_table_ms
     }
 
     pub fn color_format(&self) -> vk::Format {
