@@ -110,13 +110,16 @@ fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
         }
     }
     let (l, fx, fz) = (level as f64, nx as f64, nz as f64);
-    // The bound at patch-relative sample coordinates (col, row) whose
+    // Quad index and fraction of a patch-relative coordinate along an axis
+    // of `cells` cells.
+    let locate = |x: f64, cells: f64| {
+        let u = x * l / cells;
+        let k = (u as usize).min(level - 1);
+        (k, u - k as f64)
+    };
+    // The bound at a point in quad (i, j) at fractions (fu, fv), whose
     // surface height is `surface`.
-    let bound = |col: f64, row: f64, surface: f64| {
-        let (u, v) = (col * l / fx, row * l / fz);
-        let j = (u as usize).min(level - 1);
-        let i = (v as usize).min(level - 1);
-        let (fu, fv) = (u - j as f64, v - i as f64);
+    let bound = |(i, fv): (usize, f64), (j, fu): (usize, f64), surface: f64| {
         let v00 = vertices[i * stride + j];
         let v01 = vertices[i * stride + j + 1];
         let v10 = vertices[(i + 1) * stride + j];
@@ -126,25 +129,32 @@ fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
         let bilinear = top + fv * (bottom - top);
         (surface - bilinear).abs() + 0.25 * (v00 + v11 - v01 - v10).abs()
     };
+    let sample_cols: Vec<_> = (0..=nx).map(|c| locate(c as f64, fx)).collect();
+    let centre_cols: Vec<_> = (0..nx).map(|c| locate(c as f64 + 0.5, fx)).collect();
     let mut worst = 0.0f64;
     for r in 0..=nz {
-        let row = map.row(rect.row0 + r);
-        for c in 0..=nx {
-            worst = worst.max(bound(c as f64, r as f64, f64::from(row[rect.col0 + c])));
+        let at = locate(r as f64, fz);
+        let row = &map.row(rect.row0 + r)[rect.col0..=rect.col1];
+        for (&h, &col) in row.iter().zip(&sample_cols) {
+            worst = worst.max(bound(at, col, f64::from(h)));
         }
     }
     for r in 0..nz {
-        for c in 0..nx {
-            let (col, row) = (c as f64 + 0.5, r as f64 + 0.5);
-            let surface = map.interpolate(rect.col0 as f64 + col, rect.row0 as f64 + row);
-            worst = worst.max(bound(col, row, surface));
+        let at = locate(r as f64 + 0.5, fz);
+        let top = &map.row(rect.row0 + r)[rect.col0..=rect.col1];
+        let below = &map.row(rect.row0 + r + 1)[rect.col0..=rect.col1];
+        for (c, &col) in centre_cols.iter().enumerate() {
+            // A cell's centre lies on its split from upper-right to
+            // lower-left (`Heightmap::interpolate`).
+            let surface = 0.5 * (f64::from(top[c + 1]) + f64::from(below[c]));
+            worst = worst.max(bound(at, col, surface));
         }
     }
     for i in 0..level {
         for j in 0..level {
             let (col, row) = ((j as f64 + 0.5) * fx / l, (i as f64 + 0.5) * fz / l);
             let surface = map.interpolate(rect.col0 as f64 + col, rect.row0 as f64 + row);
-            worst = worst.max(bound(col, row, surface));
+            worst = worst.max(bound(locate(row, fz), locate(col, fx), surface));
         }
     }
     worst
