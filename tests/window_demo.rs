@@ -88,3 +88,52 @@ fn scripted_run_with_resizes_matches_the_headless_render() {
     let offscreen = image::open(&headless).unwrap().to_rgba8();
     assert_images_match("window-vs-headless", &window, &offscreen, 12, 0.005);
 }
+
+#[test]
+fn a_storm_of_resizes_and_minimises_stays_clean() {
+    if skip_gpu() {
+        return;
+    }
+    let out = Command::new("xvfb-run")
+        .args([
+            "-a",
+            "-s",
+            "-screen 0 1600x1200x24",
+            env!("CARGO_BIN_EXE_vkterrain"),
+            "demo",
+        ])
+        .args([
+            "--validate",
+            "--width",
+            "320",
+            "--height",
+            "200",
+            "--frames",
+            "260",
+        ])
+        .args(["--resize-storm", "200", "--exit"])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("rendered 260 frames"), "{stdout}");
+    assert!(stdout.contains("; 0 validation messages"), "{stdout}");
+    let builds: u32 = stdout
+        .split("swapchain built ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the run reports its swapchain builds");
+    assert!(
+        builds >= 150,
+        "only {builds} swapchain builds for 200 resizes"
+    );
+    // Back at the starting size at the end.
+    let sizes = stdout.lines().find(|l| l.contains("sizes ")).unwrap();
+    assert!(sizes.trim_end().ends_with("-> 320x200"), "{sizes}");
+}

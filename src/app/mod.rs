@@ -62,6 +62,9 @@ pub struct DemoOptions {
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
     pub resize_at: Option<u64>,
+    /// Request this many window sizes, one per redraw, including tiny ones
+    /// and a minimise every 25th, then go back to the starting size.
+    pub resize_storm: Option<u64>,
     /// Write the last frame here (with `frames`).
     pub screenshot: Option<PathBuf>,
 }
@@ -139,6 +142,8 @@ struct Running {
     screenshot_buffer: Option<Buffer>,
     frame: u64,
     rebuild: bool,
+    /// Resize-storm requests made so far.
+    storm_step: u64,
     controller: CameraController,
     keys: Keys,
     settings: RenderSettings,
@@ -291,6 +296,7 @@ impl Running {
             screenshots: 0,
             swapchains_built: 0,
             sizes: Vec::new(),
+            storm_step: 0,
             window,
             gpu,
         };
@@ -498,6 +504,38 @@ impl Running {
         )
     }
 
+    /// One step of `--resize-storm`: a new size (from 1x1 up to about twice
+    /// the starting size, by a fixed pseudo-random sequence) or, every 25th
+    /// step, a minimise that the next step undoes; after `count` steps, the
+    /// starting size again.
+    fn storm(&mut self, count: u64, options: &DemoOptions) {
+        let step = self.storm_step;
+        if step > count {
+            return;
+        }
+        self.storm_step += 1;
+        self.rebuild = true;
+        if step == count {
+            self.window.set_minimized(false);
+            let _ = self
+                .window
+                .request_inner_size(PhysicalSize::new(options.width, options.height));
+            return;
+        }
+        if step % 25 == 24 {
+            self.window.set_minimized(true);
+            return;
+        }
+        if step % 25 == 0 && step > 0 {
+            self.window.set_minimized(false);
+        }
+        let mut x = step.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        x ^= x >> 31;
+        let w = 1 + (x % u64::from(2 * options.width)) as u32;
+        let h = 1 + ((x >> 32) % u64::from(2 * options.height)) as u32;
+        let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop, options: &DemoOptions) -> Result<()> {
         let now = Instant::now();
         let dt = (now - self.last_tick).as_secs_f64().min(0.25);
@@ -523,6 +561,9 @@ impl Running {
                 let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
                 self.rebuild = true;
             }
+        }
+        if let Some(count) = options.resize_storm {
+            self.storm(count, options);
         }
         if self.rebuild {
             self.rebuild_swapchain(options)?;

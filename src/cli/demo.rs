@@ -47,6 +47,11 @@ pub struct DemoCmd {
     #[arg(long, value_name = "K", requires = "frames")]
     pub resize_at: Option<u64>,
 
+    /// Request N window sizes in a row, one per redraw (tiny ones and
+    /// minimises included), then go back to the starting size.
+    #[arg(long, value_name = "N", requires = "frames")]
+    pub resize_storm: Option<u64>,
+
     /// Write the last frame to this PNG.
     #[arg(long, value_name = "PATH", requires = "frames")]
     pub screenshot: Option<PathBuf>,
@@ -100,6 +105,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         memory_budget: cmd.view.features.gpu_memory_budget,
         frames: cmd.frames,
         resize_at: cmd.resize_at,
+        resize_storm: cmd.resize_storm,
         screenshot: cmd.screenshot.clone(),
     })?;
     let fps = summary.frames as f64 / summary.seconds.max(1e-9);
