@@ -8,6 +8,36 @@ use std::process::Command;
 
 use common::gpu::{assert_images_match, skip_gpu};
 
+/// Runs `vkterrain demo ARGS` under a fresh Xvfb and returns its stdout,
+/// failing the test unless it exits 0 after `frames` frames with no
+/// validation message.
+fn demo_under_xvfb(args: &[&str], frames: u32) -> String {
+    let out = Command::new("xvfb-run")
+        .args([
+            "-a",
+            "-s",
+            "-screen 0 1600x1200x24",
+            env!("CARGO_BIN_EXE_vkterrain"),
+            "demo",
+        ])
+        .args(args)
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "demo failed: {stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains(&format!("rendered {frames} frames")),
+        "{stdout}"
+    );
+    assert!(stdout.contains("; 0 validation messages"), "{stdout}");
+    stdout
+}
+
 #[test]
 fn scripted_run_with_resizes_matches_the_headless_render() {
     if skip_gpu() {
@@ -22,14 +52,7 @@ fn scripted_run_with_resizes_matches_the_headless_render() {
         "--fov",
         "60",
     ];
-    let mut args = vec![
-        "-a",
-        "-s",
-        "-screen 0 1600x1200x24",
-        env!("CARGO_BIN_EXE_vkterrain"),
-        "demo",
-        "--validate",
-    ];
+    let mut args = vec!["--validate"];
     args.extend(camera);
     args.extend([
         "--width",
@@ -43,19 +66,7 @@ fn scripted_run_with_resizes_matches_the_headless_render() {
         "--exit",
     ]);
     args.extend(["--screenshot", shot.to_str().unwrap()]);
-    let out = Command::new("xvfb-run")
-        .args(&args)
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert!(stdout.contains("rendered 24 frames"), "{stdout}");
-    assert!(stdout.contains("; 0 validation messages"), "{stdout}");
+    let stdout = demo_under_xvfb(&args, 24);
     // Resized to 2/3, to a tiny size, and back.
     assert!(
         stdout.contains("sizes 640x400 -> 426x266 -> 16x12 -> 640x400"),
@@ -94,15 +105,8 @@ fn a_storm_of_resizes_and_minimises_stays_clean() {
     if skip_gpu() {
         return;
     }
-    let out = Command::new("xvfb-run")
-        .args([
-            "-a",
-            "-s",
-            "-screen 0 1600x1200x24",
-            env!("CARGO_BIN_EXE_vkterrain"),
-            "demo",
-        ])
-        .args([
+    let stdout = demo_under_xvfb(
+        &[
             "--validate",
             "--width",
             "320",
@@ -110,19 +114,12 @@ fn a_storm_of_resizes_and_minimises_stays_clean() {
             "200",
             "--frames",
             "260",
-        ])
-        .args(["--resize-storm", "200", "--exit"])
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "demo failed: {stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
+            "--resize-storm",
+            "200",
+            "--exit",
+        ],
+        260,
     );
-    assert!(stdout.contains("rendered 260 frames"), "{stdout}");
-    assert!(stdout.contains("; 0 validation messages"), "{stdout}");
     let builds: u32 = stdout
         .split("swapchain built ")
         .nth(1)
