@@ -5,7 +5,7 @@ mod common;
 
 use common::gpu::*;
 use glam::DVec2;
-use vkterrain::bench::error::measure;
+use vkterrain::bench::error::{measure, DepthView};
 use vkterrain::render::{RenderPath, RenderSettings};
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
@@ -34,8 +34,8 @@ fn a_render_against_itself_has_no_error() {
     let cam = camera([-200.0, 150.0, -250.0], [0.0, 0.0, 0.0], 60.0);
     let a = scene.render(&cam, &brute());
     let stats = measure(
-        &depth_view(&a),
-        &depth_view(&a),
+        &DepthView::of(&a),
+        &DepthView::of(&a),
         f64::from(a.view.pixels_per_radian),
     );
     assert!(stats.pixels > 5000);
@@ -59,7 +59,7 @@ fn a_known_vertical_offset_gives_its_projected_size() {
     let reference = low.render(&cam, &brute());
     let tested = high.render(&cam, &brute());
     let k = f64::from(reference.view.pixels_per_radian);
-    let stats = measure(&depth_view(&tested), &depth_view(&reference), k);
+    let stats = measure(&DepthView::of(&tested), &DepthView::of(&reference), k);
     assert_eq!(stats.mismatched, 0);
     assert_eq!(stats.pixels, 160 * 120);
     // Every pixel: offset * K / distance to the reference surface.
@@ -97,7 +97,7 @@ fn coverage_mismatches_count_as_the_silhouette_shift() {
     let reference = here.render(&cam, &brute());
     let tested = there.render(&cam, &brute());
     let k = f64::from(reference.view.pixels_per_radian);
-    let stats = measure(&depth_view(&tested), &depth_view(&reference), k);
+    let stats = measure(&DepthView::of(&tested), &DepthView::of(&reference), k);
     let shift = 20.0 * k / 900.0;
     assert!(stats.mismatched > 0);
     assert!(

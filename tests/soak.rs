@@ -2,9 +2,6 @@
 //! flythrough with validation on, and memory stays flat.
 
 mod common;
-
-use std::process::Command;
-
 use common::gpu::skip_gpu;
 use common::*;
 
@@ -15,21 +12,30 @@ fn a_short_soak_is_clean_and_flat() {
     }
     let dir = tempfile::tempdir().unwrap();
     let scene = data_path("jacksboro_fault_dem.toml");
-    let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-        .current_dir(dir.path())
-        .args(["soak", "--scene", scene.to_str().unwrap(), "--validate"])
-        .args([
+    let scene = scene.to_str().unwrap();
+    let out = vkterrain_in(
+        dir.path(),
+        &[
+            "soak",
+            "--scene",
+            scene,
+            "--validate",
             "--frames",
             "360",
             "--baseline-frame",
             "120",
             "--loop-frames",
             "60",
-        ])
-        .args(["--width", "96", "--height", "64", "--max-growth", "5"])
-        .args(["--report", "soak.json"])
-        .output()
-        .unwrap();
+            "--width",
+            "96",
+            "--height",
+            "64",
+            "--max-growth",
+            "5",
+            "--report",
+            "soak.json",
+        ],
+    );
     assert!(
         out.status.success(),
         "{}",
@@ -58,10 +64,7 @@ fn soak_refuses_bad_arguments() {
         ),
         (&["soak"][..], "--frames"),
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
-            .args(args)
-            .output()
-            .unwrap();
+        let out = vkterrain_in(std::path::Path::new("."), args);
         assert!(!out.status.success(), "{args:?}");
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(stderr.contains(needle), "{args:?}: {stderr}");

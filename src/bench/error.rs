@@ -45,7 +45,17 @@ pub struct DepthView<'a> {
     pub view_proj: DMat4,
 }
 
-impl DepthView<'_> {
+impl<'a> DepthView<'a> {
+    /// A headless frame's depth, with the view-projection it was drawn with.
+    pub fn of(frame: &'a crate::render::HeadlessFrame) -> Self {
+        DepthView {
+            width: frame.readback.width as usize,
+            height: frame.readback.height as usize,
+            depth: &frame.readback.depth,
+            view_proj: frame.view.view_proj.as_dmat4(),
+        }
+    }
+
     /// Camera-relative position seen at pixel `i`'s centre, or None for sky.
     pub fn position(&self, inverse: &DMat4, i: usize) -> Option<DVec3> {
         let d = self.depth[i];

@@ -149,16 +149,35 @@ fn relative_link(from: &Path, to: &Path) -> String {
     parts.join("/")
 }
 
-/// Scene, device and camera of a group of rows, in first-seen order.
-fn groups(rows: &[Row]) -> Vec<(String, String, String)> {
+/// The distinct `key`s of `rows`, in first-seen order.
+pub fn first_seen<K: PartialEq>(rows: &[Row], key: impl Fn(&Row) -> K) -> Vec<K> {
     let mut seen = Vec::new();
     for r in rows {
-        let key = (r.scene.clone(), r.device.clone(), r.camera.clone());
-        if !seen.contains(&key) {
-            seen.push(key);
+        let k = key(r);
+        if !seen.contains(&k) {
+            seen.push(k);
         }
     }
     seen
+}
+
+/// Scene, device and camera: what one group of rows shares.
+type GroupKey = (String, String, String);
+
+/// Each group of rows, in first-seen order, with its key.
+fn groups(rows: &[Row]) -> Vec<(GroupKey, Vec<&Row>)> {
+    first_seen(rows, |r| {
+        (r.scene.clone(), r.device.clone(), r.camera.clone())
+    })
+    .into_iter()
+    .map(|key| {
+        let group = rows
+            .iter()
+            .filter(|r| (&r.scene, &r.device, &r.camera) == (&key.0, &key.1, &key.2))
+            .collect();
+        (key, group)
+    })
+    .collect()
 }
 
 /// What the targets come to on one camera's rows.
@@ -271,11 +290,7 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         "| scene | device | camera | error mode p99 (<= {TARGET_P99_PX} px) | brute / error triangles (>= {TARGET_TRIANGLES_VS_BRUTE}x) | brute / error GPU time (>= {TARGET_GPU_VS_BRUTE}x) | distance / error triangles at <= its error (>= {TARGET_DISTANCE_VS_ERROR}x) | error / oracle triangles (<= {TARGET_ERROR_VS_ORACLE}x) |"
     );
     let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
-    for (scene, device, camera) in groups(rows) {
-        let group: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.scene == scene && r.device == device && r.camera == camera)
-            .collect();
+    for ((scene, device, camera), group) in groups(rows) {
         let c = check_targets(&group);
         let distance = match (c.distance_vs_error, c.best_distance_p99) {
             (Some(v), _) => verdict(Some(v), TARGET_DISTANCE_VS_ERROR, true, "x"),
@@ -297,11 +312,7 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
     }
 
     let _ = writeln!(w, "## Results\n");
-    for (scene, device, camera) in groups(rows) {
-        let group: Vec<&Row> = rows
-            .iter()
-            .filter(|r| r.scene == scene && r.device == device && r.camera == camera)
-            .collect();
+    for ((scene, device, camera), group) in groups(rows) {
         let first = group[0];
         let _ = writeln!(
             w,
@@ -459,16 +470,7 @@ fn register_font() -> Result<()> {
 /// error, log-log, one colour per configuration family.
 pub fn pareto(rows: &[Row], path: &Path) -> Result<()> {
     register_font()?;
-    let panels: Vec<(String, String)> = {
-        let mut seen = Vec::new();
-        for r in rows {
-            let key = (r.scene.clone(), r.device.clone());
-            if !seen.contains(&key) {
-                seen.push(key);
-            }
-        }
-        seen
-    };
+    let panels = first_seen(rows, |r| (r.scene.clone(), r.device.clone()));
     let (w, h) = (1400u32, 520 * panels.len().max(1) as u32);
     let mut pixels = vec![255u8; (w * h * 3) as usize];
     {

@@ -310,13 +310,6 @@ impl<'a> Bench<'a> {
         Ok(bench)
     }
 
-    fn renderer(&mut self, path: RenderPath) -> &mut PathRenderer {
-        self.renderers
-            .iter_mut()
-            .find(|r| r.path == path)
-            .expect("a renderer is built for every configuration's path")
-    }
-
     fn render(
         &mut self,
         camera: &Camera,
@@ -326,11 +319,7 @@ impl<'a> Bench<'a> {
         let (gpu, terrain) = (self.gpu, self.terrain);
         let settings = config.settings(self.scene_lod);
         let headless = self.headless.as_mut().expect("built in new");
-        let target = self
-            .renderers
-            .iter_mut()
-            .find(|r| r.path == settings.path)
-            .expect("a renderer is built for every configuration's path");
+        let target = renderer_for(&mut self.renderers, settings.path);
         if settings.path == RenderPath::Geomip {
             target.renderer.set_geomip_levels(terrain, levels)?;
         }
@@ -388,7 +377,7 @@ impl<'a> Bench<'a> {
         let patches = grid.patch_count();
         let count = geomip::level_count(grid.cells_per_patch());
         let k = f64::from(reference.view.pixels_per_radian);
-        let reference_view = depth_view(reference);
+        let reference_view = DepthView::of(reference);
         let reference_patch = pixel_patches(terrain, camera, &reference_view);
         // [patch][level]: pixels, and pixels over each tau.
         let mut pixels = vec![0u32; patches * count];
@@ -397,7 +386,7 @@ impl<'a> Bench<'a> {
             let uniform = vec![level as u8; patches];
             let frame = self.render(camera, &Config::Oracle(0.0), Some(&uniform))?;
             progress.advance(message);
-            let tested = depth_view(&frame);
+            let tested = DepthView::of(&frame);
             let tested_patch = pixel_patches(terrain, camera, &tested);
             for e in pixel_errors(&tested, &reference_view, k) {
                 let Some(p) = reference_patch[e.index].or(tested_patch[e.index]) else {
@@ -472,7 +461,7 @@ impl<'a> Bench<'a> {
                 progress,
                 &message,
             )?;
-            let reference_view = depth_view(&reference);
+            let reference_view = DepthView::of(&reference);
             let k = f64::from(reference.view.pixels_per_radian);
             gathered[brute]
                 .1
@@ -503,7 +492,7 @@ impl<'a> Bench<'a> {
                     &message,
                 )?;
                 g.errors
-                    .add(&pixel_errors(&depth_view(&frame), &reference_view, k));
+                    .add(&pixel_errors(&DepthView::of(&frame), &reference_view, k));
             }
         }
         Ok(gathered)
@@ -556,7 +545,8 @@ impl<'a> Bench<'a> {
         for (name, cameras, repeats) in &views {
             for (config, mut g) in self.sequence(name, cameras, *repeats, configs, progress)? {
                 let stats = g.errors.stats();
-                let bytes = self.renderer(config.render_path()).bytes + self.target_bytes;
+                let bytes = renderer_for(&mut self.renderers, config.render_path()).bytes
+                    + self.target_bytes;
                 rows.push(Row {
                     scene: scene.to_string(),
                     device: device.clone(),
@@ -597,13 +587,11 @@ impl<'a> Bench<'a> {
     }
 }
 
-fn depth_view(frame: &HeadlessFrame) -> DepthView<'_> {
-    DepthView {
-        width: frame.readback.width as usize,
-        height: frame.readback.height as usize,
-        depth: &frame.readback.depth,
-        view_proj: frame.view.view_proj.as_dmat4(),
-    }
+fn renderer_for(renderers: &mut [PathRenderer], path: RenderPath) -> &mut PathRenderer {
+    renderers
+        .iter_mut()
+        .find(|r| r.path == path)
+        .expect("a renderer is built for every configuration's path")
 }
 
 /// The patch under each pixel's surface point (None for sky).

@@ -206,13 +206,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             " (validation off)"
         }
     )?;
-    let mut cameras: Vec<&str> = Vec::new();
-    for r in &rows {
-        if !cameras.contains(&r.camera.as_str()) {
-            cameras.push(&r.camera);
-        }
-    }
-    for camera in cameras {
+    for camera in report::first_seen(&rows, |r| r.camera.clone()) {
         let group: Vec<_> = rows.iter().filter(|r| r.camera == camera).collect();
         let c = check_targets(&group);
         let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.2}"));

@@ -127,8 +127,9 @@ struct GeomipGeometry {
     draws: Vec<GeomipDraw>,
     /// Per-patch errors of each level, for choosing levels by projected error.
     errors: ErrorTable,
-    /// Levels set from outside (`set_geomip_levels`) instead of chosen.
-    given: Option<Vec<u8>>,
+    /// Levels set from outside (`set_geomip_levels`) instead of chosen,
+    /// balanced, with no morph.
+    given: Option<geomip::PatchLevels>,
 }
 
 /// One patch of the geomip path: its index list and push constants.
@@ -429,7 +430,10 @@ impl TerrainRenderer {
                 }
                 let mut levels = levels.to_vec();
                 geomip::balance(&mut levels, grid);
-                Some(levels)
+                Some(geomip::PatchLevels {
+                    morph: vec![0.0; levels.len()],
+                    levels,
+                })
             }
         };
         Ok(())
@@ -773,12 +777,10 @@ impl GeomipGeometry {
     /// Levels by distance, balanced; the visible patches become this
     /// frame's draws, with their morph factors.
     fn choose(&mut self, terrain: &Terrain, view: &FrameView, settings: &RenderSettings) {
-        if let Some(levels) = &self.given {
-            let chosen = geomip::PatchLevels {
-                morph: vec![0.0; levels.len()],
-                levels: levels.clone(),
-            };
-            return self.set_draws(terrain, view, settings, &chosen);
+        if let Some(chosen) = self.given.take() {
+            self.set_draws(terrain, view, settings, &chosen);
+            self.given = Some(chosen);
+            return;
         }
         let chosen = match settings.lod_metric {
             LodMetric::Distance => {

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
-use vkterrain::bench::error::DepthView;
 use vkterrain::render::{
     Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, TerrainRenderer,
 };
@@ -108,20 +107,10 @@ pub fn camera(eye: [f64; 3], target: [f64; 3], fov: f32) -> Camera {
     }
 }
 
-/// The frame's depth as the error measurement reads it.
-pub fn depth_view(frame: &HeadlessFrame) -> DepthView<'_> {
-    DepthView {
-        width: frame.readback.width as usize,
-        height: frame.readback.height as usize,
-        depth: &frame.readback.depth,
-        view_proj: frame.view.view_proj.as_dmat4(),
-    }
-}
-
 /// World position seen at each pixel centre, from the depth buffer; None
 /// where the pixel shows the background (depth 0 with reversed Z).
 pub fn world_positions(frame: &HeadlessFrame, camera: &Camera) -> Vec<Option<DVec3>> {
-    let view = depth_view(frame);
+    let view = vkterrain::bench::error::DepthView::of(frame);
     let inverse = view.view_proj.inverse();
     (0..view.depth.len())
         .map(|i| view.position(&inverse, i).map(|p| camera.eye + p))
