@@ -1,6 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
+#ifdef MATERIAL
+#include "material.glsl"
+#endif
 
 // The brute path: every sample is a vertex and nothing is buffered. Six
 // vertices per cell, cells row-major, form the triangles ABC and DCB of
@@ -21,6 +24,9 @@ void main() {
     int cell = gl_VertexIndex / 6;
     ivec2 sample_cr = ivec2(cell % cells_across, cell / cells_across) + CORNER[gl_VertexIndex % 6];
     float h = texelFetch(heightmap, sample_cr, 0).r;
+#ifdef DISPLACE
+    h += layer_displacement(vec2(sample_cr), h);
+#endif
     vec2 local = vec2(frame.grid.x + float(sample_cr.x) * frame.spacing_size.x,
                       frame.grid.y - float(sample_cr.y) * frame.spacing_size.y);
     vec3 rel = vec3(local.x, h, local.y) - frame.eye_local.xyz;

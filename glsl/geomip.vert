@@ -1,6 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
+#ifdef MATERIAL
+#include "material.glsl"
+#endif
 
 // The geomip path: one vertex template of (N+1)^2 grid offsets drawn once
 // per visible patch, with the patch's level and sides in push constants.
@@ -25,8 +28,17 @@ ivec2 clamp_sample(ivec2 offset) {
     return min(pc.origin + offset, ivec2(frame.spacing_size.zw) - 1);
 }
 
+// The height drawn at a sample: the heightmap's, plus what the layers add.
+float displaced(ivec2 sample_cr) {
+    float h = texelFetch(heightmap, sample_cr, 0).r;
+#ifdef DISPLACE
+    h += layer_displacement(vec2(sample_cr), h);
+#endif
+    return h;
+}
+
 float height_of(ivec2 offset) {
-    return texelFetch(heightmap, clamp_sample(offset), 0).r;
+    return displaced(clamp_sample(offset));
 }
 
 vec2 local_xz(ivec2 sample_cr) {
@@ -37,7 +49,7 @@ vec2 local_xz(ivec2 sample_cr) {
 void main() {
     ivec2 offset = ivec2(in_offset);
     ivec2 sample_cr = clamp_sample(offset);
-    float h = texelFetch(heightmap, sample_cr, 0).r;
+    float h = displaced(sample_cr);
     vec2 xz = local_xz(sample_cr);
     vec3 rel = vec3(xz.x, h, xz.y) - frame.eye_local.xyz;
 

@@ -1,6 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
+#ifdef MATERIAL
+#include "material.glsl"
+#endif
 
 layout(location = 0) in vec2 in_grid;
 layout(location = 1) in float in_height;
@@ -8,22 +11,16 @@ layout(location = 2) flat in float in_inside_factor;
 
 layout(location = 0) out vec4 out_color;
 
-// Unit normal by central differences one sample either side, one-sided at
-// the borders (the offsets are clamped to the grid, and the step is the
-// distance actually spanned). Mirror: TerrainInfo::normal_at.
-vec3 surface_normal(vec2 g) {
-    vec2 size = frame.spacing_size.zw;
-    float left = max(g.x - 1.0, 0.0);
-    float right = min(g.x + 1.0, size.x - 1.0);
-    float up = max(g.y - 1.0, 0.0);
-    float down = min(g.y + 1.0, size.y - 1.0);
-    float dhdx = (sample_height(vec2(right, g.y)) - sample_height(vec2(left, g.y)))
-        / ((right - left) * frame.spacing_size.x);
-    // Rows grow towards -z: up (smaller row) is +z.
-    float dhdz = (sample_height(vec2(g.x, up)) - sample_height(vec2(g.x, down)))
-        / ((down - up) * frame.spacing_size.y);
-    return normalize(vec3(-dhdx, 1.0, -dhdz));
-}
+#ifdef MATERIAL
+layout(set = 0, binding = BINDING_DIFFUSE_MAPS) uniform sampler2DArray diffuse_maps;
+#endif
+#ifdef NORMAL_MAPS
+layout(set = 0, binding = BINDING_NORMAL_MAPS) uniform sampler2DArray normal_maps;
+#endif
+#ifdef LIGHTMAP
+// Sunlight visibility of the first light, one texel per sample.
+layout(set = 0, binding = BINDING_LIGHTMAP) uniform sampler2DArray lightmap;
+#endif
 
 // Low ground green, through brown rock, to snow.
 vec3 height_color(float t) {
@@ -39,21 +36,98 @@ vec3 lod_color(float factor) {
     return clamp(vec3(abs(t * 6.0 - 3.0) - 1.0, 2.0 - abs(t * 6.0 - 2.0), 2.0 - abs(t * 6.0 - 4.0)), 0.0, 1.0).bgr;
 }
 
+// Ambient plus every directional light; the first is dimmed by the baked
+// lightmap when there is one.
+vec3 lighting(vec3 n) {
+    vec3 light = frame.ambient.rgb;
+    for (int i = 0; i < int(frame.ambient.w); ++i) {
+        float visible = 1.0;
+#ifdef LIGHTMAP
+        if (i == 0) {
+            vec2 size = frame.spacing_size.zw;
+            visible = texture(lightmap, vec3((in_grid + 0.5) / size, 0.0)).r;
+        }
+#endif
+        light += frame.light_color[i].rgb * max(dot(n, frame.light_dir[i].xyz), 0.0) * visible;
+    }
+    return light;
+}
+
+#ifdef MATERIAL
+// Blended colour and normal of the layers at this fragment. The tangent
+// frame follows each layer's texture axes over the surface: u and v run
+// along the rows of its tile matrix, lifted onto the surface by the height
+// gradient.
+void layered(vec2 gradient, vec3 n, out vec3 albedo, out vec3 normal) {
+    float w[MAX_LAYERS];
+#ifdef BLEND_MAPS
+    vec2 size = vec2(textureSize(blend_maps, 0).xy);
+    vec2 uv = stretched_uv(in_grid, size);
+    vec4 b0 = texture(blend_maps, vec3(uv, 0.0));
+    vec4 b1 = BLEND_MAP_COUNT > 1u ? texture(blend_maps, vec3(uv, 1.0)) : vec4(0.0);
+    blend_weights(b0, b1, w);
+#else
+    rule_weights(normalised_height(in_height), n.y, w);
+#endif
+    vec2 xz = grid_to_local(in_grid);
+    // Derivatives taken here, in uniform control flow, so layers whose
+    // weight is 0 can be skipped without losing mip selection.
+    vec2 dx = dFdx(xz);
+    vec2 dy = dFdy(xz);
+    albedo = vec3(0.0);
+    normal = vec3(0.0);
+    for (int i = 0; i < int(LAYER_COUNT); ++i) {
+        if (w[i] <= 0.0) {
+            continue;
+        }
+        vec4 m = material.layers[i].tile;
+        vec2 uv = layer_uv(i, xz);
+        vec2 gx = vec2(dot(m.xy, dx), dot(m.zw, dx));
+        vec2 gy = vec2(dot(m.xy, dy), dot(m.zw, dy));
+        albedo += w[i] * textureGrad(diffuse_maps, vec3(uv, float(i)), gx, gy).rgb;
+        vec3 layer_normal = n;
+#ifdef NORMAL_MAPS
+        int nl = int(material.layers[i].offset.w);
+        if (nl >= 0) {
+            vec3 t = textureGrad(normal_maps, vec3(uv, float(nl)), gx, gy).xyz * 2.0 - 1.0;
+            vec2 du = normalize(m.xy);
+            vec2 dv = normalize(m.zw);
+            vec3 tu = normalize(vec3(du.x, dot(gradient, du), du.y));
+            vec3 tv = normalize(vec3(dv.x, dot(gradient, dv), dv.y));
+            // The third axis along the surface normal, whatever the
+            // handedness of (u, v) on the ground.
+            layer_normal = normalize(t.x * tu + t.y * tv + t.z * n);
+        }
+#endif
+        normal += w[i] * layer_normal;
+    }
+    normal = normalize(normal);
+}
+#endif
+
 void main() {
     uint mode = frame.modes.y;
     if (mode == SHADE_FLAT) {
         out_color = vec4(1.0);
         return;
     }
-    vec3 n = surface_normal(in_grid);
-    float diffuse = max(dot(n, frame.light.xyz), 0.0);
-    float lighting = frame.light.w + (1.0 - frame.light.w) * diffuse;
+    vec2 gradient = height_gradient(in_grid);
+    vec3 n = gradient_normal(gradient);
     vec3 albedo;
     if (mode == SHADE_LOD_COLORS) {
         albedo = lod_color(in_inside_factor);
     } else {
-        float span = max(frame.height_range.y - frame.height_range.x, 1e-6);
-        albedo = height_color(clamp((in_height - frame.height_range.x) / span, 0.0, 1.0));
+#ifdef MATERIAL
+        layered(gradient, n, albedo, n);
+#else
+        albedo = height_color(clamp(normalised_height(in_height), 0.0, 1.0));
+#endif
     }
-    out_color = vec4(albedo * lighting, 1.0);
+    vec3 color = albedo * lighting(n);
+    if (frame.fog.y > 0.0) {
+        vec3 rel = vec3(grid_to_local(in_grid), in_height).xzy - frame.eye_local.xyz;
+        float f = clamp((length(rel) - frame.fog.x) * frame.fog.y, 0.0, 1.0);
+        color = mix(color, frame.fog_color.rgb, f);
+    }
+    out_color = vec4(color, 1.0);
 }

@@ -1,6 +1,9 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
+#ifdef MATERIAL
+#include "material.glsl"
+#endif
 
 layout(quads, fractional_even_spacing, ccw) in;
 
@@ -19,6 +22,9 @@ void main() {
     vec3 rel = mix(mix(in_rel[0], in_rel[1], uv.x), mix(in_rel[2], in_rel[3], uv.x), uv.y);
     vec2 g = mix(mix(in_grid[0], in_grid[1], uv.x), mix(in_grid[2], in_grid[3], uv.x), uv.y);
     float h = sample_height(g);
+#ifdef DISPLACE
+    h += layer_displacement(g, h);
+#endif
     rel.y = h - frame.eye_local.y;
     gl_Position = frame.view_proj * vec4(rel, 1.0);
     out_grid = g;

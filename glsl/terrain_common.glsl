@@ -21,8 +21,8 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     vec4 grid;
     // dx, dz, columns, rows.
     vec4 spacing_size;
-    // xyz: unit direction towards the light; w: ambient intensity.
-    vec4 light;
+    // rgb: ambient light; w: number of directional lights (1..MAX_LIGHTS).
+    vec4 ambient;
     // x, y: lowest and highest height (colour ramp); z: 1 when frustum
     // culling is on.
     vec4 height_range;
@@ -32,6 +32,12 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     // x: largest projected error in pixels (error LOD), y: viewport height
     // over 2 tan(fov / 2), z, w: patch columns and rows.
     vec4 error_lod;
+    // Directional lights: xyz towards the light (unit), and rgb radiance.
+    vec4 light_dir[MAX_LIGHTS];
+    vec4 light_color[MAX_LIGHTS];
+    // x: fog start, y: 1 / fog range (0: no fog); fog_color.rgb.
+    vec4 fog;
+    vec4 fog_color;
 } frame;
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with
@@ -63,6 +69,39 @@ float sample_height(vec2 g) {
     vec3 h = lower ? vec3(d, c, b) : vec3(a, b, c);
     vec2 uv = lower ? 1.0 - st : st;
     return (1.0 - uv.x - uv.y) * h.x + uv.x * h.y + uv.y * h.z;
+}
+
+// Local (x, z) of continuous sample coordinates. Mirror:
+// TerrainInfo::local_x / local_z.
+vec2 grid_to_local(vec2 g) {
+    return vec2(frame.grid.x + g.x * frame.spacing_size.x, frame.grid.y - g.y * frame.spacing_size.y);
+}
+
+// Height gradient (dh/dx, dh/dz) by central differences one sample either
+// side, one-sided at the borders (the offsets are clamped to the grid, and
+// the step is the distance actually spanned). Mirror: TerrainInfo::normal_at.
+vec2 height_gradient(vec2 g) {
+    vec2 size = frame.spacing_size.zw;
+    float left = max(g.x - 1.0, 0.0);
+    float right = min(g.x + 1.0, size.x - 1.0);
+    float up = max(g.y - 1.0, 0.0);
+    float down = min(g.y + 1.0, size.y - 1.0);
+    float dhdx = (sample_height(vec2(right, g.y)) - sample_height(vec2(left, g.y)))
+        / ((right - left) * frame.spacing_size.x);
+    // Rows grow towards -z: up (smaller row) is +z.
+    float dhdz = (sample_height(vec2(g.x, up)) - sample_height(vec2(g.x, down)))
+        / ((down - up) * frame.spacing_size.y);
+    return vec2(dhdx, dhdz);
+}
+
+// Unit surface normal from the gradient.
+vec3 gradient_normal(vec2 gradient) {
+    return normalize(vec3(-gradient.x, 1.0, -gradient.y));
+}
+
+// Height normalised to the terrain's range (0 lowest, 1 highest).
+float normalised_height(float h) {
+    return (h - frame.height_range.x) / max(frame.height_range.y - frame.height_range.x, 1e-6);
 }
 
 // True when the box lies entirely behind one of the frustum planes; the

@@ -6,6 +6,7 @@
 //! - [`bench`]: speed against error: the screen-space error measurement.
 //! - [`render`]: the terrain renderer, drawing into a target it is given.
 //! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
+//! - [`material`]: a scene's textures, blend maps and lightmap, loaded.
 //! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
 //!   table, height queries, frustum and LOD maths). No GPU types.
@@ -14,6 +15,7 @@
 pub mod app;
 pub mod bench;
 pub mod cli;
+pub mod material;
 pub mod output;
 pub mod render;
 pub mod scene;

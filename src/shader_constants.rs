@@ -17,6 +17,27 @@ pub const LOD_METRIC_DISTANCE: u32 = 0;
 /// LOD metric: projected error.
 pub const LOD_METRIC_ERROR: u32 = 1;
 
+/// Uniform block of the material layers' parameters (scenes with layers).
+pub const BINDING_MATERIAL: u32 = 5;
+/// 2D array of the layers' colour textures.
+pub const BINDING_DIFFUSE_MAPS: u32 = 6;
+/// 2D array of the layers' normal maps (when a layer has one).
+pub const BINDING_NORMAL_MAPS: u32 = 7;
+/// 2D array of the layers' height maps (when the material displaces).
+pub const BINDING_HEIGHT_MAPS: u32 = 8;
+/// 2D array of the blend maps (blend-map mode).
+pub const BINDING_BLEND_MAPS: u32 = 9;
+/// The baked lightmap (one layer).
+pub const BINDING_LIGHTMAP: u32 = 10;
+/// Most material layers. Mirror: terrain::shading::MAX_LAYERS.
+pub const MAX_LAYERS: u32 = 8;
+/// Most directional lights. Mirror: scene::material::MAX_LIGHTS.
+pub const MAX_LIGHTS: u32 = 3;
+/// Specialisation constant: number of material layers.
+pub const SPEC_LAYER_COUNT: u32 = 0;
+/// Specialisation constant: number of blend maps (blend-map mode).
+pub const SPEC_BLEND_MAP_COUNT: u32 = 1;
+
 /// Storage buffer of inputs of the GLSL mirror check (compute, tests only).
 pub const BINDING_MIRROR_CASES: u32 = 2;
 /// Storage buffer of results of the GLSL mirror check.
@@ -52,6 +73,16 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
         ("LOD_METRIC_DISTANCE", uint(LOD_METRIC_DISTANCE)),
         ("LOD_METRIC_ERROR", uint(LOD_METRIC_ERROR)),
+        ("BINDING_MATERIAL", BINDING_MATERIAL.to_string()),
+        ("BINDING_DIFFUSE_MAPS", BINDING_DIFFUSE_MAPS.to_string()),
+        ("BINDING_NORMAL_MAPS", BINDING_NORMAL_MAPS.to_string()),
+        ("BINDING_HEIGHT_MAPS", BINDING_HEIGHT_MAPS.to_string()),
+        ("BINDING_BLEND_MAPS", BINDING_BLEND_MAPS.to_string()),
+        ("BINDING_LIGHTMAP", BINDING_LIGHTMAP.to_string()),
+        ("MAX_LAYERS", MAX_LAYERS.to_string()),
+        ("MAX_LIGHTS", MAX_LIGHTS.to_string()),
+        ("SPEC_LAYER_COUNT", SPEC_LAYER_COUNT.to_string()),
+        ("SPEC_BLEND_MAP_COUNT", SPEC_BLEND_MAP_COUNT.to_string()),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),
         ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),

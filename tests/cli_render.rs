@@ -464,3 +464,104 @@ fn a_gpu_memory_budget_refuses_the_resource_that_exceeds_it() {
         );
     }
 }
+
+#[test]
+fn render_stats_list_the_material_resources_of_the_default_scene() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let out = vkterrain(
+        dir.path(),
+        &[
+            "render",
+            "--validate",
+            "--width",
+            "64",
+            "--height",
+            "36",
+            "--out",
+            "f.png",
+            "--stats",
+            "s.json",
+        ],
+    );
+    ok(&out);
+    let s = stats(&dir.path().join("s.json"));
+    let memory = s["gpu_memory"].as_object().unwrap();
+    for (name, at_least) in [
+        // 5 layers of 256x256 RGBA with mip chains.
+        ("material.diffuse_maps", 5 * 256 * 256 * 4),
+        ("material.normal_maps", 5 * 256 * 256 * 4),
+        ("material.blend_maps", 513 * 513 * 4),
+        ("lighting.lightmap", 1025 * 1025),
+        ("material.uniforms", 400),
+    ] {
+        let bytes = memory[name].as_u64().unwrap_or(0);
+        assert!(bytes >= at_least as u64, "{name}: {bytes} bytes");
+    }
+    assert!(!memory.contains_key("material.height_maps"), "{memory:?}");
+    assert!(s["startup"]["material_ms"].as_f64().unwrap() > 0.0);
+    assert_eq!(s["validation_messages"], 0);
+}
+
+#[test]
+fn bad_scenes_fail_with_the_file_key_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let textures = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/textures");
+    let base = "[heightmap]\npath = \"../assets/heightmaps/default.png\"\n";
+    let cases: [(&str, String, &str); 4] = [
+        (
+            "missing.toml",
+            String::new(),
+            "missing.toml: cannot read the scene",
+        ),
+        (
+            "unknown.toml",
+            format!("{base}[material]\nlayer_count = 2\n"),
+            "unknown field `layer_count`",
+        ),
+        (
+            "texture.toml",
+            format!("{base}[material]\n[[material.layer]]\ndiffuse = \"nowhere.png\"\n"),
+            "texture.toml:5: material.layer[0].diffuse: cannot read",
+        ),
+        (
+            "blend.toml",
+            format!(
+                "{base}[material]\nblend_maps = [\"{}\"]\n[[material.layer]]\ndiffuse = \"{}\"\n",
+                textures.join("grass.png").display(),
+                textures.join("grass.png").display()
+            ),
+            "blend.toml:4: material.blend_maps[0]",
+        ),
+    ];
+    for (name, text, expected) in cases {
+        let path = dir.path().join("scenes").join(name);
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        if !text.is_empty() {
+            std::fs::write(&path, text).unwrap();
+        }
+        // The heightmap path is relative to the scene: scenes/../assets.
+        std::os::unix::fs::symlink(
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("assets"),
+            dir.path().join("assets"),
+        )
+        .ok();
+        let out = vkterrain(
+            dir.path(),
+            &[
+                "render",
+                "--scene",
+                path.to_str().unwrap(),
+                "--out",
+                "x.png",
+            ],
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{name} must fail");
+        assert!(stderr.contains(expected), "{name}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!dir.path().join("x.png").exists());
+    }
+}

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use common::*;
 use glam::{DVec2, DVec3};
-use vkterrain::scene::{HeightmapSource, Scene, SceneError, SceneFileError};
+use vkterrain::scene::{AssetSource, HeightmapSource, Scene, SceneError, SceneFileError};
 
 #[test]
 fn the_default_scene_file_is_the_built_in_scene() {
@@ -36,10 +36,25 @@ fn the_default_scene_file_is_the_built_in_scene() {
     assert_eq!(
         Scene {
             heightmap: built_in.heightmap.clone(),
+            material: built_in.material.clone(),
             ..from_file.clone()
         },
         built_in
     );
+    // Its textures and blend map are the files the scene names, built in.
+    let mut on_disk = from_file.material.clone().unwrap();
+    let mut embedded = built_in.material.clone().unwrap();
+    let pairs: Vec<_> = on_disk.assets_mut().zip(embedded.assets_mut()).collect();
+    assert_eq!(pairs.len(), 11);
+    for (file, built) in pairs {
+        let (AssetSource::File(path), AssetSource::Embedded { bytes, .. }) =
+            (&file.source, &built.source)
+        else {
+            panic!("{} is a file on disk and built in", file.origin())
+        };
+        assert_eq!(&std::fs::read(path).unwrap(), bytes, "{}", path.display());
+        assert_eq!((&file.key, file.line), (&built.key, built.line));
+    }
     assert_eq!(
         from_file.terrain_info().unwrap(),
         built_in.terrain_info().unwrap()
@@ -92,7 +107,7 @@ fn assert_invalid(text: &str, key: &str, line: usize) {
     match invalid(text) {
         SceneFileError::Invalid {
             key: k, line: l, ..
-        } => assert_eq!((k, l), (key, line), "{text}"),
+        } => assert_eq!((k.as_str(), l), (key, line), "{text}"),
         other => panic!("expected an invalid {key} at line {line}, got {other}"),
     }
 }

@@ -46,6 +46,8 @@ vkterrain controls
 #[derive(Clone, Debug)]
 pub struct DemoOptions {
     pub terrain: Terrain,
+    /// The scene's material layers and lightmap.
+    pub appearance: crate::material::Appearance,
     pub camera: Camera,
     pub settings: RenderSettings,
     pub width: u32,
@@ -328,9 +330,10 @@ impl Running {
             .unwrap_or(vk::Format::B8G8R8A8_SRGB);
         let wireframe = self.gpu.device.caps.fill_mode_non_solid;
         self.renderer = Some(
-            TerrainRenderer::new(
+            TerrainRenderer::with_appearance(
                 &self.gpu,
                 &options.terrain,
+                &options.appearance,
                 format,
                 FRAMES_IN_FLIGHT as u32,
                 // Brute adds pipelines only (no buffers): cheap to have ready

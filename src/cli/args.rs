@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use clap::Args;
 use glam::{DVec2, DVec3};
 
-use crate::scene::{HeightmapSource, Scene, SceneFileError};
+use crate::scene::{HeightmapSource, Lighting, Scene, SceneFileError};
 
 use crate::terrain::{HeightmapFormat, LoadOptions};
 
@@ -207,6 +207,12 @@ impl TerrainArgs {
             scene.cell_spacing = DVec2::ONE;
             scene.origin = DVec2::ZERO;
             scene.camera = None;
+            // The default look belongs to its own heightmap (its blend map,
+            // fog distances): a bare heightmap is coloured by height.
+            scene.material = None;
+            scene.lightmap = false;
+            scene.fog = None;
+            scene.lighting = Lighting::default();
         }
         let load = &mut scene.load;
         load.format = self.format.or(load.format);

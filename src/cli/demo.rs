@@ -11,6 +11,7 @@ use clap::ValueEnum;
 use super::args::{SizeArgs, TerrainArgs};
 use super::render::{render, RenderCmd, ViewArgs, DEFAULT_OUTPUT};
 use crate::app::{self, DemoOptions};
+use crate::material::Appearance;
 use crate::terrain::Terrain;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -87,9 +88,11 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     let settings = cmd.view.settings(&scene);
     let info = scene.terrain_info()?;
     let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
-    let terrain = Terrain::new(info, 0.0)?;
+    let appearance = Appearance::load(&scene, &info)?;
+    let terrain = Terrain::new(info, appearance.y_margin())?;
     let summary = app::run(DemoOptions {
         terrain,
+        appearance,
         camera,
         settings,
         width: cmd.size.width,

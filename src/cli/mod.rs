@@ -2,6 +2,7 @@
 //! Errors reach `main` as `anyhow` chains that name the file and the problem.
 
 pub mod args;
+pub mod assets;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -57,6 +58,11 @@ pub enum Command {
     /// Generate a fractal, eroded heightmap as a 16-bit PNG (the default
     /// scene's heightmap is `generate --out assets/heightmaps/default.png`).
     Generate(render::GenerateCmd),
+    /// Generate the default layer textures (tileable colour, normal and
+    /// height maps for sand, grass, dirt, rock and snow).
+    GenerateTextures(assets::GenerateTexturesCmd),
+    /// Bake a rules-mode scene's layer weights into blend maps.
+    GenerateBlendMap(assets::GenerateBlendMapCmd),
 }
 
 #[derive(clap::Args, Debug)]
@@ -100,6 +106,8 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
         Some(Command::Height(cmd)) => height(cmd, out),
         Some(Command::Inspect(cmd)) => inspect(cmd, out),
         Some(Command::Generate(cmd)) => render::generate(cmd, out),
+        Some(Command::GenerateTextures(cmd)) => assets::generate_textures(cmd, out),
+        Some(Command::GenerateBlendMap(cmd)) => assets::generate_blend_map(cmd, out),
         Some(Command::Bench(cmd)) => bench::bench(cmd, out),
         Some(Command::Soak(cmd)) => soak::soak(cmd, out),
     }

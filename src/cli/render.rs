@@ -12,6 +12,7 @@ use serde::Serialize;
 use super::args::{
     parse_color, parse_dvec3, parse_fov, parse_range, FeatureArgs, SizeArgs, TerrainArgs,
 };
+use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
 use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
@@ -180,6 +181,8 @@ impl ViewArgs {
         RenderSettings {
             path: self.path.into(),
             lod: scene.lod,
+            lighting: scene.lighting,
+            fog: scene.fog,
             lod_mode: match self.lod_mode {
                 LodModeArg::Smooth => DistanceMode::Smooth,
                 LodModeArg::Debug => DistanceMode::Debug,
@@ -195,7 +198,11 @@ impl ViewArgs {
             clear_color: self.clear_color.unwrap_or(if self.flat {
                 [0.0; 3]
             } else {
-                defaults.clear_color
+                // The sky behind the terrain is the fog's colour, so
+                // distant ground fades into it.
+                scene
+                    .fog
+                    .map_or(defaults.clear_color, |f| f.color.to_array())
             }),
             cull: !self.no_cull,
             geomorph: !self.no_morph,
@@ -203,7 +210,6 @@ impl ViewArgs {
                 LodArg::Distance => LodMetric::Distance,
                 LodArg::Error => LodMetric::Error(self.pixel_error),
             },
-            ..defaults
         }
     }
 }
@@ -291,6 +297,9 @@ pub struct FrameStats {
 pub struct StartupStats {
     /// Reading and decoding the heightmap.
     pub load_ms: f64,
+    /// Reading the textures, building their mip chains and baking the
+    /// lightmap.
+    pub material_ms: f64,
     /// Per-patch Y bounds and control points.
     pub bounds_ms: f64,
     /// The per-patch error table.
@@ -339,7 +348,10 @@ pub fn render_scene(
     let load_ms = ms(started);
     let camera = camera.apply(scene.camera_for(&info))?;
     let started = std::time::Instant::now();
-    let terrain = Terrain::new(info, 0.0)?;
+    let appearance = Appearance::load(scene, &info)?;
+    let material_ms = ms(started);
+    let started = std::time::Instant::now();
+    let terrain = Terrain::new(info, appearance.y_margin())?;
     let bounds_ms = ms(started);
     let gpu = features.gpu(validate)?;
     let mut notes = Vec::new();
@@ -358,9 +370,10 @@ pub fn render_scene(
         ));
     }
     let started = std::time::Instant::now();
-    let mut renderer = TerrainRenderer::new(
+    let mut renderer = TerrainRenderer::with_appearance(
         &gpu,
         &terrain,
+        &appearance,
         OFFSCREEN_COLOR_FORMAT,
         1,
         &RendererOptions {
@@ -410,6 +423,7 @@ pub fn render_scene(
         fov_deg: camera.fov_y_deg,
         startup: StartupStats {
             load_ms,
+            material_ms,
             bounds_ms,
             error_table_ms,
             gpu_setup_ms,

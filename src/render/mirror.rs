@@ -157,7 +157,7 @@ pub fn run_mirror_check(
         results_size,
     );
     let pipeline =
-        device.create_compute_pipeline(shaders::MIRROR_CHECK_COMP, layout, "mirror.pipeline");
+        device.create_compute_pipeline(shaders::mirror_check_comp(), layout, "mirror.pipeline");
 
     let ran = pipeline.and_then(|pipeline| {
         let groups = (cases.len() as u32).div_ceil(LOCAL_SIZE);

@@ -2,6 +2,7 @@
 //! draw recording into a target it is given. Knows nothing of windows.
 
 pub mod headless;
+pub mod material;
 pub mod mirror;
 pub mod renderer;
 pub mod shaders;

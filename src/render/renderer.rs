@@ -17,8 +17,10 @@ use std::mem::size_of;
 
 use ash::vk;
 
+use super::material::{GpuAppearance, ShaderVariant};
 use super::shaders;
 use super::uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings};
+use crate::material::Appearance;
 use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_HEIGHTMAP};
 use crate::terrain::{geomip, ErrorTable, Terrain};
 use crate::vk::commands::Recorder;
@@ -160,6 +162,8 @@ struct BruteGeometry {
 /// Draws a terrain into any target, by the paths it was built for.
 pub struct TerrainRenderer {
     heightmap: Image,
+    /// Material layers, blend maps and lightmap, as the scene needs.
+    appearance: GpuAppearance,
     sampler: vk::Sampler,
     set_layout: vk::DescriptorSetLayout,
     pipeline_layout: vk::PipelineLayout,
@@ -186,10 +190,31 @@ pub struct FrameMeasurements {
 
 impl TerrainRenderer {
     /// Uploads the terrain and builds the pipelines of `options.paths` for
-    /// targets of `color_format`.
+    /// targets of `color_format`, coloured by height.
     pub fn new(
         gpu: &Gpu,
         terrain: &Terrain,
+        color_format: vk::Format,
+        frames_in_flight: u32,
+        options: &RendererOptions,
+    ) -> Result<Self> {
+        Self::with_appearance(
+            gpu,
+            terrain,
+            &Appearance::default(),
+            color_format,
+            frames_in_flight,
+            options,
+        )
+    }
+
+    /// Like `new`, drawn with a scene's material layers and lightmap. The
+    /// terrain's Y bounds must already allow for the material's
+    /// displacement (`Appearance::y_margin`).
+    pub fn with_appearance(
+        gpu: &Gpu,
+        terrain: &Terrain,
+        appearance: &Appearance,
         color_format: vk::Format,
         frames_in_flight: u32,
         options: &RendererOptions,
@@ -240,7 +265,21 @@ impl TerrainRenderer {
             rows,
             info.heightmap().heights(),
         )?;
-        let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
+        let sampler = match device.create_nearest_sampler("terrain.heightmap_sampler") {
+            Ok(s) => s,
+            Err(e) => {
+                device.destroy_image(heightmap);
+                return Err(e);
+            }
+        };
+        let gpu_appearance = match GpuAppearance::new(device, &gpu.instance, appearance, info) {
+            Ok(a) => a,
+            Err(e) => {
+                device.destroy_sampler(sampler);
+                device.destroy_image(heightmap);
+                return Err(e);
+            }
+        };
         let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
         if wants(RenderPath::Tess) {
             stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
@@ -281,6 +320,11 @@ impl TerrainRenderer {
         } else {
             None
         };
+        let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
+        for binding in gpu_appearance.bindings(vertex_stages) {
+            pool_sizes.push((binding.1, 1));
+            bindings.push(binding);
+        }
         let set_layout = device.create_descriptor_set_layout(&bindings, "terrain.set_layout")?;
         let pipeline_layout =
             device.create_pipeline_layout(&[set_layout], "terrain.pipeline_layout")?;
@@ -305,6 +349,7 @@ impl TerrainRenderer {
                 size_of::<FrameUniforms>() as u64,
             );
             device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
+            gpu_appearance.write(device, set);
             if let Some(errors) = &error_table {
                 device.write_buffer(
                     set,
@@ -323,6 +368,7 @@ impl TerrainRenderer {
         }
         let mut renderer = TerrainRenderer {
             heightmap,
+            appearance: gpu_appearance,
             sampler,
             set_layout,
             pipeline_layout,
@@ -544,6 +590,7 @@ impl TerrainRenderer {
         device.destroy_descriptor_set_layout(self.set_layout);
         device.destroy_sampler(self.sampler);
         device.destroy_image(self.heightmap);
+        self.appearance.destroy(device);
     }
 }
 
@@ -553,23 +600,20 @@ fn build_pipelines(
     path: RenderPath,
     wireframe: bool,
 ) -> Result<PathPipelines> {
-    build_pipelines_with(
-        device,
-        renderer.pipeline_layout,
-        renderer.color_format,
-        path,
-        wireframe,
-    )
+    build_pipelines_with(device, renderer, renderer.pipeline_layout, path, wireframe)
 }
 
 fn build_pipelines_with(
     device: &Device,
+    renderer: &TerrainRenderer,
     layout: vk::PipelineLayout,
-    color_format: vk::Format,
     path: RenderPath,
     wireframe: bool,
 ) -> Result<PathPipelines> {
-    let create = |mode, suffix| create_pipeline(device, layout, color_format, path, mode, suffix);
+    let variant = &renderer.appearance.variant;
+    let color_format = renderer.color_format;
+    let create =
+        |mode, suffix| create_pipeline(device, layout, color_format, variant, path, mode, suffix);
     let fill = create(vk::PolygonMode::FILL, "fill")?;
     let wireframe = if wireframe {
         match create(vk::PolygonMode::LINE, "wireframe") {
@@ -589,10 +633,13 @@ fn create_pipeline(
     device: &Device,
     layout: vk::PipelineLayout,
     color_format: vk::Format,
+    variant: &ShaderVariant,
     path: RenderPath,
     polygon_mode: vk::PolygonMode,
     suffix: &str,
 ) -> Result<vk::Pipeline> {
+    let frag = shaders::spirv("terrain.frag", &variant.fragment_defines());
+    let placing = |file| shaders::spirv(file, &variant.vertex_defines());
     let (name, stages, topology, patch_control_points, vertex_stride, vertex_attributes): (
         String,
         &[_],
@@ -604,16 +651,16 @@ fn create_pipeline(
         RenderPath::Tess => (
             format!("terrain.pipeline.tess.{suffix}"),
             &[
-                (vk::ShaderStageFlags::VERTEX, shaders::TERRAIN_VERT),
+                (vk::ShaderStageFlags::VERTEX, shaders::terrain_vert()),
                 (
                     vk::ShaderStageFlags::TESSELLATION_CONTROL,
-                    shaders::TERRAIN_TESC,
+                    shaders::terrain_tesc(),
                 ),
                 (
                     vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-                    shaders::TERRAIN_TESE,
+                    placing("terrain.tese"),
                 ),
-                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+                (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
             vk::PrimitiveTopology::PATCH_LIST,
             4,
@@ -623,8 +670,8 @@ fn create_pipeline(
         RenderPath::Geomip => (
             format!("terrain.pipeline.geomip.{suffix}"),
             &[
-                (vk::ShaderStageFlags::VERTEX, shaders::GEOMIP_VERT),
-                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+                (vk::ShaderStageFlags::VERTEX, placing("geomip.vert")),
+                (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
             vk::PrimitiveTopology::TRIANGLE_LIST,
             0,
@@ -634,8 +681,8 @@ fn create_pipeline(
         RenderPath::Brute => (
             format!("terrain.pipeline.brute.{suffix}"),
             &[
-                (vk::ShaderStageFlags::VERTEX, shaders::BRUTE_VERT),
-                (vk::ShaderStageFlags::FRAGMENT, shaders::TERRAIN_FRAG),
+                (vk::ShaderStageFlags::VERTEX, placing("brute.vert")),
+                (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
             vk::PrimitiveTopology::TRIANGLE_LIST,
             0,
@@ -656,6 +703,7 @@ fn create_pipeline(
         // Reversed Z: nearer is larger.
         depth_compare: vk::CompareOp::GREATER,
         layout,
+        specialization: &variant.specialization(),
     })
 }
 
@@ -740,13 +788,7 @@ fn build_geomip(
             "terrain.pipeline_layout.geomip",
         )
         .and_then(|layout| {
-            match build_pipelines_with(
-                device,
-                layout,
-                renderer.color_format,
-                RenderPath::Geomip,
-                wireframe,
-            ) {
+            match build_pipelines_with(device, renderer, layout, RenderPath::Geomip, wireframe) {
                 Ok(pipelines) => Ok((layout, pipelines)),
                 Err(e) => {
                     device.destroy_pipeline_layout(layout);

@@ -6,6 +6,7 @@ use std::mem::{offset_of, size_of};
 use glam::{DVec3, Mat4, Vec3, Vec4};
 
 use super::renderer::RenderPath;
+use crate::scene::{Fog, Lighting, MAX_LIGHTS};
 use crate::shader_constants::{
     LOD_METRIC_DISTANCE, LOD_METRIC_ERROR, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT,
     SHADE_LOD_COLORS,
@@ -22,22 +23,32 @@ pub struct FrameUniforms {
     pub lod: [f32; 4],
     pub grid: [f32; 4],
     pub spacing_size: [f32; 4],
-    pub light: [f32; 4],
+    /// rgb ambient, w: directional light count.
+    pub ambient: [f32; 4],
     pub height_range: [f32; 4],
     pub modes: [u32; 4],
     pub error_lod: [f32; 4],
+    pub light_dir: [[f32; 4]; MAX_LIGHTS],
+    pub light_color: [[f32; 4]; MAX_LIGHTS],
+    /// start, 1 / range (0: no fog).
+    pub fog: [f32; 4],
+    pub fog_color: [f32; 4],
 }
 
 // std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
-const _: () = assert!(size_of::<FrameUniforms>() == 288);
+const _: () = assert!(size_of::<FrameUniforms>() == 416);
 const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
 const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
 const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
 const _: () = assert!(offset_of!(FrameUniforms, grid) == 192);
 const _: () = assert!(offset_of!(FrameUniforms, spacing_size) == 208);
-const _: () = assert!(offset_of!(FrameUniforms, light) == 224);
+const _: () = assert!(offset_of!(FrameUniforms, ambient) == 224);
 const _: () = assert!(offset_of!(FrameUniforms, height_range) == 240);
 const _: () = assert!(offset_of!(FrameUniforms, modes) == 256);
+const _: () = assert!(offset_of!(FrameUniforms, light_dir) == 288);
+const _: () = assert!(offset_of!(FrameUniforms, light_color) == 336);
+const _: () = assert!(offset_of!(FrameUniforms, fog) == 384);
+const _: () = assert!(offset_of!(FrameUniforms, fog_color) == 400);
 const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
 
 /// How the fragment shader colours the terrain.
@@ -79,9 +90,8 @@ pub struct RenderSettings {
     pub clear_color: [f32; 3],
     /// GPU frustum culling of patches.
     pub cull: bool,
-    /// Direction towards the light (normalised when used).
-    pub light_dir: Vec3,
-    pub ambient: f32,
+    pub lighting: Lighting,
+    pub fog: Option<Fog>,
 }
 
 impl Default for RenderSettings {
@@ -96,8 +106,8 @@ impl Default for RenderSettings {
             wireframe: false,
             clear_color: [0.52, 0.68, 0.86],
             cull: true,
-            light_dir: Vec3::new(-0.4, 0.7, 0.45),
-            ambient: 0.3,
+            lighting: Lighting::default(),
+            fog: None,
         }
     }
 }
@@ -188,7 +198,8 @@ impl FrameUniforms {
         let info = terrain.info();
         let (lo, hi) = info.heightmap().min_max();
         let sp = info.spacing();
-        let light = settings.light_dir.try_normalize().unwrap_or(Vec3::Y);
+        let lighting = &settings.lighting;
+        let lights = lighting.active();
         let lod = settings.lod;
         FrameUniforms {
             view_proj: view.view_proj.to_cols_array_2d(),
@@ -207,7 +218,7 @@ impl FrameUniforms {
                 info.cols() as f32,
                 info.rows() as f32,
             ],
-            light: light.extend(settings.ambient).to_array(),
+            ambient: lighting.ambient.extend(lights.len() as f32).to_array(),
             height_range: [lo, hi, if settings.cull { 1.0 } else { 0.0 }, 0.0],
             modes: [
                 match settings.lod_mode {
@@ -234,6 +245,26 @@ impl FrameUniforms {
                 terrain.grid().patch_cols() as f32,
                 terrain.grid().patch_rows() as f32,
             ],
+            light_dir: std::array::from_fn(|i| {
+                lights.get(i).map_or([0.0; 4], |l| {
+                    l.direction
+                        .try_normalize()
+                        .unwrap_or(Vec3::Y)
+                        .extend(0.0)
+                        .to_array()
+                })
+            }),
+            light_color: std::array::from_fn(|i| {
+                lights
+                    .get(i)
+                    .map_or([0.0; 4], |l| l.radiance.extend(0.0).to_array())
+            }),
+            fog: settings
+                .fog
+                .map_or([0.0; 4], |f| [f.start, 1.0 / f.range, 0.0, 0.0]),
+            fog_color: settings
+                .fog
+                .map_or([0.0; 4], |f| f.color.extend(1.0).to_array()),
         }
     }
 }

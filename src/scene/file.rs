@@ -35,6 +35,9 @@ use glam::{DVec2, DVec3};
 use serde::Deserialize;
 use toml::Spanned;
 
+use super::material::{
+    parse_fog, parse_lighting, parse_material, FogToml, LightingToml, MaterialToml,
+};
 use super::{HeightmapSource, Scene};
 use crate::terrain::camera::Camera;
 use crate::terrain::heightmap::DEFAULT_MAX_SAMPLES;
@@ -58,7 +61,7 @@ pub enum SceneFileError {
     Invalid {
         path: PathBuf,
         line: usize,
-        key: &'static str,
+        key: String,
         message: String,
     },
 }
@@ -72,6 +75,9 @@ struct SceneToml {
     #[serde(default)]
     lod: LodToml,
     camera: Option<CameraToml>,
+    lighting: Option<LightingToml>,
+    fog: Option<FogToml>,
+    material: Option<MaterialToml>,
 }
 
 #[derive(Deserialize)]
@@ -122,26 +128,26 @@ struct CameraToml {
 }
 
 /// 1-based line of a byte offset.
-fn line_of(text: &str, offset: usize) -> usize {
+pub(super) fn line_of(text: &str, offset: usize) -> usize {
     text[..offset.min(text.len())].matches('\n').count() + 1
 }
 
-struct Checker<'a> {
-    path: &'a Path,
-    text: &'a str,
+pub(super) struct Checker<'a> {
+    pub(super) path: &'a Path,
+    pub(super) text: &'a str,
 }
 
 impl Checker<'_> {
-    fn invalid<T>(
+    pub(super) fn invalid<T>(
         &self,
-        key: &'static str,
+        key: &str,
         span: std::ops::Range<usize>,
         message: String,
     ) -> Result<T, SceneFileError> {
         Err(SceneFileError::Invalid {
             path: self.path.to_path_buf(),
             line: line_of(self.text, span.start),
-            key,
+            key: key.to_string(),
             message,
         })
     }
@@ -280,6 +286,11 @@ impl Scene {
             }
         };
 
+        let (lighting, lightmap) = parse_lighting(&check, parsed.lighting.as_ref())?;
+        let fog = parse_fog(&check, parsed.fog.as_ref())?;
+        let scene_dir = path.parent().unwrap_or(Path::new("."));
+        let material = parse_material(&check, parsed.material.as_ref(), scene_dir)?;
+
         Ok(Scene {
             heightmap: HeightmapSource::File(resolved),
             load: LoadOptions {
@@ -296,6 +307,10 @@ impl Scene {
             cells_per_patch,
             lod,
             camera,
+            lighting,
+            lightmap,
+            fog,
+            material,
         })
     }
 }

@@ -4,12 +4,17 @@
 //! built into the binary, so the run command works from any directory.
 
 mod file;
+pub mod material;
 
 use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3};
 
 pub use file::SceneFileError;
+pub use material::{
+    Asset, AssetSource, DirectionalLight, Fog, LayerSpec, Lighting, MaterialSpec, WeightSource,
+    MAX_LIGHTS,
+};
 
 use crate::terrain::camera::Camera;
 use crate::terrain::{
@@ -21,6 +26,55 @@ pub const DEFAULT_SCENE_TOML: &str = include_str!("../../assets/scenes/default.t
 /// The default heightmap: 1025x1025, 16-bit, made by `vkterrain generate`
 /// with its default parameters (see assets/README.md).
 pub const DEFAULT_HEIGHTMAP_PNG: &[u8] = include_bytes!("../../assets/heightmaps/default.png");
+/// The default scene's textures and blend map, built in like its heightmap
+/// (paths relative to assets/).
+pub const DEFAULT_SCENE_ASSETS: &[(&str, &[u8])] = &[
+    (
+        "textures/grass.png",
+        include_bytes!("../../assets/textures/grass.png"),
+    ),
+    (
+        "textures/grass-normal.png",
+        include_bytes!("../../assets/textures/grass-normal.png"),
+    ),
+    (
+        "textures/dirt.png",
+        include_bytes!("../../assets/textures/dirt.png"),
+    ),
+    (
+        "textures/dirt-normal.png",
+        include_bytes!("../../assets/textures/dirt-normal.png"),
+    ),
+    (
+        "textures/rock.png",
+        include_bytes!("../../assets/textures/rock.png"),
+    ),
+    (
+        "textures/rock-normal.png",
+        include_bytes!("../../assets/textures/rock-normal.png"),
+    ),
+    (
+        "textures/snow.png",
+        include_bytes!("../../assets/textures/snow.png"),
+    ),
+    (
+        "textures/snow-normal.png",
+        include_bytes!("../../assets/textures/snow-normal.png"),
+    ),
+    (
+        "textures/sand.png",
+        include_bytes!("../../assets/textures/sand.png"),
+    ),
+    (
+        "textures/sand-normal.png",
+        include_bytes!("../../assets/textures/sand-normal.png"),
+    ),
+    (
+        "textures/default-blend.png",
+        include_bytes!("../../assets/textures/default-blend.png"),
+    ),
+];
+
 /// Vertical field of view when a scene gives none.
 pub const DEFAULT_FOV_DEG: f32 = 55.0;
 
@@ -48,6 +102,12 @@ pub struct Scene {
     pub lod: DistanceLod,
     /// None: an overview of the whole terrain (`camera_for`).
     pub camera: Option<Camera>,
+    pub lighting: Lighting,
+    /// Bake a self-shadowing lightmap for the first light.
+    pub lightmap: bool,
+    pub fog: Option<Fog>,
+    /// None: colours by height.
+    pub material: Option<MaterialSpec>,
 }
 
 /// Why a scene's terrain could not be built.
@@ -72,6 +132,18 @@ impl Scene {
             bytes: DEFAULT_HEIGHTMAP_PNG,
             format: HeightmapFormat::Png,
         };
+        if let Some(material) = &mut scene.material {
+            for asset in material.assets_mut() {
+                let AssetSource::File(path) = &asset.source else {
+                    continue;
+                };
+                let (name, bytes) = DEFAULT_SCENE_ASSETS
+                    .iter()
+                    .find(|(name, _)| path.ends_with(name))
+                    .expect("every asset of the built-in scene is built in");
+                asset.source = AssetSource::Embedded { name, bytes };
+            }
+        }
         scene
     }
 

@@ -49,10 +49,19 @@ impl Rng {
 
 /// Gradient noise on the integer lattice, in about [-1, 1].
 fn gradient_noise(seed: u64, x: f64, y: f64) -> f64 {
+    periodic_noise(seed, x, y, 0)
+}
+
+/// Gradient noise that repeats every `period` lattice cells in x and y
+/// (0: never), in about [-1, 1]. Tileable textures use a period that
+/// divides their size.
+pub(crate) fn periodic_noise(seed: u64, x: f64, y: f64, period: i64) -> f64 {
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let (ix, iy) = (x0 as i64, y0 as i64);
+    let wrap = |i: i64| if period > 0 { i.rem_euclid(period) } else { i };
     let grad = |i: i64, j: i64, dx: f64, dy: f64| {
+        let (i, j) = (wrap(i), wrap(j));
         let mut h = seed
             ^ (i as u64).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)
             ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);

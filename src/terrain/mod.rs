@@ -13,6 +13,7 @@ pub mod heightmap;
 pub mod info;
 pub mod lod;
 mod query;
+pub mod shading;
 
 pub use camera::{look_at, perspective, Frustum};
 pub use error::{HeightmapError, TerrainError};

@@ -141,6 +141,39 @@ impl Device {
         Ok(sampler)
     }
 
+    /// Linear filtering across levels for textures: `repeat` tiles them
+    /// (layer textures), otherwise they clamp to the edge (maps stretched
+    /// over the terrain). Anisotropic filtering at up to `anisotropy`
+    /// samples when given (the device feature must be on).
+    pub fn create_texture_sampler(
+        &self,
+        name: &str,
+        repeat: bool,
+        anisotropy: Option<f32>,
+    ) -> Result<vk::Sampler> {
+        let address = if repeat {
+            vk::SamplerAddressMode::REPEAT
+        } else {
+            vk::SamplerAddressMode::CLAMP_TO_EDGE
+        };
+        let info = vk::SamplerCreateInfo::default()
+            .mag_filter(vk::Filter::LINEAR)
+            .min_filter(vk::Filter::LINEAR)
+            .mipmap_mode(vk::SamplerMipmapMode::LINEAR)
+            .address_mode_u(address)
+            .address_mode_v(address)
+            .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE)
+            .max_lod(vk::LOD_CLAMP_NONE)
+            .anisotropy_enable(anisotropy.is_some())
+            .max_anisotropy(anisotropy.unwrap_or(1.0));
+        // SAFETY: valid create info; anisotropy only when the caller has
+        // checked the feature.
+        let sampler =
+            unsafe { self.raw.create_sampler(&info, None) }.context("creating a sampler")?;
+        self.set_name(sampler, name);
+        Ok(sampler)
+    }
+
     pub fn destroy_sampler(&self, sampler: vk::Sampler) {
         // SAFETY: no descriptor set using it is in use.
         unsafe { self.raw.destroy_sampler(sampler, None) };

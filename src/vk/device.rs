@@ -31,6 +31,9 @@ pub struct Capabilities {
     pub timestamp_valid_bits: u32,
     pub max_tessellation_level: u32,
     pub max_image_dimension_2d: u32,
+    pub max_image_array_layers: u32,
+    /// maxSamplerAnisotropy (meaningful with `sampler_anisotropy`).
+    pub max_sampler_anisotropy: f32,
     /// Patches one tessellated draw may hold on this driver; None: no limit.
     ///
     /// lavapipe (Mesa 22.3) drops whole runs of triangles from a draw whose
@@ -155,6 +158,8 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 timestamp_valid_bits: family.timestamp_valid_bits,
                 max_tessellation_level: props.limits.max_tessellation_generation_level,
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
+                max_image_array_layers: props.limits.max_image_array_layers,
+                max_sampler_anisotropy: props.limits.max_sampler_anisotropy,
                 max_patches_per_draw: (driver.driver_id == vk::DriverId::MESA_LLVMPIPE)
                     .then_some(8),
             },

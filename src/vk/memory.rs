@@ -267,6 +267,19 @@ impl Device {
     }
 
     pub fn create_image(&self, desc: ImageDesc, name: &str) -> Result<Image> {
+        self.create_image_array(desc, 1, 1, vk::ImageViewType::TYPE_2D, name)
+    }
+
+    /// An image of `levels` mip levels and `layers` array layers, viewed
+    /// whole as `view_type`.
+    pub fn create_image_array(
+        &self,
+        desc: ImageDesc,
+        levels: u32,
+        layers: u32,
+        view_type: vk::ImageViewType,
+        name: &str,
+    ) -> Result<Image> {
         let info = vk::ImageCreateInfo::default()
             .image_type(vk::ImageType::TYPE_2D)
             .format(desc.format)
@@ -275,8 +288,8 @@ impl Device {
                 height: desc.extent.height,
                 depth: 1,
             })
-            .mip_levels(1)
-            .array_layers(1)
+            .mip_levels(levels)
+            .array_layers(layers)
             .samples(vk::SampleCountFlags::TYPE_1)
             .tiling(vk::ImageTiling::OPTIMAL)
             .usage(desc.usage)
@@ -298,7 +311,7 @@ impl Device {
         )?;
         let view_info = vk::ImageViewCreateInfo::default()
             .image(raw)
-            .view_type(vk::ImageViewType::TYPE_2D)
+            .view_type(view_type)
             .format(desc.format)
             .subresource_range(subresource_range(desc.aspect));
         // SAFETY: the view matches the image's format and aspect.
@@ -376,11 +389,22 @@ impl Device {
     }
 }
 
+/// Every level and layer of an image.
 pub fn subresource_range(aspect: vk::ImageAspectFlags) -> vk::ImageSubresourceRange {
     vk::ImageSubresourceRange::default()
         .aspect_mask(aspect)
-        .level_count(1)
-        .layer_count(1)
+        .level_count(vk::REMAINING_MIP_LEVELS)
+        .layer_count(vk::REMAINING_ARRAY_LAYERS)
+}
+
+/// The shape of an image `Device::upload_image` fills.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexelUpload {
+    pub format: vk::Format,
+    pub width: u32,
+    pub height: u32,
+    pub layers: u32,
+    pub view_type: vk::ImageViewType,
 }
 
 /// One image layout transition with synchronization2 scopes.
@@ -441,20 +465,66 @@ impl Device {
         height: u32,
         texels: &[f32],
     ) -> Result<Image> {
-        let image = self.create_image(
-            ImageDesc {
-                extent: vk::Extent2D { width, height },
+        self.upload_image(
+            name,
+            &TexelUpload {
                 format: vk::Format::R32_SFLOAT,
+                width,
+                height,
+                layers: 1,
+                view_type: vk::ImageViewType::TYPE_2D,
+            },
+            &[bytemuck::cast_slice(texels)],
+        )
+    }
+
+    /// A sampled image whose level i is `levels[i]`: every layer in turn,
+    /// each (width >> i) x (height >> i) texels (at least 1) of `up.format`,
+    /// rows top first. Uploaded through one staging buffer and left in
+    /// SHADER_READ_ONLY_OPTIMAL for vertex to fragment stages.
+    pub fn upload_image(&self, name: &str, up: &TexelUpload, levels: &[&[u8]]) -> Result<Image> {
+        let image = self.create_image_array(
+            ImageDesc {
+                extent: vk::Extent2D {
+                    width: up.width,
+                    height: up.height,
+                },
+                format: up.format,
                 usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
                 aspect: vk::ImageAspectFlags::COLOR,
             },
+            levels.len() as u32,
+            up.layers,
+            up.view_type,
             name,
         )?;
         let staging = self.create_host_buffer(
             &format!("{name}.staging"),
             vk::BufferUsageFlags::TRANSFER_SRC,
-            bytemuck::cast_slice(texels),
+            &levels.concat(),
         )?;
+        let mut offset = 0u64;
+        let regions: Vec<vk::BufferImageCopy> = levels
+            .iter()
+            .enumerate()
+            .map(|(i, bytes)| {
+                let region = vk::BufferImageCopy::default()
+                    .buffer_offset(offset)
+                    .image_subresource(
+                        vk::ImageSubresourceLayers::default()
+                            .aspect_mask(vk::ImageAspectFlags::COLOR)
+                            .mip_level(i as u32)
+                            .layer_count(up.layers),
+                    )
+                    .image_extent(vk::Extent3D {
+                        width: (up.width >> i).max(1),
+                        height: (up.height >> i).max(1),
+                        depth: 1,
+                    });
+                offset += bytes.len() as u64;
+                region
+            })
+            .collect();
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
         let uploaded = self.one_shot(&format!("{name}.upload"), |cmd| {
             transition_images(
@@ -467,25 +537,15 @@ impl Device {
                     to: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
                 }],
             );
-            let region = vk::BufferImageCopy::default()
-                .image_subresource(
-                    vk::ImageSubresourceLayers::default()
-                        .aspect_mask(vk::ImageAspectFlags::COLOR)
-                        .layer_count(1),
-                )
-                .image_extent(vk::Extent3D {
-                    width,
-                    height,
-                    depth: 1,
-                });
-            // SAFETY: the staging buffer holds width * height floats.
+            // SAFETY: the staging buffer holds every level at the offsets
+            // of `regions`, each level's extent of texels per layer.
             unsafe {
                 self.raw.cmd_copy_buffer_to_image(
                     cmd,
                     staging.raw,
                     image.raw,
                     L::TRANSFER_DST_OPTIMAL,
-                    &[region],
+                    &regions,
                 )
             };
             transition_images(

@@ -22,6 +22,9 @@ pub struct GraphicsPipelineDesc<'a> {
     pub depth_format: vk::Format,
     pub depth_compare: vk::CompareOp,
     pub layout: vk::PipelineLayout,
+    /// Values of specialisation constants 0, 1, ... (u32 each), given to
+    /// every stage; a stage ignores the ids it doesn't declare.
+    pub specialization: &'a [u32],
 }
 
 impl Device {
@@ -77,6 +80,17 @@ impl Device {
                 }
             }
         }
+        let entries: Vec<vk::SpecializationMapEntry> = (0..desc.specialization.len())
+            .map(|i| {
+                vk::SpecializationMapEntry::default()
+                    .constant_id(i as u32)
+                    .offset(4 * i as u32)
+                    .size(4)
+            })
+            .collect();
+        let specialization = vk::SpecializationInfo::default()
+            .map_entries(&entries)
+            .data(bytemuck::cast_slice(desc.specialization));
         let stages: Vec<vk::PipelineShaderStageCreateInfo> = modules
             .iter()
             .map(|&(stage, module)| {
@@ -84,6 +98,7 @@ impl Device {
                     .stage(stage)
                     .module(module)
                     .name(c"main")
+                    .specialization_info(&specialization)
             })
             .collect();
         let bindings = [vk::VertexInputBindingDescription::default()

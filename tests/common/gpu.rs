@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
+use vkterrain::material::Appearance;
 use vkterrain::render::{
     Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, TerrainRenderer,
 };
@@ -33,15 +34,28 @@ pub struct GpuScene {
 
 impl GpuScene {
     pub fn new(terrain: Terrain, width: u32, height: u32, wireframe: bool) -> Self {
+        Self::with_appearance(terrain, &Appearance::default(), width, height, wireframe)
+    }
+
+    /// A scene drawn with material layers and a lightmap; `terrain` must
+    /// allow for the displacement (`Appearance::y_margin`).
+    pub fn with_appearance(
+        terrain: Terrain,
+        appearance: &Appearance,
+        width: u32,
+        height: u32,
+        wireframe: bool,
+    ) -> Self {
         let gpu = Gpu::new(true).unwrap_or_else(|e| {
             panic!(
                 "GPU tests need a Vulkan device with tessellation and the validation layer: {e} \
                  (set VKTERRAIN_SKIP_GPU=1 to skip them)"
             )
         });
-        let renderer = TerrainRenderer::new(
+        let renderer = TerrainRenderer::with_appearance(
             &gpu,
             &terrain,
+            appearance,
             OFFSCREEN_COLOR_FORMAT,
             1,
             &RendererOptions {

@@ -1,0 +1,397 @@
+//! Material layers on the GPU, validation on: golden images of blend-map
+//! mode, rules mode, one layer and eight; rules against the blend map baked
+//! from them (the GLSL weights against the Rust ones); displacement that
+//! culling must not lose; and only the resources a scene uses.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::gpu::*;
+use common::*;
+use glam::DVec2;
+use vkterrain::material::generate::blend_maps_from_rules;
+use vkterrain::material::Appearance;
+use vkterrain::render::{RenderPath, RenderSettings};
+use vkterrain::scene::{Asset, AssetSource, Scene, WeightSource};
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::shading::Rules;
+use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
+
+const W: u32 = 320;
+const H: u32 = 180;
+
+fn repo(path: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
+}
+
+/// The scene's terrain (Y bounds grown for its displacement), look and
+/// settings.
+fn prepare(scene: &Scene) -> (Terrain, Appearance, RenderSettings) {
+    let info = scene.terrain_info().unwrap();
+    let appearance = Appearance::load(scene, &info).unwrap();
+    let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
+    let settings = RenderSettings {
+        lod: scene.lod,
+        lighting: scene.lighting,
+        fog: scene.fog,
+        ..RenderSettings::default()
+    };
+    (terrain, appearance, settings)
+}
+
+/// Renders `scene` from its camera (or overview) with each path in
+/// `paths`; checks validation.
+fn render(scene: &Scene, paths: &[RenderPath]) -> Vec<image::RgbaImage> {
+    let (terrain, appearance, settings) = prepare(scene);
+    let camera = scene.camera_for(terrain.info());
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, W, H, false);
+    let images = paths
+        .iter()
+        .map(|&path| {
+            gpu.render(&camera, &RenderSettings { path, ..settings })
+                .rgba_image()
+        })
+        .collect();
+    gpu.finish();
+    images
+}
+
+/// A scene file over the DEM with `look` appended; TEX stands for the
+/// repository's textures directory.
+fn dem_scene(dir: &tempfile::TempDir, look: &str) -> Scene {
+    let text = format!(
+        "[heightmap]\npath = \"{}\"\nheight_scale = 65535.0\ncell_spacing = [74.48, 92.15]\n\
+         [terrain]\ncells_per_patch = 32\n[camera]\neye = [-9000.0, 2600.0, -19000.0]\n\
+         target = [1500.0, 300.0, 2000.0]\nfov = 55.0\n{}",
+        data_path("jacksboro_fault_dem.png").display(),
+        look.replace("TEX", &repo("assets/textures").display().to_string())
+    );
+    Scene::load(&temp_file(dir, "scene.toml", text.as_bytes())).unwrap()
+}
+
+#[test]
+fn blend_map_mode_matches_its_golden_image_on_every_path() {
+    if skip_gpu() {
+        return;
+    }
+    let scene = Scene::default_scene();
+    let images = render(
+        &scene,
+        &[RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
+    );
+    assert_golden("material-blend-map", &images[0], 12, 0.005);
+    // The other paths draw the same surface and look, up to the
+    // triangulation: most pixels agree closely.
+    for (i, name) in [(1, "geomip"), (2, "brute")] {
+        assert_images_match(
+            &format!("material-blend-map-{name}"),
+            &images[i],
+            &images[0],
+            40,
+            0.03,
+        );
+    }
+}
+
+#[test]
+fn rules_mode_matches_its_golden_image_and_the_blend_map_baked_from_it() {
+    if skip_gpu() {
+        return;
+    }
+    let rules_scene = Scene::load(&repo("assets/scenes/rules.toml")).unwrap();
+    let rules = render(&rules_scene, &[RenderPath::Tess]).remove(0);
+    assert_golden("material-rules", &rules, 12, 0.005);
+
+    // The same rules baked into a full-resolution blend map by the CPU
+    // (terrain::shading::Rules) must look the same as the GPU's rules
+    // (rule_weights in glsl/material.glsl): this holds the two equal.
+    let dir = tempfile::tempdir().unwrap();
+    let material = rules_scene.material.as_ref().unwrap();
+    let WeightSource::Rules { cliff } = material.weights else {
+        panic!("rules.toml is in rules mode")
+    };
+    let info = rules_scene.terrain_info().unwrap();
+    let cpu_rules = Rules {
+        bands: material.layers.iter().map(|l| l.band).collect(),
+        cliff,
+    };
+    let maps = blend_maps_from_rules(&info, &cpu_rules, material.layers.len(), 1);
+    let path = dir.path().join("blend.png");
+    maps[0].save(&path).unwrap();
+    let mut baked = rules_scene.clone();
+    let m = baked.material.as_mut().unwrap();
+    m.weights = WeightSource::BlendMaps(vec![Asset {
+        source: AssetSource::File(path),
+        scene: PathBuf::from("test"),
+        line: 1,
+        key: "blend".into(),
+    }]);
+    let from_map = render(&baked, &[RenderPath::Tess]).remove(0);
+    assert_images_match("material-rules-baked", &from_map, &rules, 24, 0.02);
+}
+
+#[test]
+fn one_layer_matches_its_golden_image() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dem_scene(
+        &dir,
+        "[material]\n[[material.layer]]\ndiffuse = \"TEX/rock.png\"\n\
+         normal = \"TEX/rock-normal.png\"\ntile_size = 400.0\n",
+    );
+    let image = render(&scene, &[RenderPath::Tess]).remove(0);
+    assert_golden("material-one-layer", &image, 12, 0.005);
+}
+
+/// Eight height bands over the DEM, every texture at least once.
+const EIGHT_LAYERS: [(&str, f32, f32); 8] = [
+    ("sand", 0.0, 0.1),
+    ("grass", 0.15, 0.1),
+    ("dirt", 0.3, 0.1),
+    ("grass", 0.45, 0.1),
+    ("rock", 0.6, 0.1),
+    ("dirt", 0.72, 0.1),
+    ("rock", 0.85, 0.1),
+    ("snow", 1.0, 0.12),
+];
+
+#[test]
+fn eight_layers_over_two_blend_maps_match_their_golden_image() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // Bake eight bands into two blend maps, then draw from the maps.
+    let mut rules_look = String::from("[material]\n");
+    for (i, (name, centre, width)) in EIGHT_LAYERS.iter().enumerate() {
+        rules_look.push_str(&format!(
+            "[[material.layer]]\ndiffuse = \"TEX/{name}.png\"\ntile_size = {}\nheight_band = [{centre}, {width}]\n",
+            300.0 + 50.0 * i as f32
+        ));
+    }
+    let rules_scene = dem_scene(&dir, &rules_look);
+    let info = rules_scene.terrain_info().unwrap();
+    let m = rules_scene.material.as_ref().unwrap();
+    let rules = Rules {
+        bands: m.layers.iter().map(|l| l.band).collect(),
+        cliff: None,
+    };
+    let maps = blend_maps_from_rules(&info, &rules, 8, 1);
+    assert_eq!(maps.len(), 2, "layers 1..4 and 5..7");
+    for (i, map) in maps.iter().enumerate() {
+        map.save(dir.path().join(format!("blend{i}.png"))).unwrap();
+    }
+    let mut look = format!(
+        "[material]\nblend_maps = [\"{0}/blend0.png\", \"{0}/blend1.png\"]\n",
+        dir.path().display()
+    );
+    for (i, (name, _, _)) in EIGHT_LAYERS.iter().enumerate() {
+        look.push_str(&format!(
+            "[[material.layer]]\ndiffuse = \"TEX/{name}.png\"\nnormal = \"TEX/{name}-normal.png\"\ntile_size = {}\n",
+            300.0 + 50.0 * i as f32
+        ));
+    }
+    look.push_str("[fog]\nstart = 10000.0\nrange = 40000.0\ncolor = [0.52, 0.68, 0.86]\n");
+    let scene = dem_scene(&dir, &look);
+    let image = render(&scene, &[RenderPath::Tess]).remove(0);
+    assert_golden("material-eight-layers", &image, 12, 0.005);
+}
+
+/// A flat 129x129 plane, 10 m between samples, in 4-cell patches, with
+/// one rock layer displaced by up to ±`scale / 2`.
+fn displaced_plane(dir: &tempfile::TempDir, scale: f32) -> Scene {
+    let map = vec![0u8; 129 * 129];
+    let map_path = temp_file(dir, "flat.r8", &map);
+    let text = format!(
+        "[heightmap]\npath = \"{}\"\nformat = \"raw8\"\nsize = [129, 129]\ncell_spacing = 10.0\n\
+         [terrain]\ncells_per_patch = 4\n\
+         [material]\n[[material.layer]]\ndiffuse = \"{tex}/rock.png\"\nheight = \"{tex}/rock-height.png\"\n\
+         tile_size = 120.0\ndisplacement = {scale}\n",
+        map_path.display(),
+        tex = repo("assets/textures").display()
+    );
+    Scene::load(&temp_file(dir, "displaced.toml", text.as_bytes())).unwrap()
+}
+
+#[test]
+fn culling_keeps_what_displacement_lifts_into_view() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = displaced_plane(&dir, 240.0);
+    // Low over the plane, looking up a little: near patches lie wholly
+    // below the frustum's bottom plane until displacement lifts them.
+    let camera = camera([0.0, 20.0, -600.0], [0.0, 120.0, 600.0], 50.0);
+    let (terrain, appearance, settings) = prepare(&scene);
+    assert_eq!(appearance.y_margin(), 120.0);
+    let flat = terrain.info().clone();
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, W, H, false);
+    for path in [RenderPath::Tess, RenderPath::Geomip] {
+        let culled = gpu.render(&camera, &RenderSettings { path, ..settings });
+        let all = gpu.render(
+            &camera,
+            &RenderSettings {
+                path,
+                cull: false,
+                ..settings
+            },
+        );
+        assert!(
+            culled.patches_in_frustum < gpu.terrain.grid().patch_count(),
+            "{path:?}: culling must have something to cull"
+        );
+        assert_eq!(
+            culled.readback.rgba, all.readback.rgba,
+            "{path:?}: culling changed the image"
+        );
+    }
+    gpu.finish();
+
+    // Without the grown bounds, the same culling loses visible ground:
+    // the check above can fail.
+    let bare = Terrain::new(flat, 0.0).unwrap();
+    let mut gpu = GpuScene::with_appearance(bare, &appearance, W, H, false);
+    let culled = gpu.render(&camera, &settings);
+    let all = gpu.render(
+        &camera,
+        &RenderSettings {
+            cull: false,
+            ..settings
+        },
+    );
+    let differing = culled
+        .readback
+        .rgba
+        .chunks_exact(4)
+        .zip(all.readback.rgba.chunks_exact(4))
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(
+        differing > 100,
+        "ungrown bounds should lose ground: {differing} pixels differ"
+    );
+    gpu.finish();
+}
+
+#[test]
+fn only_the_resources_a_scene_uses_are_created() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let names = |scene: &Scene| -> Vec<String> {
+        let (terrain, appearance, _) = prepare(scene);
+        let gpu = GpuScene::with_appearance(terrain, &appearance, 8, 8, false);
+        let names = gpu
+            .gpu
+            .device
+            .memory_report()
+            .into_iter()
+            .map(|(n, _)| n)
+            .filter(|n| n.starts_with("material.") || n.starts_with("lighting."))
+            .collect();
+        gpu.finish();
+        names
+    };
+    // No layers: nothing.
+    assert!(names(&dem_scene(&dir, "")).is_empty());
+    // One layer, no maps: its uniforms and colour only.
+    assert_eq!(
+        names(&dem_scene(
+            &dir,
+            "[material]\n[[material.layer]]\ndiffuse = \"TEX/rock.png\"\n"
+        )),
+        vec!["material.diffuse_maps", "material.uniforms"]
+    );
+    // A height map whose displacement is 0 is not uploaded.
+    let look = "[material]\n[[material.layer]]\ndiffuse = \"TEX/rock.png\"\nheight = \"TEX/rock-height.png\"\n";
+    assert_eq!(
+        names(&dem_scene(&dir, look)),
+        vec!["material.diffuse_maps", "material.uniforms"]
+    );
+    // The default scene: blend map, normal maps and lightmap, no height maps.
+    assert_eq!(
+        names(&Scene::default_scene()),
+        vec![
+            "lighting.lightmap",
+            "material.blend_maps",
+            "material.diffuse_maps",
+            "material.normal_maps",
+            "material.uniforms"
+        ]
+    );
+}
+
+#[test]
+fn a_textured_scene_draws_on_a_terrain_that_is_not_2n_plus_1() {
+    if skip_gpu() {
+        return;
+    }
+    // 100x70 samples with uneven spacing: texel-centre addressing of the
+    // lightmap and displacement on every path, validation-clean.
+    let map = Heightmap::from_fn(100, 70, |r, c| ((r * 7 + c * 13) % 50) as f32).unwrap();
+    let info = TerrainInfo::new(map, DVec2::new(3.0, 5.0), 8, DVec2::ZERO).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = displaced_plane(&dir, 10.0);
+    scene.lightmap = true;
+    let appearance = Appearance::load(&scene, &info).unwrap();
+    let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
+    let camera: Camera = scene.camera_for(terrain.info());
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 64, false);
+    for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
+        let frame = gpu.render(
+            &camera,
+            &RenderSettings {
+                path,
+                ..RenderSettings::default()
+            },
+        );
+        let drawn = frame
+            .readback
+            .rgba
+            .chunks_exact(4)
+            .filter(|p| p[..3] != frame.readback.rgba[..3])
+            .count();
+        assert!(drawn > 0, "{path:?} drew nothing");
+    }
+    gpu.finish();
+}
+
+#[test]
+fn anisotropic_filtering_when_the_scene_asks_for_it() {
+    if skip_gpu() {
+        return;
+    }
+    // CPU rasterisers leave it off by default (it costs them over 1000x);
+    // a scene can still ask. Tiny, because on lavapipe it is that slow.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dem_scene(
+        &dir,
+        "[material]\nanisotropy = 4.0\n[[material.layer]]\ndiffuse = \"TEX/rock.png\"\ntile_size = 400.0\n",
+    );
+    let (terrain, appearance, settings) = prepare(&scene);
+    assert_eq!(appearance.material.as_ref().unwrap().anisotropy, Some(4.0));
+    let camera = scene.camera_for(terrain.info());
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, 32, 18, false);
+    let caps = &gpu.gpu.device.caps;
+    let expected = caps
+        .sampler_anisotropy
+        .then(|| caps.max_sampler_anisotropy.min(4.0));
+    assert_eq!(
+        vkterrain::render::material::anisotropy_for(Some(4.0), caps),
+        expected
+    );
+    if caps.device_type == "CPU" {
+        assert_eq!(
+            vkterrain::render::material::anisotropy_for(None, caps),
+            None
+        );
+    }
+    let frame = gpu.render(&camera, &settings);
+    assert!(frame.patches_in_frustum > 0);
+    gpu.finish();
+}
