@@ -565,3 +565,75 @@ fn bad_scenes_fail_with_the_file_key_and_line() {
         assert!(!dir.path().join("x.png").exists());
     }
 }
+
+/// Runs `render` with `--inject-fault KIND@n` for n = 1, 2, ... until the
+/// fault comes too late to matter; every earlier run must fail cleanly.
+/// Returns how many points failed.
+fn fails_cleanly_at_every_point(kind: &str, expected: &str) -> u32 {
+    let dir = tempfile::tempdir().unwrap();
+    let scenes = tempfile::tempdir().unwrap();
+    // The DEM with a textured layer, a normal map and a lightmap, so the
+    // material's uploads are in the sequence too.
+    let textures = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/textures");
+    let scene = temp_file(
+        &scenes,
+        "scene.toml",
+        format!(
+            "[heightmap]\npath = \"{}\"\nheight_scale = 65535.0\ncell_spacing = [74.48, 92.15]\n\
+             [lighting]\nlightmap = true\n[material]\n[[material.layer]]\ndiffuse = \"{t}/rock.png\"\n\
+             normal = \"{t}/rock-normal.png\"\n",
+            data_path("jacksboro_fault_dem.png").display(),
+            t = textures.display()
+        )
+        .as_bytes(),
+    );
+    let scene = scene.display().to_string();
+    for n in 1..=64 {
+        let fault = format!("{kind}@{n}");
+        let out = vkterrain(
+            dir.path(),
+            &[
+                "render",
+                "--validate",
+                "--scene",
+                &scene,
+                "--width",
+                "32",
+                "--height",
+                "18",
+                "--out",
+                "f.png",
+                "--stats",
+                "s.json",
+                "--inject-fault",
+                &fault,
+            ],
+        );
+        if out.status.success() {
+            return n - 1;
+        }
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{fault}: {stderr}");
+        assert!(stderr.contains(expected), "{fault}: {stderr}");
+        assert!(stderr.contains("injected fault"), "{fault}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{fault}: {stderr}");
+        // Whatever was built before the failure was freed again.
+        assert!(!stderr.contains("leak"), "{fault}: {stderr}");
+        let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(left.is_empty(), "{fault} left files behind: {left:?}");
+    }
+    panic!("{kind} still failing after 64 points");
+}
+
+#[test]
+fn device_loss_and_allocation_failure_at_any_point_fail_cleanly() {
+    if skip_gpu() {
+        return;
+    }
+    // Uploads and the frame itself: each submission in turn.
+    let submissions = fails_cleanly_at_every_point("device-lost", "device has been lost");
+    assert!(submissions >= 8, "{submissions} submissions");
+    // Every buffer and image in turn.
+    let allocations = fails_cleanly_at_every_point("out-of-memory", "Out of memory");
+    assert!(allocations >= 16, "{allocations} allocations");
+}

@@ -60,6 +60,8 @@ pub struct DemoOptions {
     pub disabled: DisabledFeatures,
     /// Largest GPU memory to allocate, in bytes.
     pub memory_budget: Option<u64>,
+    /// A failure to inject (`--inject-fault`).
+    pub fault: Option<crate::vk::Fault>,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -268,6 +270,7 @@ impl Running {
             }
         };
         device.set_memory_budget(options.memory_budget);
+        device.set_fault(options.fault);
         let gpu = Gpu { device, instance };
         if let Err(e) = surface.check_support(&gpu.device) {
             surface.destroy();

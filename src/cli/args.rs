@@ -280,6 +280,32 @@ pub struct FeatureArgs {
     /// naming the resource that would exceed it.
     #[arg(long, value_name = "MIB", value_parser = parse_budget)]
     pub gpu_memory_budget: Option<u64>,
+
+    /// Make the device fail, to see how it is reported: `device-lost[@N]`
+    /// reports the Nth queue submission (default 1, uploads included) and
+    /// all after it lost; `out-of-memory[@N]` fails the Nth allocation.
+    #[arg(long, value_name = "FAULT", value_parser = parse_fault)]
+    pub inject_fault: Option<crate::vk::Fault>,
+}
+
+fn parse_fault(s: &str) -> Result<crate::vk::Fault, String> {
+    let (kind, n) = match s.split_once('@') {
+        Some((kind, n)) => {
+            let n: u32 =
+                n.parse().ok().filter(|&n| n >= 1).ok_or_else(|| {
+                    format!("--inject-fault {s:?}: N must be a whole number from 1")
+                })?;
+            (kind, n)
+        }
+        None => (s, 1),
+    };
+    match kind {
+        "device-lost" => Ok(crate::vk::Fault::DeviceLost { submission: n }),
+        "out-of-memory" => Ok(crate::vk::Fault::OutOfDeviceMemory { allocation: n }),
+        _ => Err(format!(
+            "--inject-fault {s:?}: expected device-lost[@N] or out-of-memory[@N]"
+        )),
+    }
 }
 
 fn parse_budget(s: &str) -> Result<u64, String> {
@@ -301,6 +327,7 @@ impl FeatureArgs {
         let gpu =
             crate::vk::Gpu::with_disabled(validate, &self.disabled()).context("starting Vulkan")?;
         gpu.device.set_memory_budget(self.gpu_memory_budget);
+        gpu.device.set_fault(self.inject_fault);
         Ok(gpu)
     }
 

@@ -106,6 +106,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         walk_height: cmd.walk_height,
         disabled: cmd.view.features.disabled(),
         memory_budget: cmd.view.features.gpu_memory_budget,
+        fault: cmd.view.features.inject_fault,
         frames: cmd.frames,
         resize_at: cmd.resize_at,
         resize_storm: cmd.resize_storm,

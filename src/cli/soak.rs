@@ -8,6 +8,7 @@ use serde::Serialize;
 
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::flythrough;
+use crate::material::Appearance;
 use crate::render::{
     with_fallback, Headless, LodMetric, RenderPath, RenderSettings, RendererOptions,
     TerrainRenderer,
@@ -84,7 +85,7 @@ fn resident_bytes() -> Result<u64> {
 
 /// The settings of frame `i`: the path and LOD mode change every 50 frames,
 /// cycling through every combination the device supports.
-fn settings_for(i: u64, paths: &[RenderPath]) -> RenderSettings {
+fn settings_for(i: u64, paths: &[RenderPath], base: &RenderSettings) -> RenderSettings {
     let phase = i / 50;
     let path = paths[(phase as usize) % paths.len()];
     let lod_metric = match (phase / paths.len() as u64) % 3 {
@@ -96,7 +97,7 @@ fn settings_for(i: u64, paths: &[RenderPath]) -> RenderSettings {
         path,
         lod_metric,
         geomorph: phase % 2 == 0,
-        ..RenderSettings::default()
+        ..*base
     }
 }
 
@@ -114,7 +115,16 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
     let scene = cmd.terrain.scene()?;
     let info = scene.terrain_info()?;
     let cameras = flythrough(&info, cmd.loop_frames);
-    let terrain = Terrain::new(info, 0.0)?;
+    // The scene's look too: its textures and lightmap are resources to
+    // keep, and to free.
+    let appearance = Appearance::load(&scene, &info)?;
+    let terrain = Terrain::new(info, appearance.y_margin())?;
+    let base = RenderSettings {
+        lod: scene.lod,
+        lighting: scene.lighting,
+        fog: scene.fog,
+        ..RenderSettings::default()
+    };
     let gpu = cmd.features.gpu(cmd.validate)?;
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
     if gpu.device.caps.tessellation_shader {
@@ -125,9 +135,10 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
     for note in notes {
         writeln!(out, "{note}")?;
     }
-    let mut renderer = TerrainRenderer::new(
+    let mut renderer = TerrainRenderer::with_appearance(
         &gpu,
         &terrain,
+        &appearance,
         OFFSCREEN_COLOR_FORMAT,
         1,
         &RendererOptions {
@@ -149,7 +160,7 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
     let run = (|| -> Result<()> {
         for i in 0..cmd.frames {
             let camera = &cameras[(i % cameras.len() as u64) as usize];
-            let settings = settings_for(i, &paths);
+            let settings = settings_for(i, &paths, &base);
             headless
                 .render(&gpu, &mut renderer, &terrain, camera, &settings)
                 .with_context(|| format!("frame {i}"))?;

@@ -45,15 +45,29 @@ impl Headless {
     pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
         let device = &gpu.device;
         let target = OffscreenTarget::new(device, &gpu.instance, width, height)?;
-        let pool = device.create_command_pool("headless.command_pool")?;
-        let cmd = device.allocate_command_buffers(pool, 1, "headless.commands")?[0];
-        let fence = device.create_fence("headless.fence", false)?;
-        Ok(Headless {
-            target,
-            pool,
-            cmd,
-            fence,
-        })
+        let pool = match device.create_command_pool("headless.command_pool") {
+            Ok(p) => p,
+            Err(e) => {
+                target.destroy(device);
+                return Err(e);
+            }
+        };
+        let rest = device
+            .allocate_command_buffers(pool, 1, "headless.commands")
+            .and_then(|cmds| Ok((cmds[0], device.create_fence("headless.fence", false)?)));
+        match rest {
+            Ok((cmd, fence)) => Ok(Headless {
+                target,
+                pool,
+                cmd,
+                fence,
+            }),
+            Err(e) => {
+                device.destroy_command_pool(pool);
+                target.destroy(device);
+                Err(e)
+            }
+        }
     }
 
     /// Renders `terrain` from `camera` and waits for the result.

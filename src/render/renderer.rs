@@ -305,85 +305,99 @@ impl TerrainRenderer {
         let table =
             (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_table());
         let error_table_ms = table_start.elapsed().as_secs_f64() * 1e3;
-        let error_table = if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
+        if wants(RenderPath::Tess) {
             bindings.push((
                 BINDING_ERROR_TABLE,
                 vk::DescriptorType::STORAGE_BUFFER,
                 vk::ShaderStageFlags::TESSELLATION_CONTROL,
             ));
             pool_sizes.push((vk::DescriptorType::STORAGE_BUFFER, 1));
-            Some(device.upload_buffer(
-                "terrain.error_table",
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(table.as_slice()),
-            )?)
-        } else {
-            None
-        };
+        }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
         for binding in gpu_appearance.bindings(vertex_stages) {
             pool_sizes.push((binding.1, 1));
             bindings.push(binding);
         }
-        let set_layout = device.create_descriptor_set_layout(&bindings, "terrain.set_layout")?;
-        let pipeline_layout =
-            device.create_pipeline_layout(&[set_layout], "terrain.pipeline_layout")?;
-        let (descriptor_pool, sets) = device.allocate_descriptor_sets(
-            set_layout,
-            &pool_sizes,
-            frames_in_flight,
-            "terrain.frame_set",
-        )?;
-        let mut frames = Vec::with_capacity(sets.len());
-        for (i, set) in sets.into_iter().enumerate() {
-            let uniforms = device.create_host_buffer(
-                &format!("terrain.frame_uniforms[{i}]"),
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
-                bytemuck::bytes_of(&FrameUniforms::default()),
-            )?;
-            device.write_buffer(
-                set,
-                BINDING_FRAME,
-                vk::DescriptorType::UNIFORM_BUFFER,
-                uniforms.raw,
-                size_of::<FrameUniforms>() as u64,
-            );
-            device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
-            gpu_appearance.write(device, set);
-            if let Some(errors) = &error_table {
-                device.write_buffer(
-                    set,
-                    BINDING_ERROR_TABLE,
-                    vk::DescriptorType::STORAGE_BUFFER,
-                    errors.raw,
-                    errors.desc.size,
-                );
-            }
-            let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
-            frames.push(FrameSlot {
-                uniforms,
-                set,
-                queries,
-            });
-        }
+        // Null handles until made; destroying a null handle does nothing,
+        // so a failure part-way tears down exactly what was built.
         let mut renderer = TerrainRenderer {
             heightmap,
             appearance: gpu_appearance,
             sampler,
-            set_layout,
-            pipeline_layout,
-            descriptor_pool,
+            set_layout: vk::DescriptorSetLayout::null(),
+            pipeline_layout: vk::PipelineLayout::null(),
+            descriptor_pool: vk::DescriptorPool::null(),
             tess: None,
             geomip: None,
             brute: None,
-            error_table,
+            error_table: None,
             color_format,
             max_patches_per_draw: device.caps.max_patches_per_draw,
-            frames,
+            frames: Vec::new(),
             error_table_ms,
         };
-        // From here on, a failure tears down what was built.
         let built = (|| {
+            if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
+                renderer.error_table = Some(device.upload_buffer(
+                    "terrain.error_table",
+                    vk::BufferUsageFlags::STORAGE_BUFFER,
+                    bytemuck::cast_slice(table.as_slice()),
+                )?);
+            }
+            renderer.set_layout =
+                device.create_descriptor_set_layout(&bindings, "terrain.set_layout")?;
+            renderer.pipeline_layout =
+                device.create_pipeline_layout(&[renderer.set_layout], "terrain.pipeline_layout")?;
+            let (descriptor_pool, sets) = device.allocate_descriptor_sets(
+                renderer.set_layout,
+                &pool_sizes,
+                frames_in_flight,
+                "terrain.frame_set",
+            )?;
+            renderer.descriptor_pool = descriptor_pool;
+            for (i, set) in sets.into_iter().enumerate() {
+                let uniforms = device.create_host_buffer(
+                    &format!("terrain.frame_uniforms[{i}]"),
+                    vk::BufferUsageFlags::UNIFORM_BUFFER,
+                    bytemuck::bytes_of(&FrameUniforms::default()),
+                )?;
+                let queries =
+                    match FrameQueries::new(device, &format!("terrain.frame_queries[{i}]")) {
+                        Ok(q) => q,
+                        Err(e) => {
+                            device.destroy_buffer(uniforms);
+                            return Err(e);
+                        }
+                    };
+                device.write_buffer(
+                    set,
+                    BINDING_FRAME,
+                    vk::DescriptorType::UNIFORM_BUFFER,
+                    uniforms.raw,
+                    size_of::<FrameUniforms>() as u64,
+                );
+                device.write_sampled_image(
+                    set,
+                    BINDING_HEIGHTMAP,
+                    renderer.heightmap.view,
+                    renderer.sampler,
+                );
+                renderer.appearance.write(device, set);
+                if let Some(errors) = &renderer.error_table {
+                    device.write_buffer(
+                        set,
+                        BINDING_ERROR_TABLE,
+                        vk::DescriptorType::STORAGE_BUFFER,
+                        errors.raw,
+                        errors.desc.size,
+                    );
+                }
+                renderer.frames.push(FrameSlot {
+                    uniforms,
+                    set,
+                    queries,
+                });
+            }
             if wants(RenderPath::Tess) {
                 renderer.tess = Some(build_tess(device, &renderer, terrain, options.wireframe)?);
             }

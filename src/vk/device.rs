@@ -44,6 +44,61 @@ pub struct Capabilities {
     pub max_patches_per_draw: Option<u32>,
 }
 
+/// A failure the device can be told to report, to test how it surfaces:
+/// the `n`th queue submission (from 1, uploads included) and every one
+/// after it report VK_ERROR_DEVICE_LOST, or the `n`th allocation reports
+/// VK_ERROR_OUT_OF_DEVICE_MEMORY.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    DeviceLost { submission: u32 },
+    OutOfDeviceMemory { allocation: u32 },
+}
+
+#[derive(Debug, Default)]
+pub(super) struct FaultState {
+    fault: Option<Fault>,
+    submissions: u32,
+    allocations: u32,
+}
+
+impl Device {
+    /// Arms (or with None, disarms) an injected failure.
+    pub fn set_fault(&self, fault: Option<Fault>) {
+        *self.fault.lock().expect("fault lock") = FaultState {
+            fault,
+            ..FaultState::default()
+        };
+    }
+
+    /// Counts a queue submission; Err when it is to be reported lost.
+    pub(super) fn count_submission(&self) -> Result<()> {
+        let mut state = self.fault.lock().expect("fault lock");
+        state.submissions += 1;
+        match state.fault {
+            Some(Fault::DeviceLost { submission }) if state.submissions >= submission => {
+                Err(vk::Result::ERROR_DEVICE_LOST)
+            }
+            _ => Ok(()),
+        }
+        .context("submitting commands (injected fault)")
+    }
+
+    /// Counts an allocation; Err when it is to fail.
+    pub(super) fn count_allocation(&self, name: &str) -> Result<()> {
+        let mut state = self.fault.lock().expect("fault lock");
+        state.allocations += 1;
+        match state.fault {
+            Some(Fault::OutOfDeviceMemory { allocation }) if state.allocations == allocation => {
+                Err(VkError::Allocation {
+                    name: format!("{name} (injected fault)"),
+                    source: gpu_allocator::AllocationError::OutOfMemory,
+                })
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 pub struct Device {
     pub physical: vk::PhysicalDevice,
     pub raw: ash::Device,
@@ -58,6 +113,9 @@ pub struct Device {
     pub(super) transient_pool: vk::CommandPool,
     /// Largest bytes in use allowed; u64::MAX: no limit.
     pub(super) memory_budget: std::sync::atomic::AtomicU64,
+    /// A failure to inject (`set_fault`), and how many submissions and
+    /// allocations have been counted towards it.
+    pub(super) fault: std::sync::Mutex<FaultState>,
 }
 
 /// Features to treat as missing even where the device has them, to test
@@ -259,6 +317,7 @@ impl Device {
             memory: Mutex::new(BTreeMap::new()),
             transient_pool,
             memory_budget: std::sync::atomic::AtomicU64::new(u64::MAX),
+            fault: std::sync::Mutex::new(FaultState::default()),
         };
         device.set_name(device.raw.handle(), "vkterrain.device");
         device.set_name(device.queue, "vkterrain.queue");

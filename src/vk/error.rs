@@ -34,7 +34,8 @@ pub enum VkError {
         budget: u64,
     },
 
-    #[error("GPU memory for {name}: {source}")]
+    /// The allocator's reason follows as the error's source.
+    #[error("GPU memory for {name}")]
     Allocation {
         name: String,
         #[source]

@@ -76,6 +76,7 @@ impl Device {
                 });
             }
         }
+        self.count_allocation(name)?;
         let allocation = self
             .allocator
             .lock()
@@ -246,14 +247,20 @@ impl Device {
             vk::BufferUsageFlags::TRANSFER_SRC,
             bytes,
         )?;
-        let buffer = self.create_buffer(
+        let buffer = match self.create_buffer(
             BufferDesc {
                 size: bytes.len() as u64,
                 usage: usage | vk::BufferUsageFlags::TRANSFER_DST,
                 location: MemoryLocation::GpuOnly,
             },
             name,
-        )?;
+        ) {
+            Ok(b) => b,
+            Err(e) => {
+                self.destroy_buffer(staging);
+                return Err(e);
+            }
+        };
         let copied = self.one_shot(&format!("{name}.upload"), |cmd| {
             let region = vk::BufferCopy::default().size(bytes.len() as u64);
             // SAFETY: both buffers are large enough and not in use elsewhere.
@@ -263,7 +270,13 @@ impl Device {
             };
         });
         self.destroy_buffer(staging);
-        copied.map(|_| buffer)
+        match copied {
+            Ok(()) => Ok(buffer),
+            Err(e) => {
+                self.destroy_buffer(buffer);
+                Err(e)
+            }
+        }
     }
 
     pub fn create_image(&self, desc: ImageDesc, name: &str) -> Result<Image> {
@@ -498,11 +511,17 @@ impl Device {
             up.view_type,
             name,
         )?;
-        let staging = self.create_host_buffer(
+        let staging = match self.create_host_buffer(
             &format!("{name}.staging"),
             vk::BufferUsageFlags::TRANSFER_SRC,
             &levels.concat(),
-        )?;
+        ) {
+            Ok(b) => b,
+            Err(e) => {
+                self.destroy_image(image);
+                return Err(e);
+            }
+        };
         let mut offset = 0u64;
         let regions: Vec<vk::BufferImageCopy> = levels
             .iter()
@@ -577,6 +596,7 @@ impl Device {
     pub fn submit(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
         let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
         let submit = vk::SubmitInfo2::default().command_buffer_infos(&cmds);
+        self.count_submission()?;
         // SAFETY: `cmd` is fully recorded and `fence` unsignalled.
         unsafe { self.raw.queue_submit2(self.queue, &[submit], fence) }
             .context("submitting commands")

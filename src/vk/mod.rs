@@ -15,7 +15,7 @@ pub mod shader;
 pub mod swapchain;
 pub mod target;
 
-pub use device::{Capabilities, Device, DisabledFeatures};
+pub use device::{Capabilities, Device, DisabledFeatures, Fault};
 pub use error::{Result, VkError};
 pub use instance::Instance;
 

@@ -335,6 +335,7 @@ impl Device {
             .command_buffer_infos(&cmds)
             .wait_semaphore_infos(&waits)
             .signal_semaphore_infos(&signals);
+        self.count_submission()?;
         // SAFETY: `cmd` is recorded; `fence` is unsignalled.
         unsafe { self.raw.queue_submit2(self.queue, &[submit], fence) }
             .context("submitting a frame")

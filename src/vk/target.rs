@@ -106,7 +106,7 @@ impl OffscreenTarget {
             },
             "offscreen.color",
         )?;
-        let depth = device.create_image(
+        let depth = match device.create_image(
             ImageDesc {
                 extent,
                 format: DEPTH_FORMAT,
@@ -115,7 +115,13 @@ impl OffscreenTarget {
                 aspect: vk::ImageAspectFlags::DEPTH,
             },
             "offscreen.depth",
-        )?;
+        ) {
+            Ok(d) => d,
+            Err(e) => {
+                device.destroy_image(color);
+                return Err(e);
+            }
+        };
         let pixels = u64::from(width) * u64::from(height);
         let readback = |name: &str| {
             device.create_buffer(
@@ -127,12 +133,28 @@ impl OffscreenTarget {
                 name,
             )
         };
-        Ok(OffscreenTarget {
-            color,
-            depth,
-            color_readback: readback("offscreen.color_readback")?,
-            depth_readback: readback("offscreen.depth_readback")?,
-        })
+        let buffers = readback("offscreen.color_readback").and_then(|c| {
+            match readback("offscreen.depth_readback") {
+                Ok(d) => Ok((c, d)),
+                Err(e) => {
+                    device.destroy_buffer(c);
+                    Err(e)
+                }
+            }
+        });
+        match buffers {
+            Ok((color_readback, depth_readback)) => Ok(OffscreenTarget {
+                color,
+                depth,
+                color_readback,
+                depth_readback,
+            }),
+            Err(e) => {
+                device.destroy_image(color);
+                device.destroy_image(depth);
+                Err(e)
+            }
+        }
     }
 
     pub fn views(&self) -> TargetViews {
