@@ -11,7 +11,8 @@ fn a_short_soak_is_clean_and_flat() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let scene = data_path("jacksboro_fault_dem.toml");
+    // Textured: material resources are part of what must not leak.
+    let scene = data_path("jacksboro_fault_dem_textured.toml");
     let scene = scene.to_str().unwrap();
     let out = vkterrain_in(
         dir.path(),
