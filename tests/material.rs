@@ -447,3 +447,40 @@ fn the_committed_textures_and_blend_map_are_what_the_generators_make() {
     let made = blend_maps_from_rules(&rules.terrain_info().unwrap(), &cpu, m.layers.len(), 2);
     assert!(pixels(&textures_dir().join("default-blend.png")) == made[0]);
 }
+
+#[test]
+fn maps_without_the_channels_they_need_are_refused() {
+    // A grayscale image as a normal map.
+    let err = load_error(
+        "[material]\n[[material.layer]]\ndiffuse = \"TEX/grass.png\"\nnormal = \"TEX/grass-height.png\"\n",
+    )
+    .to_string();
+    assert!(
+        err.contains("material.layer[0].normal") && err.contains("has no colour channels"),
+        "{err}"
+    );
+    // An RGB blend map for five layers: layer 4 would read alpha as 1.
+    let dir = tempfile::tempdir().unwrap();
+    let rgb = image::RgbImage::from_pixel(33, 33, image::Rgb([0, 0, 0]));
+    let path = dir.path().join("rgb.png");
+    rgb.save(&path).unwrap();
+    let five = "[[material.layer]]\ndiffuse = \"TEX/grass.png\"\n".repeat(5);
+    let err = load_error(&format!(
+        "[material]\nblend_maps = [\"{}\"]\n{five}",
+        path.display()
+    ))
+    .to_string();
+    assert!(
+        err.contains("has no alpha channel, which weighs layer 4"),
+        "{err}"
+    );
+    // With four layers alpha is unused and RGB is fine.
+    let four = "[[material.layer]]\ndiffuse = \"TEX/grass.png\"\n".repeat(4);
+    let scene_dir = tempfile::tempdir().unwrap();
+    let scene = Scene::load(&scene_in(
+        &scene_dir,
+        &format!("[material]\nblend_maps = [\"{}\"]\n{four}", path.display()),
+    ))
+    .unwrap();
+    Appearance::load(&scene, &scene.terrain_info().unwrap()).unwrap();
+}

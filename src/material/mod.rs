@@ -44,6 +44,13 @@ pub enum MaterialError {
         rows: usize,
         expected: String,
     },
+    #[error("{origin}: {path} has no {missing}, which {why}")]
+    Channels {
+        origin: String,
+        path: String,
+        missing: &'static str,
+        why: String,
+    },
     #[error("{origin}: {path} is {width}x{height}, but the first blend map is {first_width}x{first_height}")]
     BlendMapsDiffer {
         origin: String,
@@ -289,7 +296,16 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
         diffuse.push(read_image(&l.diffuse)?);
         let normal_index = match &l.normal {
             Some(a) => {
-                normals.push(read_image(a)?);
+                let img = read_image(a)?;
+                if !img.color().has_color() {
+                    return Err(MaterialError::Channels {
+                        origin: a.origin(),
+                        path: a.display_path(),
+                        missing: "colour channels",
+                        why: "a normal map needs for x, y and z".into(),
+                    });
+                }
+                normals.push(img);
                 Some(normals.len() as u32 - 1)
             }
             None => None,
@@ -318,8 +334,27 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
         WeightSource::BlendMaps(assets) => {
             let sizes = blend_map_sizes(info.cols(), info.rows());
             let mut maps = Vec::new();
-            for a in assets {
+            for (m, a) in assets.iter().enumerate() {
                 let img = read_image(a)?;
+                // Map m weighs layers 4m + 1 ..= 4m + 4; the last of them
+                // comes from alpha, which an RGB image would read as 1.
+                let alpha_layer = 4 * m + 4;
+                if alpha_layer < spec.layers.len() && !img.color().has_alpha() {
+                    return Err(MaterialError::Channels {
+                        origin: a.origin(),
+                        path: a.display_path(),
+                        missing: "alpha channel",
+                        why: format!("weighs layer {alpha_layer}"),
+                    });
+                }
+                if !img.color().has_color() {
+                    return Err(MaterialError::Channels {
+                        origin: a.origin(),
+                        path: a.display_path(),
+                        missing: "colour channels",
+                        why: "weigh the layers above the base".into(),
+                    });
+                }
                 let (w, h) = (img.width(), img.height());
                 if !sizes.contains(&(w as usize, h as usize)) {
                     return Err(MaterialError::BlendMapSize {
