@@ -395,3 +395,56 @@ fn anisotropic_filtering_when_the_scene_asks_for_it() {
     assert!(frame.patches_in_frustum > 0);
     gpu.finish();
 }
+
+#[test]
+fn odd_sized_and_odd_format_textures_load_and_draw() {
+    if skip_gpu() {
+        return;
+    }
+    // 37x5 16-bit RGB and a 1x1 grayscale colour, and a 3x7 RGBA normal
+    // map: each array takes its largest width and height and mips down to
+    // 1x1.
+    let dir = tempfile::tempdir().unwrap();
+    let wide = image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(37, 5, |x, y| {
+        image::Rgb([(x * 1700) as u16, (y * 9000) as u16, 40000])
+    });
+    wide.save(dir.path().join("wide.png")).unwrap();
+    image::GrayImage::from_pixel(1, 1, image::Luma([200]))
+        .save(dir.path().join("dot.png"))
+        .unwrap();
+    image::RgbaImage::from_pixel(3, 7, image::Rgba([128, 128, 255, 255]))
+        .save(dir.path().join("flat-normal.png"))
+        .unwrap();
+    let d = dir.path().display();
+    let scene = dem_scene(
+        &dir,
+        &format!(
+            "[material]\ncliff_layer = 1\n\
+             [[material.layer]]\ndiffuse = \"{d}/wide.png\"\nnormal = \"{d}/flat-normal.png\"\n\
+             tile_size = 500.0\ntile_rotation = 1000.0\ntile_offset = [123456.0, -0.5]\n\
+             height_band = [0.3, 0.5]\n\
+             [[material.layer]]\ndiffuse = \"{d}/dot.png\"\n"
+        ),
+    );
+    let (terrain, appearance, settings) = prepare(&scene);
+    let m = appearance.material.as_ref().unwrap();
+    assert_eq!(
+        (m.diffuse.width, m.diffuse.height, m.diffuse.layers),
+        (37, 5, 2)
+    );
+    // 37x5 -> 18x2 -> 9x1 -> 4x1 -> 2x1 -> 1x1
+    assert_eq!(m.diffuse.levels.len(), 6);
+    assert_eq!(m.diffuse.level_extent(5), (1, 1));
+    assert_eq!(m.diffuse.levels[1].len(), 2 * 18 * 2 * 4);
+    let normals = m.normals.as_ref().unwrap();
+    assert_eq!(
+        (normals.width, normals.height, normals.levels.len()),
+        (3, 7, 3)
+    );
+    let camera = scene.camera_for(terrain.info());
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 36, false);
+    for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
+        gpu.render(&camera, &RenderSettings { path, ..settings });
+    }
+    gpu.finish();
+}
