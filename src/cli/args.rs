@@ -375,6 +375,14 @@ pub fn fuzz_parse(text: &str) {
     if let Ok(p) = parse_pixels(text) {
         assert!(p > 0);
     }
+    if let Ok(b) = parse_budget(text) {
+        assert!(b >= 1 << 20);
+    }
+    match parse_fault(text) {
+        Ok(crate::vk::Fault::DeviceLost { submission: n })
+        | Ok(crate::vk::Fault::OutOfDeviceMemory { allocation: n }) => assert!(n >= 1),
+        Err(_) => {}
+    }
     use clap::Parser;
     let args = std::iter::once("vkterrain").chain(text.split_whitespace());
     let _ = super::Cli::try_parse_from(args);
