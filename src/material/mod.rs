@@ -287,6 +287,15 @@ pub fn blend_map_sizes(cols: usize, rows: usize) -> Vec<(usize, usize)> {
     sizes
 }
 
+fn missing_channels(asset: &Asset, missing: &'static str, why: &str) -> MaterialError {
+    MaterialError::Channels {
+        origin: asset.origin(),
+        path: asset.display_path(),
+        missing,
+        why: why.to_string(),
+    }
+}
+
 fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, MaterialError> {
     let mut diffuse = Vec::new();
     let mut normals = Vec::new();
@@ -298,12 +307,11 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
             Some(a) => {
                 let img = read_image(a)?;
                 if !img.color().has_color() {
-                    return Err(MaterialError::Channels {
-                        origin: a.origin(),
-                        path: a.display_path(),
-                        missing: "colour channels",
-                        why: "a normal map needs for x, y and z".into(),
-                    });
+                    return Err(missing_channels(
+                        a,
+                        "colour channels",
+                        "a normal map needs for x, y and z",
+                    ));
                 }
                 normals.push(img);
                 Some(normals.len() as u32 - 1)
@@ -340,20 +348,12 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
                 // comes from alpha, which an RGB image would read as 1.
                 let alpha_layer = 4 * m + 4;
                 if alpha_layer < spec.layers.len() && !img.color().has_alpha() {
-                    return Err(MaterialError::Channels {
-                        origin: a.origin(),
-                        path: a.display_path(),
-                        missing: "alpha channel",
-                        why: format!("weighs layer {alpha_layer}"),
-                    });
+                    let why = format!("weighs layer {alpha_layer}");
+                    return Err(missing_channels(a, "alpha channel", &why));
                 }
                 if !img.color().has_color() {
-                    return Err(MaterialError::Channels {
-                        origin: a.origin(),
-                        path: a.display_path(),
-                        missing: "colour channels",
-                        why: "weigh the layers above the base".into(),
-                    });
+                    let why = "weigh the layers above the base";
+                    return Err(missing_channels(a, "colour channels", why));
                 }
                 let (w, h) = (img.width(), img.height());
                 if !sizes.contains(&(w as usize, h as usize)) {
