@@ -31,13 +31,7 @@ fn prepare(scene: &Scene) -> (Terrain, Appearance, RenderSettings) {
     let info = scene.terrain_info().unwrap();
     let appearance = Appearance::load(scene, &info).unwrap();
     let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
-    let settings = RenderSettings {
-        lod: scene.lod,
-        lighting: scene.lighting,
-        fog: scene.fog,
-        ..RenderSettings::default()
-    };
-    (terrain, appearance, settings)
+    (terrain, appearance, RenderSettings::for_scene(scene))
 }
 
 /// Renders `scene` from its camera (or overview) with each path in

@@ -177,12 +177,9 @@ impl ViewArgs {
     }
 
     pub fn settings(&self, scene: &Scene) -> RenderSettings {
-        let defaults = RenderSettings::default();
+        let base = RenderSettings::for_scene(scene);
         RenderSettings {
             path: self.path.into(),
-            lod: scene.lod,
-            lighting: scene.lighting,
-            fog: scene.fog,
             lod_mode: match self.lod_mode {
                 LodModeArg::Smooth => DistanceMode::Smooth,
                 LodModeArg::Debug => DistanceMode::Debug,
@@ -198,11 +195,7 @@ impl ViewArgs {
             clear_color: self.clear_color.unwrap_or(if self.flat {
                 [0.0; 3]
             } else {
-                // The sky behind the terrain is the fog's colour, so
-                // distant ground fades into it.
-                scene
-                    .fog
-                    .map_or(defaults.clear_color, |f| f.color.to_array())
+                base.clear_color
             }),
             cull: !self.no_cull,
             geomorph: !self.no_morph,
@@ -210,6 +203,7 @@ impl ViewArgs {
                 LodArg::Distance => LodMetric::Distance,
                 LodArg::Error => LodMetric::Error(self.pixel_error),
             },
+            ..base
         }
     }
 }

@@ -119,12 +119,7 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
     // keep, and to free.
     let appearance = Appearance::load(&scene, &info)?;
     let terrain = Terrain::new(info, appearance.y_margin())?;
-    let base = RenderSettings {
-        lod: scene.lod,
-        lighting: scene.lighting,
-        fog: scene.fog,
-        ..RenderSettings::default()
-    };
+    let base = RenderSettings::for_scene(&scene);
     let gpu = cmd.features.gpu(cmd.validate)?;
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
     if gpu.device.caps.tessellation_shader {

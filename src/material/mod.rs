@@ -73,15 +73,6 @@ pub enum TexelFormat {
     R8,
 }
 
-impl TexelFormat {
-    pub fn bytes_per_texel(self) -> usize {
-        match self {
-            TexelFormat::Srgba8 | TexelFormat::Rgba8 => 4,
-            TexelFormat::R8 => 1,
-        }
-    }
-}
-
 /// What a texture holds, which decides its format and how levels are made.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Content {
@@ -123,10 +114,6 @@ impl TextureArray {
         ((self.width >> level).max(1), (self.height >> level).max(1))
     }
 
-    pub fn byte_size(&self) -> usize {
-        self.levels.iter().map(Vec::len).sum()
-    }
-
     /// Builds an array from images of any size: each is resized to the
     /// largest width and height among them, then mipmapped.
     pub fn from_images(content: Content, images: &[DynamicImage]) -> Self {
@@ -164,7 +151,7 @@ pub struct LayerParams {
     pub displacement: f32,
     /// Layer of the normal-map array, if the layer has one.
     pub normal_index: Option<u32>,
-    /// Layer of the height-map array, if the layer has one.
+    /// Layer of the height-map array, if the layer displaces with one.
     pub height_index: Option<u32>,
     pub band: Option<HeightBand>,
 }
@@ -197,9 +184,10 @@ impl Material {
         )
     }
 
-    /// True when the surface is displaced by some layer.
+    /// True when the surface is displaced by some layer: only displacing
+    /// layers' height maps are kept.
     pub fn displaces(&self) -> bool {
-        self.max_displacement() > 0.0
+        self.heights.is_some()
     }
 }
 
@@ -318,10 +306,15 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
             }
             None => None,
         };
+        // A height map is read (so a bad one is reported) but kept only
+        // when its layer displaces: with scale 0 it would add nothing.
         let height_index = match &l.height {
             Some(a) => {
-                heights.push(read_image(a)?);
-                Some(heights.len() as u32 - 1)
+                let img = read_image(a)?;
+                (l.displacement != 0.0).then(|| {
+                    heights.push(img);
+                    heights.len() as u32 - 1
+                })
             }
             None => None,
         };

@@ -271,10 +271,8 @@ impl GpuAppearance {
             if let Some(t) = &m.normals {
                 self.normals = Some(upload("material.normal_maps", t)?);
             }
-            if self.variant.displace {
-                if let Some(t) = &m.heights {
-                    self.heights = Some(upload("material.height_maps", t)?);
-                }
+            if let Some(t) = &m.heights {
+                self.heights = Some(upload("material.height_maps", t)?);
             }
             if let Some(t) = &m.blend_maps {
                 self.blend_maps = Some(upload("material.blend_maps", t)?);

@@ -6,7 +6,7 @@ use std::mem::{offset_of, size_of};
 use glam::{DVec3, Mat4, Vec3, Vec4};
 
 use super::renderer::RenderPath;
-use crate::scene::{Fog, Lighting, MAX_LIGHTS};
+use crate::scene::{Fog, Lighting, Scene, MAX_LIGHTS};
 use crate::shader_constants::{
     LOD_METRIC_DISTANCE, LOD_METRIC_ERROR, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT,
     SHADE_LOD_COLORS,
@@ -108,6 +108,24 @@ impl Default for RenderSettings {
             cull: true,
             lighting: Lighting::default(),
             fog: None,
+        }
+    }
+}
+
+impl RenderSettings {
+    /// The defaults with a scene's LOD, lights and fog; with fog, the sky
+    /// behind the terrain takes the fog's colour, so distant ground fades
+    /// into it.
+    pub fn for_scene(scene: &Scene) -> Self {
+        let defaults = RenderSettings::default();
+        RenderSettings {
+            lod: scene.lod,
+            lighting: scene.lighting,
+            fog: scene.fog,
+            clear_color: scene
+                .fog
+                .map_or(defaults.clear_color, |f| f.color.to_array()),
+            ..defaults
         }
     }
 }

@@ -168,23 +168,6 @@ pub struct MaterialSpec {
 }
 
 impl MaterialSpec {
-    pub fn has_normal_maps(&self) -> bool {
-        self.layers.iter().any(|l| l.normal.is_some())
-    }
-
-    pub fn displacement_scales(&self) -> Vec<f32> {
-        self.layers
-            .iter()
-            .filter(|l| l.height.is_some())
-            .map(|l| l.displacement)
-            .collect()
-    }
-
-    /// True when some layer displaces the surface.
-    pub fn displaces(&self) -> bool {
-        self.displacement_scales().iter().any(|&s| s != 0.0)
-    }
-
     /// Every asset, for embedding or listing.
     pub fn assets_mut(&mut self) -> impl Iterator<Item = &mut Asset> {
         let maps: Vec<&mut Asset> = match &mut self.weights {
