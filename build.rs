@@ -121,7 +121,7 @@ fn main() {
 /// The macro sets each stage is compiled with. Material features that add
 /// descriptors are variants, so a scene that doesn't use one has no binding
 /// and no code for it; the layer and blend-map counts are specialisation
-/// constants of these.
+/// constants of these. The error LOD's equal spacing is a variant too.
 fn variants(file: &str) -> Vec<Vec<&'static str>> {
     let subsets = |flags: &[&'static str]| -> Vec<Vec<&'static str>> {
         (0..1usize << flags.len())
@@ -133,6 +133,14 @@ fn variants(file: &str) -> Vec<Vec<&'static str>> {
             })
             .collect()
     };
+    // The stages that place vertices, by how the material displaces them.
+    let placing = || {
+        vec![
+            vec![],
+            vec!["MATERIAL", "DISPLACE"],
+            vec!["MATERIAL", "DISPLACE", "BLEND_MAPS"],
+        ]
+    };
     match file {
         "terrain.frag" => {
             let mut all = vec![vec![], vec!["LIGHTMAP"]];
@@ -142,11 +150,16 @@ fn variants(file: &str) -> Vec<Vec<&'static str>> {
             }
             all
         }
-        "terrain.tese" | "brute.vert" | "geomip.vert" => vec![
-            vec![],
-            vec!["MATERIAL", "DISPLACE"],
-            vec!["MATERIAL", "DISPLACE", "BLEND_MAPS"],
-        ],
+        "brute.vert" | "geomip.vert" => placing(),
+        // Each also with equal spacing, for the error LOD.
+        "terrain.tese" => placing()
+            .into_iter()
+            .flat_map(|v| {
+                let mut equal = v.clone();
+                equal.push("EQUAL_SPACING");
+                [v, equal]
+            })
+            .collect(),
         _ => vec![vec![]],
     }
 }

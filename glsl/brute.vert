@@ -27,10 +27,7 @@ void main() {
 #ifdef DISPLACE
     h += layer_displacement(vec2(sample_cr), h);
 #endif
-    vec2 local = vec2(frame.grid.x + float(sample_cr.x) * frame.spacing_size.x,
-                      frame.grid.y - float(sample_cr.y) * frame.spacing_size.y);
-    vec3 rel = vec3(local.x, h, local.y) - frame.eye_local.xyz;
-    gl_Position = frame.view_proj * vec4(rel, 1.0);
+    gl_Position = surface_clip_position(vec2(sample_cr), h);
     out_grid = vec2(sample_cr);
     out_height = h;
     // Full resolution: shown as the finest tessellation level.

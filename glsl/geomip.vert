@@ -41,17 +41,10 @@ float height_of(ivec2 offset) {
     return displaced(clamp_sample(offset));
 }
 
-vec2 local_xz(ivec2 sample_cr) {
-    return vec2(frame.grid.x + float(sample_cr.x) * frame.spacing_size.x,
-                frame.grid.y - float(sample_cr.y) * frame.spacing_size.y);
-}
-
 void main() {
     ivec2 offset = ivec2(in_offset);
     ivec2 sample_cr = clamp_sample(offset);
     float h = displaced(sample_cr);
-    vec2 xz = local_xz(sample_cr);
-    vec3 rel = vec3(xz.x, h, xz.y) - frame.eye_local.xyz;
 
     int n = int(frame.modes.z);
     int s = 1 << pc.level;
@@ -70,9 +63,11 @@ void main() {
         ivec2 a = odd_x && odd_y ? offset + ivec2(s, -s) : (odd_x ? offset - ivec2(s, 0) : offset - ivec2(0, s));
         ivec2 b = odd_x && odd_y ? offset + ivec2(-s, s) : (odd_x ? offset + ivec2(s, 0) : offset + ivec2(0, s));
         h = mix(h, 0.5 * (height_of(a) + height_of(b)), morph);
-        rel.y = h - frame.eye_local.y;
     }
-    gl_Position = frame.view_proj * vec4(rel, 1.0);
+    // Level 0 without morph is the reference's own triangles: the tess
+    // path's full-resolution patches are drawn this way, and their edges
+    // meet the tessellated ones on the same samples (surface_clip_position).
+    gl_Position = surface_clip_position(vec2(sample_cr), h);
     out_grid = vec2(sample_cr);
     out_height = h;
     // Shown as the tessellation factor with the same density.

@@ -10,8 +10,9 @@ layout(local_size_x = 64) in;
 
 // Per case: a position (camera-relative for the factors, the box centre for
 // the frustum test), the box extents, continuous sample coordinates
-// (column, row) in xy, and the 7 per-level errors for the error-bounded
-// factor (at the position's distance) in two vec4s.
+// (column, row) in xy and in z the cells the error-bounded factor spans,
+// and the 7 per-level errors for that factor (at the position's distance)
+// in two vec4s.
 layout(std430, set = 0, binding = BINDING_MIRROR_CASES) readonly buffer Cases {
     vec4 cases[];
 };
@@ -39,7 +40,7 @@ void main() {
         tess_factor(position.xyz),
         aabb_outside_frustum(position.xyz, extents.xyz) ? 1.0 : 0.0,
         sample_height(grid.xy),
-        error_tess_factor(errors, length(position.xyz)));
+        error_tess_factor(errors, length(position.xyz), int(grid.z)));
     results[2u * i + 1u] = vec4(
         box_distance(position.xyz - extents.xyz, position.xyz + extents.xyz),
         edge_distance(position.xz, position.xz + extents.xz,

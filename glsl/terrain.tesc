@@ -15,12 +15,30 @@ layout(std430, set = 0, binding = BINDING_ERROR_TABLE) readonly buffer ErrorTabl
     float patch_errors[];
 };
 
-layout(location = 0) out vec3 out_rel[];
+// This frame's full-resolution patches, one bit each, chosen on the CPU
+// (error LOD only): they are drawn with the reference's triangles instead,
+// and every edge they share gets a vertex on every sample.
+layout(std430, set = 0, binding = BINDING_FULL_RESOLUTION) readonly buffer FullResolution {
+    uint full_resolution[];
+};
+
+bool is_full_resolution(int patch_index) {
+    return (full_resolution[patch_index >> 5] & (1u << uint(patch_index & 31))) != 0u;
+}
+
+void cull_patch() {
+    gl_TessLevelOuter[0] = 0.0;
+    gl_TessLevelOuter[1] = 0.0;
+    gl_TessLevelOuter[2] = 0.0;
+    gl_TessLevelOuter[3] = 0.0;
+    gl_TessLevelInner[0] = 0.0;
+    gl_TessLevelInner[1] = 0.0;
+}
+
 layout(location = 1) out vec2 out_grid[];
 layout(location = 2) patch out float out_inside_factor;
 
 void main() {
-    out_rel[gl_InvocationID] = in_rel[gl_InvocationID];
     out_grid[gl_InvocationID] = in_grid[gl_InvocationID];
     if (gl_InvocationID != 0) {
         return;
@@ -33,15 +51,14 @@ void main() {
     vec3 center = 0.5 * (box_min + box_max);
     vec3 extents = 0.5 * (box_max - box_min);
     if (frame.height_range.z != 0.0 && aabb_outside_frustum(center, extents)) {
-        gl_TessLevelOuter[0] = 0.0;
-        gl_TessLevelOuter[1] = 0.0;
-        gl_TessLevelOuter[2] = 0.0;
-        gl_TessLevelOuter[3] = 0.0;
-        gl_TessLevelInner[0] = 0.0;
-        gl_TessLevelInner[1] = 0.0;
+        cull_patch();
         out_inside_factor = 0.0;
         return;
     }
+    // The patch's cells (columns, rows); remainder patches at the far
+    // edges have fewer. No factor exceeds the cells it spans.
+    ivec2 cells = ivec2(in_grid[3] - in_grid[0]);
+    int edge_cells[4] = int[4](cells.y, cells.x, cells.y, cells.x);
 
     vec3 midpoints[4] = vec3[4](
         0.5 * (in_rel[0] + in_rel[2]),
@@ -53,14 +70,20 @@ void main() {
     if (frame.modes.w == LOD_METRIC_ERROR) {
         // This patch and its neighbours across the left, top, right and
         // bottom edges; an edge uses the larger error of the two patches,
-        // so both compute the same factor for it. Errors are projected from
-        // the nearest point that can hold them: for an edge, the strip on
-        // it between the terrain's lowest and highest heights (what both
-        // patches know alike); for the inside, the patch's box.
-        // Mirror: terrain::lod::patch_error_factors.
+        // so both compute the same factor for it, and gets a vertex on
+        // every sample when the neighbour is drawn at full resolution.
+        // Errors are projected from the nearest point that can hold them:
+        // for an edge, the strip on it between the terrain's lowest and
+        // highest heights (what both patches know alike); for the inside,
+        // the patch's box. Mirror: terrain::lod::patch_error_factors.
         ivec2 grid_size = ivec2(frame.error_lod.zw);
         ivec2 here = ivec2(in_grid[0]) / int(frame.modes.z);
         int p = here.y * grid_size.x + here.x;
+        if (is_full_resolution(p)) {
+            cull_patch();
+            out_inside_factor = 0.0;
+            return;
+        }
         float own[ERROR_LEVEL_COUNT];
         for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
             own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
@@ -74,14 +97,18 @@ void main() {
             float shared_errors[ERROR_LEVEL_COUNT] = own;
             if (all(greaterThanEqual(there, ivec2(0))) && all(lessThan(there, grid_size))) {
                 int q = there.y * grid_size.x + there.x;
+                if (is_full_resolution(q)) {
+                    gl_TessLevelOuter[e] = float(edge_cells[e]);
+                    continue;
+                }
                 for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
                     shared_errors[k] = max(own[k], patch_errors[q * int(ERROR_LEVEL_COUNT) + k]);
                 }
             }
             float d = edge_distance(in_rel[ends[e].x].xz, in_rel[ends[e].y].xz, y_lo, y_hi);
-            gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d);
+            gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d, edge_cells[e]);
         }
-        inside = error_tess_factor(own, box_distance(box_min, box_max));
+        inside = error_tess_factor(own, box_distance(box_min, box_max), min(cells.x, cells.y));
     } else {
         // Edge factors from edge midpoints, so both patches sharing an edge
         // compute the same value; inside factors from the centre. Vulkan's

@@ -5,9 +5,16 @@
 #include "material.glsl"
 #endif
 
+// The error LOD's factors are whole numbers (powers of two, or an edge's
+// cell count towards a full-resolution neighbour), tessellated with equal
+// spacing so the surface is the one the error table bounds; the distance
+// LOD glides with fractional even spacing.
+#ifdef EQUAL_SPACING
+layout(quads, equal_spacing, ccw) in;
+#else
 layout(quads, fractional_even_spacing, ccw) in;
+#endif
 
-layout(location = 0) in vec3 in_rel[];
 layout(location = 1) in vec2 in_grid[];
 layout(location = 2) patch in float in_inside_factor;
 
@@ -18,15 +25,19 @@ layout(location = 2) flat out float out_inside_factor;
 void main() {
     vec2 uv = gl_TessCoord.xy;
     // Bilinear interpolation across the patch: u runs left to right, v top
-    // to bottom.
-    vec3 rel = mix(mix(in_rel[0], in_rel[1], uv.x), mix(in_rel[2], in_rel[3], uv.x), uv.y);
+    // to bottom. Positions that are whole samples in exact arithmetic
+    // (k * cells / L for a factor L) are snapped onto them: every other
+    // position is at least 1/64 of a cell from a sample, and a vertex on a
+    // sample then reads it exactly and lands where the full-resolution
+    // draw puts it.
     vec2 g = mix(mix(in_grid[0], in_grid[1], uv.x), mix(in_grid[2], in_grid[3], uv.x), uv.y);
+    vec2 nearest = round(g);
+    g = mix(g, nearest, lessThan(abs(g - nearest), vec2(1.0 / 128.0)));
     float h = sample_height(g);
 #ifdef DISPLACE
     h += layer_displacement(g, h);
 #endif
-    rel.y = h - frame.eye_local.y;
-    gl_Position = frame.view_proj * vec4(rel, 1.0);
+    gl_Position = surface_clip_position(g, h);
     out_grid = g;
     out_height = h;
     out_inside_factor = in_inside_factor;

@@ -163,31 +163,38 @@ float edge_distance(vec2 a, vec2 b, float y_lo, float y_hi) {
     return sqrt(dot(p, p) + dy * dy);
 }
 
-// Error-bounded tessellation factor: the smallest level whose error
-// projects to at most error_lod.x pixels at `distance`, interpolated in log
-// space from the level before so it moves continuously with distance.
+// Error-bounded tessellation factor of a span of `cells` cells: the
+// smallest power of two below `cells` whose error projects to at most
+// error_lod.x pixels at `distance`, else `cells` (a vertex on every sample).
 // errors[k] is the error of 2^k segments. Mirror: terrain::lod::error_tess_factor.
-float error_tess_factor(float errors[ERROR_LEVEL_COUNT], float distance) {
+float error_tess_factor(float errors[ERROR_LEVEL_COUNT], float distance, int cells) {
     float scale = frame.error_lod.y / max(distance, 1.17549435e-38);
     if (isnan(scale)) {
         return MIN_TESS_FACTOR;
     }
     float tau = max(frame.error_lod.x, 1.17549435e-38);
-    float factor = MAX_TESS_FACTOR;
+    float full = clamp(float(cells), MIN_TESS_FACTOR, MAX_TESS_FACTOR);
     for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
-        if (errors[k] * scale <= tau) {
-            if (k == 0) {
-                factor = MIN_TESS_FACTOR;
-            } else {
-                float coarse = errors[k - 1] * scale;
-                float fine = errors[k] * scale;
-                float t = fine > 0.0
-                    ? lod_saturate((log(coarse) - log(tau)) / (log(coarse) - log(fine)))
-                    : lod_saturate((coarse - tau) / coarse);
-                factor = exp2(float(k - 1) + t);
-            }
+        float factor = float(1 << k);
+        if (factor >= full) {
             break;
         }
+        if (errors[k] * scale <= tau) {
+            return factor;
+        }
     }
-    return clamp_tess_factor(factor);
+    return full;
+}
+
+// Clip-space position of the surface point at sample coordinates g with
+// height h. Every path that places a vertex on a sample goes through here
+// with the same arithmetic and no contraction, so a sample that two draws
+// share lands on the same position bit for bit.
+vec4 surface_clip_position(vec2 g, float h) {
+    // grid_to_local, written out so `precise` covers it.
+    precise float x = frame.grid.x + g.x * frame.spacing_size.x;
+    precise float z = frame.grid.y - g.y * frame.spacing_size.y;
+    precise vec3 rel = vec3(x, h, z) - frame.eye_local.xyz;
+    precise vec4 clip = frame.view_proj * vec4(rel, 1.0);
+    return clip;
 }

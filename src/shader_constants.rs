@@ -10,6 +10,9 @@ pub const BINDING_HEIGHTMAP: u32 = 1;
 
 /// Storage buffer of the per-patch error table (tess path, error LOD).
 pub const BINDING_ERROR_TABLE: u32 = 4;
+/// Storage buffer of this frame's full-resolution patches, one bit each
+/// (tess path, error LOD).
+pub const BINDING_FULL_RESOLUTION: u32 = 11;
 /// Levels per patch in the error table (factors 1, 2, ..., 64).
 pub const ERROR_LEVEL_COUNT: u32 = 7;
 /// LOD metric: distance.
@@ -70,6 +73,10 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("BINDING_FRAME", BINDING_FRAME.to_string()),
         ("BINDING_HEIGHTMAP", BINDING_HEIGHTMAP.to_string()),
         ("BINDING_ERROR_TABLE", BINDING_ERROR_TABLE.to_string()),
+        (
+            "BINDING_FULL_RESOLUTION",
+            BINDING_FULL_RESOLUTION.to_string(),
+        ),
         ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
         ("LOD_METRIC_DISTANCE", uint(LOD_METRIC_DISTANCE)),
         ("LOD_METRIC_ERROR", uint(LOD_METRIC_ERROR)),

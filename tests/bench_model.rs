@@ -226,6 +226,7 @@ fn row(
         triangles: Some(tris),
         tes_invocations: Some(tris / 2),
         gpu_memory_bytes: 1 << 20,
+        predicted_max_px: tau.map(|t| f64::from(t) * 1.5),
         max_px: 2.0 * p99,
         p99_px: p99,
         mean_px: 0.1 * p99,
@@ -240,7 +241,10 @@ fn sample_rows() -> Vec<Row> {
         row("v", "tess", Some("distance"), None, 30_000, 20.0, 0.5),
         row("v", "tess", Some("distance"), None, 8_000, 8.0, 0.9),
         row("v", "tess", Some("distance"), None, 2_000, 2.0, 3.0),
+        row("v", "tess", Some("error"), Some(0.5), 9_000, 7.0, 0.4),
         row("v", "tess", Some("error"), Some(1.0), 4_000, 5.0, 0.8),
+        row("v", "tess", Some("error"), Some(2.0), 2_500, 3.0, 2.5),
+        row("v", "geomip", Some("error"), Some(1.0), 20_000, 9.0, 0.2),
         row("v", "oracle", None, Some(1.0), 3_000, 4.0, 0.7),
     ]
 }
@@ -250,27 +254,31 @@ fn targets_are_read_from_the_rows() {
     let rows = sample_rows();
     let refs: Vec<&Row> = rows.iter().collect();
     let c = check_targets(&refs);
-    assert_eq!(c.error_p99, Some(0.8));
-    assert_eq!(c.triangles_vs_brute, Some(25.0));
-    assert_eq!(c.gpu_vs_brute, Some(10.0));
-    // The cheapest distance setting at p99 <= 0.8 is the 30 000 one.
-    assert_eq!(c.distance_vs_error, Some(7.5));
-    assert_eq!(c.error_vs_oracle, Some(4.0 / 3.0));
-    // No distance setting that good: say how close the best came.
-    let worse: Vec<&Row> = refs
-        .iter()
-        .copied()
-        .filter(|r| r.triangles != Some(30_000))
-        .collect();
-    let c = check_targets(&worse);
-    assert_eq!(c.distance_vs_error, None);
-    assert_eq!(c.best_distance_p99, Some(0.9));
+    assert_eq!(c.tess_p99, [Some(0.4), Some(0.8), Some(2.5)]);
+    assert_eq!(c.tess_vs_brute_triangles, Some(0.04));
+    assert_eq!(c.brute_vs_tess_triangles, Some(25.0));
+    assert_eq!(c.brute_vs_tess_gpu, Some(10.0));
+    // The fewest triangles at p99 <= 1 px: the oracle's 3 000 (the 2 000
+    // distance setting measures 3 px).
+    assert!(c.best_config.as_deref().unwrap().contains("oracle"));
+    assert_eq!(c.tess_vs_best, Some(4.0 / 3.0));
+    assert_eq!(c.geomip_p99, Some(0.2));
+    assert_eq!(c.geomip_vs_best, Some(20.0 / 3.0));
     let md = markdown(&rows, "## Why\n\nBecause.", "pareto.png");
     assert!(
         md.contains("|T.y - R.y| * K / |R - eye|"),
         "the definition is written down"
     );
-    assert!(md.contains("25.00x (met)"));
+    assert!(md.contains("1.33x (met)"), "tess within 1.5x of the best");
+    assert!(
+        md.contains("6.67x (**missed**, 3.33x off)"),
+        "geomip beyond 2x"
+    );
+    assert!(
+        md.contains("2.50 px (**missed**, 1.25x off)"),
+        "p99 over tau at 2 px"
+    );
+    assert!(md.contains("## Predicted against measured error"));
     assert!(md.contains("Because."));
     assert!(md.contains("![GPU time and triangles against p99 error](pareto.png)"));
 }

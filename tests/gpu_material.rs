@@ -31,7 +31,8 @@ fn prepare(scene: &Scene) -> (Terrain, Appearance, RenderSettings) {
     let info = scene.terrain_info().unwrap();
     let appearance = Appearance::load(scene, &info).unwrap();
     let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
-    (terrain, appearance, RenderSettings::for_scene(scene))
+    let settings = RenderSettings::for_scene(scene, terrain.info());
+    (terrain, appearance, settings)
 }
 
 /// Renders `scene` from its camera (or overview) with each path in
@@ -52,11 +53,13 @@ fn render(scene: &Scene, paths: &[RenderPath]) -> Vec<image::RgbaImage> {
 }
 
 /// A scene file over the DEM with `look` appended; TEX stands for the
-/// repository's textures directory.
+/// repository's textures directory. The distance LOD is named, so the
+/// images are about the material, not the level choice.
 fn dem_scene(dir: &tempfile::TempDir, look: &str) -> Scene {
     let text = format!(
         "[heightmap]\npath = \"{}\"\nheight_scale = 65535.0\ncell_spacing = [74.48, 92.15]\n\
-         [terrain]\ncells_per_patch = 32\n[camera]\neye = [-9000.0, 2600.0, -19000.0]\n\
+         [terrain]\ncells_per_patch = 32\n[lod]\nmin_distance = 20.0\nmax_distance = 500.0\n\
+         [camera]\neye = [-9000.0, 2600.0, -19000.0]\n\
          target = [1500.0, 300.0, 2000.0]\nfov = 55.0\n{}",
         data_path("jacksboro_fault_dem.png").display(),
         look.replace("TEX", &repo("assets/textures").display().to_string())

@@ -176,3 +176,26 @@ proptest! {
         TERRAIN.with(|t| check_shared_edges(t, Vec3::new(ex, ey, ez), &lod, mode))?;
     }
 }
+
+#[test]
+fn error_factors_are_powers_of_two_below_the_cells_or_the_cells() {
+    use vkterrain::terrain::lod::{error_tess_factor, patch_is_full_resolution};
+    // At distance 1 with 1 pixel per radian, level k projects to 8 / 2^k px.
+    let errors = [8.0, 4.0, 2.0, 1.0, 0.5, 0.25, 0.125];
+    let factor = |d: f32, px: f32, cells: u32| error_tess_factor(&errors, d, 1.0, px, cells);
+    assert_eq!(factor(1.0, 1.0, 32), 8.0);
+    assert_eq!(factor(1.0, 2.0, 32), 4.0);
+    assert_eq!(factor(1.0, 1.0, 23), 8.0);
+    // Nothing below the span's cells will do: a vertex on every sample.
+    assert_eq!(factor(1.0, 1.0, 8), 8.0);
+    assert_eq!(factor(1.0, 0.1, 23), 23.0);
+    assert_eq!(factor(0.0, 1.0, 32), 32.0);
+    assert_eq!(factor(1.0, 1.0, 1), 1.0);
+    // Far away, or a broken scale: the coarsest.
+    assert_eq!(factor(1e9, 1.0, 32), 1.0);
+    assert_eq!(error_tess_factor(&errors, 1.0, f32::NAN, 1.0, 32), 1.0);
+    // The full-resolution decision takes the smaller side.
+    assert!(patch_is_full_resolution(&errors, 1.0, 1.0, 0.1, [32, 23]));
+    assert!(patch_is_full_resolution(&errors, 1.0, 1.0, 1.0, [32, 8]));
+    assert!(!patch_is_full_resolution(&errors, 1.0, 1.0, 1.0, [32, 32]));
+}

@@ -20,8 +20,8 @@ fn the_default_scene_file_is_the_built_in_scene() {
     assert_eq!(built_in.cells_per_patch, 32);
     assert_eq!(built_in.load.height_scale, 1400.0);
     assert_eq!(
-        (built_in.lod.min_dist, built_in.lod.max_dist),
-        (150.0, 6000.0)
+        built_in.lod.map(|l| (l.min_dist, l.max_dist)),
+        Some((150.0, 6000.0))
     );
     let camera = built_in.camera.expect("the default scene has a camera");
     assert_eq!(camera.eye, DVec3::new(-2300.0, 1750.0, -4300.0));
@@ -93,6 +93,35 @@ fn heightmap_paths_are_relative_to_the_scene() {
     assert!(overview.eye.y > 1076.0);
 }
 
+#[test]
+fn a_scene_without_lod_draws_the_error_lod_at_one_pixel() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(
+        data_path("jacksboro_fault_dem.r16"),
+        dir.path().join("dem.r16"),
+    )
+    .unwrap();
+    let head = "[heightmap]\npath = \"dem.r16\"\nsize = [403, 344]\ncell_spacing = 10.0\n";
+    let load = |extra: &str| Scene::load(&write_scene(&dir, &format!("{head}{extra}"))).unwrap();
+    let bare = load("");
+    assert_eq!((bare.pixel_error, bare.lod), (Some(1.0), None));
+    // Its distances, when the distance LOD is asked for, fit the terrain:
+    // 4020 m wide, not the default scene's 8 km.
+    let lod = bare.distance_lod(&bare.terrain_info().unwrap());
+    assert!(
+        (lod.min_dist - 80.4).abs() < 0.01 && (lod.max_dist - 3015.0).abs() < 0.1,
+        "{lod:?}"
+    );
+    let distance = load("[lod]\nmin_distance = 10.0\nmax_distance = 900.0\n");
+    assert_eq!(distance.pixel_error, None);
+    assert_eq!(distance.lod.unwrap().max_dist, 900.0);
+    let both = load("[lod]\npixel_error = 2.5\nmin_distance = 10.0\n");
+    assert_eq!(both.pixel_error, Some(2.5));
+    assert_eq!(both.lod.unwrap().min_dist, 10.0);
+    // The default scene keeps its distance LOD.
+    assert_eq!(Scene::default_scene().pixel_error, None);
+}
+
 fn invalid(text: &str) -> SceneFileError {
     let dir = tempfile::tempdir().unwrap();
     let err = Scene::load(&write_scene(&dir, text)).expect_err("must be refused");
@@ -142,6 +171,11 @@ fn errors_name_the_key_and_line() {
         4,
     );
     assert_invalid(&format!("{head}[lod]\nmax_level = 7.0\n"), "lod", 4);
+    assert_invalid(
+        &format!("{head}[lod]\npixel_error = 0.0\n"),
+        "lod.pixel_error",
+        4,
+    );
     assert_invalid(
         &format!("{head}[camera]\neye = [0.0, 1.0, 0.0]\ntarget = [0.0, 1.0, 0.0]\n"),
         "camera.target",

@@ -14,12 +14,18 @@ use plotters::prelude::*;
 use super::run::{Row, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
 use crate::output::write_atomically;
 
-/// Target of `--lod error --pixel-error 1`: its measured p99.
-pub const TARGET_P99_PX: f64 = 1.0;
-pub const TARGET_TRIANGLES_VS_BRUTE: f64 = 20.0;
-pub const TARGET_GPU_VS_BRUTE: f64 = 5.0;
-pub const TARGET_DISTANCE_VS_ERROR: f64 = 2.0;
-pub const TARGET_ERROR_VS_ORACLE: f64 = 1.5;
+/// Tolerances at which tess error mode's p99 must be within tau.
+pub const TARGET_TAUS: [f32; 3] = [0.5, 1.0, 2.0];
+/// At tau = 1 px: tess error mode's triangles over the fewest of any row of
+/// the view whose p99 is within 1 px (every distance setting, geomip and
+/// the oracle count).
+pub const TARGET_TESS_VS_BEST: f64 = 1.5;
+/// The same for geomip error mode.
+pub const TARGET_GEOMIP_VS_BEST: f64 = 2.0;
+/// On the large terrain, brute's triangles and GPU time over tess error
+/// mode's at tau = 1 px.
+pub const TARGET_LARGE_TRIANGLES_VS_BRUTE: f64 = 20.0;
+pub const TARGET_LARGE_GPU_VS_BRUTE: f64 = 5.0;
 
 /// Rows already in `dir`, less those `fresh` replaces (same scene and
 /// device), followed by `fresh`.
@@ -66,7 +72,7 @@ fn csv_field(s: &str) -> String {
 pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
-         triangles,tes_invocations,gpu_memory_bytes,max_px,p99_px,mean_px,error_pixels,\
+         triangles,tes_invocations,gpu_memory_bytes,predicted_max_px,max_px,p99_px,mean_px,error_pixels,\
          mismatched_pixels\n",
     );
     for r in rows {
@@ -87,6 +93,7 @@ pub fn csv(rows: &[Row]) -> String {
             opt(r.triangles),
             opt(r.tes_invocations),
             r.gpu_memory_bytes.to_string(),
+            opt(r.predicted_max_px.map(|v| format!("{v:.4}"))),
             format!("{:.4}", r.max_px),
             format!("{:.4}", r.p99_px),
             format!("{:.4}", r.mean_px),
@@ -183,55 +190,50 @@ fn groups(rows: &[Row]) -> Vec<(GroupKey, Vec<&Row>)> {
 /// What the targets come to on one camera's rows.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct TargetCheck {
-    pub error_p99: Option<f64>,
-    pub triangles_vs_brute: Option<f64>,
-    pub gpu_vs_brute: Option<f64>,
-    /// Triangles of the cheapest distance setting with p99 at most error
-    /// mode's, over error mode's; None when no distance setting got there.
-    pub distance_vs_error: Option<f64>,
-    /// The distance setting closest to error mode's p99 when none reaches it.
-    pub best_distance_p99: Option<f64>,
-    pub error_vs_oracle: Option<f64>,
+    /// Tess error mode's p99 at each of `TARGET_TAUS`.
+    pub tess_p99: [Option<f64>; 3],
+    /// At tau = 1 px: tess error mode's triangles over brute's.
+    pub tess_vs_brute_triangles: Option<f64>,
+    /// At tau = 1 px: brute's triangles and GPU time over tess error mode's.
+    pub brute_vs_tess_triangles: Option<f64>,
+    pub brute_vs_tess_gpu: Option<f64>,
+    /// The row with the fewest triangles whose p99 is within 1 px.
+    pub best_config: Option<String>,
+    /// At tau = 1 px: tess and geomip error mode's triangles over the best
+    /// row's.
+    pub tess_vs_best: Option<f64>,
+    pub geomip_p99: Option<f64>,
+    pub geomip_vs_best: Option<f64>,
 }
 
-/// The targets, read from the rows of one scene, device and camera: error
-/// mode at tau = 1 against brute, the distance sweep and the oracle.
+/// The targets, read from the rows of one scene, device and camera.
 pub fn check_targets(rows: &[&Row]) -> TargetCheck {
-    let find = |path: &str, lod: Option<&str>| {
+    let find = |path: &str, tau: f32| {
         rows.iter()
-            .find(|r| r.path == path && r.lod.as_deref() == lod && r.tau == Some(1.0))
+            .find(|r| r.path == path && r.lod.as_deref() == Some("error") && r.tau == Some(tau))
             .copied()
     };
     let brute = rows.iter().find(|r| r.path == "brute").copied();
-    let error = find("tess", Some("error"));
-    let oracle = find("oracle", None);
+    let (tess, geomip) = (find("tess", 1.0), find("geomip", 1.0));
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
     };
     let tris = |r: Option<&Row>| r.and_then(|r| r.triangles).map(|t| t as f64);
-    let mut check = TargetCheck {
-        error_p99: error.map(|e| e.p99_px),
-        triangles_vs_brute: ratio(tris(brute), tris(error)),
-        gpu_vs_brute: ratio(brute.and_then(|b| b.gpu_ms), error.and_then(|e| e.gpu_ms)),
-        error_vs_oracle: ratio(tris(error), tris(oracle)),
-        ..TargetCheck::default()
-    };
-    if let Some(e) = error {
-        let distance = rows
-            .iter()
-            .filter(|r| r.path == "tess" && r.lod.as_deref() == Some("distance"));
-        let cheapest = distance
-            .clone()
-            .filter(|r| r.p99_px <= e.p99_px)
-            .filter_map(|r| r.triangles)
-            .min();
-        check.distance_vs_error = ratio(cheapest.map(|t| t as f64), tris(Some(e)));
-        if check.distance_vs_error.is_none() {
-            check.best_distance_p99 = distance.map(|r| r.p99_px).min_by(f64::total_cmp);
-        }
+    let best = rows
+        .iter()
+        .filter(|r| r.p99_px <= 1.0 && r.triangles.is_some())
+        .min_by_key(|r| r.triangles);
+    TargetCheck {
+        tess_p99: TARGET_TAUS.map(|t| find("tess", t).map(|r| r.p99_px)),
+        tess_vs_brute_triangles: ratio(tris(tess), tris(brute)),
+        brute_vs_tess_triangles: ratio(tris(brute), tris(tess)),
+        brute_vs_tess_gpu: ratio(brute.and_then(|b| b.gpu_ms), tess.and_then(|e| e.gpu_ms)),
+        best_config: best.map(|r| format!("{} ({})", r.config, opt(r.triangles))),
+        tess_vs_best: ratio(tris(tess), tris(best.copied())),
+        geomip_p99: geomip.map(|g| g.p99_px),
+        geomip_vs_best: ratio(tris(geomip), tris(best.copied())),
     }
-    check
 }
 
 fn verdict(value: Option<f64>, target: f64, at_least: bool, unit: &str) -> String {
@@ -281,29 +283,76 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
     let _ = writeln!(w, "## Targets\n");
     let _ = writeln!(
         w,
-        "Read from the rows below: tess error mode at tau = 1 px against brute, against the \
-         cheapest tess distance setting whose p99 is at most error mode's, and against the \
-         oracle at tau = 1 px.\n"
+        "Read from the rows below. Tess error mode's p99 at tau = 0.5, 1 and 2 px must be \
+         within tau. At tau = 1 px it must draw no more triangles than brute and at most \
+         {TARGET_TESS_VS_BEST}x the fewest of any row of the same view whose p99 is within \
+         1 px (the best row: any distance setting, geomip or the oracle); geomip error mode \
+         must be within 1 px and {TARGET_GEOMIP_VS_BEST}x of the same row. On a large terrain \
+         (4097^2 samples or more) tess error mode at 1 px must draw {TARGET_LARGE_TRIANGLES_VS_BRUTE}x \
+         fewer triangles than brute in {TARGET_LARGE_GPU_VS_BRUTE}x less GPU time; those two \
+         ratios are shown for every view.\n"
     );
     let _ = writeln!(
         w,
-        "| scene | device | camera | error mode p99 (<= {TARGET_P99_PX} px) | brute / error triangles (>= {TARGET_TRIANGLES_VS_BRUTE}x) | brute / error GPU time (>= {TARGET_GPU_VS_BRUTE}x) | distance / error triangles at <= its error (>= {TARGET_DISTANCE_VS_ERROR}x) | error / oracle triangles (<= {TARGET_ERROR_VS_ORACLE}x) |"
+        "| scene | device | camera | tess p99 at 0.5 / 1 / 2 px | tess / brute triangles (<= 1x) | best row at p99 <= 1 px | tess / best (<= {TARGET_TESS_VS_BEST}x) | geomip p99 (<= 1 px) | geomip / best (<= {TARGET_GEOMIP_VS_BEST}x) | brute / tess triangles, GPU time |"
     );
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
         let c = check_targets(&group);
-        let distance = match (c.distance_vs_error, c.best_distance_p99) {
-            (Some(v), _) => verdict(Some(v), TARGET_DISTANCE_VS_ERROR, true, "x"),
-            (None, Some(p)) => format!("no setting reaches it (best p99 {p:.2} px)"),
-            (None, None) => "n/a".into(),
+        let p99s: Vec<String> = c
+            .tess_p99
+            .iter()
+            .zip(TARGET_TAUS)
+            .map(|(&p, t)| verdict(p, f64::from(t), false, " px"))
+            .collect();
+        let ratios = match (c.brute_vs_tess_triangles, c.brute_vs_tess_gpu) {
+            (Some(t), Some(g)) => format!("{t:.2}x, {g:.2}x"),
+            (Some(t), None) => format!("{t:.2}x, n/a"),
+            _ => "n/a".into(),
         };
         let _ = writeln!(
             w,
-            "| {scene} | {device} | {camera} | {} | {} | {} | {distance} | {} |",
-            verdict(c.error_p99, TARGET_P99_PX, false, " px"),
-            verdict(c.triangles_vs_brute, TARGET_TRIANGLES_VS_BRUTE, true, "x"),
-            verdict(c.gpu_vs_brute, TARGET_GPU_VS_BRUTE, true, "x"),
-            verdict(c.error_vs_oracle, TARGET_ERROR_VS_ORACLE, false, "x"),
+            "| {scene} | {device} | {camera} | {} | {} | {} | {} | {} | {} | {ratios} |",
+            p99s.join(" / "),
+            verdict(c.tess_vs_brute_triangles, 1.0, false, "x"),
+            c.best_config.as_deref().unwrap_or("none"),
+            verdict(c.tess_vs_best, TARGET_TESS_VS_BEST, false, "x"),
+            verdict(c.geomip_p99, 1.0, false, " px"),
+            verdict(c.geomip_vs_best, TARGET_GEOMIP_VS_BEST, false, "x"),
+        );
+    }
+    let _ = writeln!(w);
+    let _ = writeln!(w, "## Predicted against measured error\n");
+    let _ = writeln!(
+        w,
+        "At tau = 1 px: the largest error each error mode's level choice expected on screen \
+         (`predicted_max_px`, over the frames), beside the measured max and p99.\n"
+    );
+    let _ = writeln!(
+        w,
+        "| scene | device | camera | tess predicted / max / p99 px | geomip predicted / max / p99 px |"
+    );
+    let _ = writeln!(w, "|---|---|---|---|---|");
+    for ((scene, device, camera), group) in groups(rows) {
+        let cell = |path: &str| {
+            group
+                .iter()
+                .find(|r| r.path == path && r.lod.as_deref() == Some("error") && r.tau == Some(1.0))
+                .map_or("n/a".to_string(), |r| {
+                    format!(
+                        "{} / {:.2} / {:.3}",
+                        r.predicted_max_px
+                            .map_or("unbounded".into(), |p| format!("{p:.2}")),
+                        r.max_px,
+                        r.p99_px
+                    )
+                })
+        };
+        let _ = writeln!(
+            w,
+            "| {scene} | {device} | {camera} | {} | {} |",
+            cell("tess"),
+            cell("geomip")
         );
     }
     let _ = writeln!(w);
@@ -324,19 +373,21 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         );
         let _ = writeln!(
             w,
-            "| config | triangles | TES invocations | GPU ms | CPU ms | GPU MiB | max px | p99 px | mean px | mismatched |"
+            "| config | triangles | TES invocations | GPU ms | CPU ms | GPU MiB | predicted max px | max px | p99 px | mean px | mismatched |"
         );
-        let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+        let _ = writeln!(w, "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
         for r in group {
             let _ = writeln!(
                 w,
-                "| {} | {} | {} | {} | {:.2} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
+                "| {} | {} | {} | {} | {:.2} | {} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
                 r.config,
                 opt(r.triangles),
                 opt(r.tes_invocations),
                 r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
                 r.cpu_ms,
                 mib(r.gpu_memory_bytes),
+                r.predicted_max_px
+                    .map_or("n/a".into(), |v| format!("{v:.2}")),
                 r.max_px,
                 r.p99_px,
                 r.mean_px,

@@ -19,7 +19,7 @@ use crate::vk::Gpu;
 /// Pixel tolerances of the error-driven configurations.
 pub const TAUS: [f32; 6] = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
 /// `--quick`'s shorter list.
-pub const QUICK_TAUS: [f32; 3] = [0.5, 1.0, 4.0];
+pub const QUICK_TAUS: [f32; 3] = [0.5, 1.0, 2.0];
 /// Frames timed per named view, after `WARM_UP` untimed ones.
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
@@ -204,6 +204,11 @@ pub struct Row {
     pub tes_invocations: Option<u64>,
     /// Device memory of this path's renderer plus the render target.
     pub gpu_memory_bytes: u64,
+    /// The largest error the LOD choice expected on screen, over the
+    /// frames (`TerrainRenderer::predicted_max_px`); null for brute, the
+    /// oracle and the distance LOD.
+    #[serde(default)]
+    pub predicted_max_px: Option<f64>,
     pub max_px: f64,
     pub p99_px: f64,
     pub mean_px: f64,
@@ -226,6 +231,7 @@ struct Gathered {
     cpu_ms: Vec<f64>,
     triangles: Vec<u64>,
     tes_invocations: Vec<u64>,
+    predicted_max_px: Option<f64>,
     errors: ErrorHistogram,
 }
 
@@ -344,6 +350,12 @@ impl<'a> Bench<'a> {
         for r in 0..repeats {
             let frame = self.render(camera, config, levels)?;
             progress.advance(message);
+            let renderer = &renderer_for(&mut self.renderers, config.render_path()).renderer;
+            if let Some(px) = renderer.predicted_max_px() {
+                let px = f64::from(px);
+                gathered.predicted_max_px =
+                    Some(gathered.predicted_max_px.map_or(px, |m| m.max(px)));
+            }
             if first_sample + r >= WARM_UP {
                 gathered.gpu_ms.extend(frame.measurements.gpu_ms);
                 gathered.cpu_ms.push(frame.cpu_ms);
@@ -564,6 +576,7 @@ impl<'a> Bench<'a> {
                     triangles: mean_count(&g.triangles),
                     tes_invocations: mean_count(&g.tes_invocations),
                     gpu_memory_bytes: bytes,
+                    predicted_max_px: g.predicted_max_px,
                     max_px: stats.max_px,
                     p99_px: stats.p99_px,
                     mean_px: stats.mean_px,

@@ -149,7 +149,8 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             gpu.device.caps.device_name
         )?;
     }
-    let configs = configs(scene.lod, cmd.quick, tessellation);
+    let scene_lod = scene.distance_lod(terrain.info());
+    let configs = configs(scene_lod, cmd.quick, tessellation);
     let options = BenchOptions {
         width: cmd.size.width,
         height: cmd.size.height,
@@ -168,7 +169,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
     let mut bench = Bench::new(
         &gpu,
         &terrain,
-        scene.lod,
+        scene_lod,
         &configs,
         options.width,
         options.height,
@@ -212,13 +213,17 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.2}"));
         writeln!(
             out,
-            "  {camera}: error mode tau=1 p99 {} px; brute/error triangles {}x, GPU {}x; \
-             distance/error triangles {}x; error/oracle triangles {}x",
-            f(c.error_p99),
-            f(c.triangles_vs_brute),
-            f(c.gpu_vs_brute),
-            f(c.distance_vs_error),
-            f(c.error_vs_oracle),
+            "  {camera}: tess error p99 {} / {} / {} px at tau 0.5 / 1 / 2; at 1 px: \
+             tess/brute triangles {}x, tess/best {}x, geomip p99 {} px, geomip/best {}x; \
+             best at p99 <= 1 px: {}",
+            f(c.tess_p99[0]),
+            f(c.tess_p99[1]),
+            f(c.tess_p99[2]),
+            f(c.tess_vs_brute_triangles),
+            f(c.tess_vs_best),
+            f(c.geomip_p99),
+            f(c.geomip_vs_best),
+            c.best_config.as_deref().unwrap_or("none"),
         )?;
     }
     writeln!(

@@ -85,8 +85,8 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     }
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
-    let settings = cmd.view.settings(&scene);
     let info = scene.terrain_info()?;
+    let settings = cmd.view.settings(&scene, &info);
     let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
     let appearance = Appearance::load(&scene, &info)?;
     let terrain = Terrain::new(info, appearance.y_margin())?;

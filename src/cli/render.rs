@@ -22,7 +22,11 @@ use crate::scene::Scene;
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{DistanceMode, Terrain};
+use crate::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
+
+/// The error LOD's tolerance when neither the command line nor the scene
+/// gives one, in pixels.
+pub const DEFAULT_PIXEL_ERROR: f32 = 1.0;
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::Capabilities;
 
@@ -132,13 +136,16 @@ pub struct ViewArgs {
     pub no_cull: bool,
 
     /// How levels are chosen: by distance, or by projected error (the tess
-    /// path's factors and the geomip path's levels alike).
-    #[arg(long, value_enum, default_value_t = LodArg::Distance)]
-    pub lod: LodArg,
+    /// path's factors and the geomip path's levels alike). Default: the
+    /// scene's; error at 1 px for a heightmap or a scene that names no LOD
+    /// (the default scene uses distance).
+    #[arg(long, value_enum)]
+    pub lod: Option<LodArg>,
 
-    /// Largest projected error in pixels with --lod error.
-    #[arg(long, value_name = "PIXELS", default_value = "1", value_parser = positive_pixels)]
-    pub pixel_error: f32,
+    /// Largest projected error in pixels for the error LOD (implies
+    /// --lod error unless --lod says otherwise). Default: the scene's, or 1.
+    #[arg(long, value_name = "PIXELS", value_parser = positive_pixels)]
+    pub pixel_error: Option<f32>,
 
     /// Geomip path: switch levels abruptly instead of geomorphing.
     #[arg(long)]
@@ -156,16 +163,23 @@ impl ViewArgs {
             validate_cells_per_patch(n)?;
             scene.cells_per_patch = n;
         }
+        // Checked here, applied by `settings` over the terrain's distances.
+        self.distance_overrides(DistanceLod::default()).validate()?;
+        Ok(())
+    }
+
+    /// `lod` with --lod-distance and --lod-levels applied.
+    fn distance_overrides(&self, lod: DistanceLod) -> DistanceLod {
+        let mut lod = lod;
         if let Some((min, max)) = self.lod_distance {
-            scene.lod.min_dist = min;
-            scene.lod.max_dist = max;
+            lod.min_dist = min;
+            lod.max_dist = max;
         }
         if let Some((min, max)) = self.lod_levels {
-            scene.lod.min_exp = min;
-            scene.lod.max_exp = max;
+            lod.min_exp = min;
+            lod.max_exp = max;
         }
-        scene.lod.validate()?;
-        Ok(())
+        lod
     }
 
     pub fn camera_override(&self) -> CameraOverride {
@@ -176,8 +190,18 @@ impl ViewArgs {
         }
     }
 
-    pub fn settings(&self, scene: &Scene) -> RenderSettings {
-        let base = RenderSettings::for_scene(scene);
+    /// The scene's settings for its terrain, with these options applied.
+    pub fn settings(&self, scene: &Scene, info: &TerrainInfo) -> RenderSettings {
+        let base = RenderSettings::for_scene(scene, info);
+        let pixels = self
+            .pixel_error
+            .or(scene.pixel_error)
+            .unwrap_or(DEFAULT_PIXEL_ERROR);
+        let lod_metric = match (self.lod, self.pixel_error) {
+            (Some(LodArg::Distance), _) => LodMetric::Distance,
+            (Some(LodArg::Error), _) | (None, Some(_)) => LodMetric::Error(pixels),
+            (None, None) => base.lod_metric,
+        };
         RenderSettings {
             path: self.path.into(),
             lod_mode: match self.lod_mode {
@@ -199,10 +223,8 @@ impl ViewArgs {
             }),
             cull: !self.no_cull,
             geomorph: !self.no_morph,
-            lod_metric: match self.lod {
-                LodArg::Distance => LodMetric::Distance,
-                LodArg::Error => LodMetric::Error(self.pixel_error),
-            },
+            lod_metric,
+            lod: self.distance_overrides(base.lod),
             ..base
         }
     }
@@ -275,6 +297,9 @@ pub struct FrameStats {
     pub vertex_invocations: Option<u64>,
     pub clipping_invocations: Option<u64>,
     pub gpu_ms: Option<f64>,
+    /// The largest error the error LOD's choice expects on screen, in
+    /// pixels; null for the distance LOD and brute.
+    pub predicted_max_px: Option<f32>,
     pub cpu_ms: f64,
     pub gpu_memory_bytes: u64,
     pub gpu_memory: BTreeMap<String, u64>,
@@ -327,10 +352,10 @@ pub struct RenderOutput {
 
 /// Renders one frame of `scene` headless: builds the GPU objects, draws,
 /// reads back, and tears everything down again.
+/// Renders `scene` with the settings `view` gives for its terrain.
 pub fn render_scene(
     scene: &Scene,
-    camera: &CameraOverride,
-    settings: &RenderSettings,
+    view: &ViewArgs,
     width: u32,
     height: u32,
     validate: bool,
@@ -340,7 +365,8 @@ pub fn render_scene(
     let started = std::time::Instant::now();
     let info = scene.terrain_info()?;
     let load_ms = ms(started);
-    let camera = camera.apply(scene.camera_for(&info))?;
+    let camera = view.camera_override().apply(scene.camera_for(&info))?;
+    let settings = view.settings(scene, &info);
     let started = std::time::Instant::now();
     let appearance = Appearance::load(scene, &info)?;
     let material_ms = ms(started);
@@ -349,7 +375,7 @@ pub fn render_scene(
     let bounds_ms = ms(started);
     let gpu = features.gpu(validate)?;
     let mut notes = Vec::new();
-    let settings = &with_fallback(*settings, &gpu.device.caps, &mut notes);
+    let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
     let caps = &gpu.device.caps;
     if !caps.pipeline_statistics_query {
         notes.push(format!(
@@ -386,6 +412,7 @@ pub fn render_scene(
         }
     };
     let frame = headless.render(&gpu, &mut renderer, &terrain, &camera, settings);
+    let predicted_max_px = renderer.predicted_max_px();
     // Memory is reported while everything is still allocated.
     let gpu_memory: BTreeMap<String, u64> = gpu.device.memory_report().into_iter().collect();
     headless.destroy(&gpu);
@@ -407,6 +434,7 @@ pub fn render_scene(
         vertex_invocations: statistics.map(|s| s.vertex_invocations),
         clipping_invocations: statistics.map(|s| s.clipping_invocations),
         gpu_ms: frame.measurements.gpu_ms,
+        predicted_max_px,
         cpu_ms: frame.cpu_ms,
         gpu_memory_bytes: gpu_memory.values().sum(),
         gpu_memory,
@@ -436,11 +464,9 @@ pub fn render_scene(
 pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
-    let settings = cmd.view.settings(&scene);
     let output = render_scene(
         &scene,
-        &cmd.view.camera_override(),
-        &settings,
+        &cmd.view,
         cmd.size.width,
         cmd.size.height,
         cmd.validate,

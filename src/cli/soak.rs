@@ -119,7 +119,7 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
     // keep, and to free.
     let appearance = Appearance::load(&scene, &info)?;
     let terrain = Terrain::new(info, appearance.y_margin())?;
-    let base = RenderSettings::for_scene(&scene);
+    let base = RenderSettings::for_scene(&scene, terrain.info());
     let gpu = cmd.features.gpu(cmd.validate)?;
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
     if gpu.device.caps.tessellation_shader {

@@ -27,6 +27,8 @@ pub struct MirrorCase {
     pub grid: Vec2,
     /// Per-level errors for the error-bounded factor at `position`'s distance.
     pub errors: [f32; 7],
+    /// Cells the error-bounded factor spans.
+    pub cells: u32,
 }
 
 /// What the GPU computed for one case.
@@ -66,7 +68,7 @@ pub fn run_mirror_check(
             [
                 c.position.extend(0.0).to_array(),
                 c.extents.extend(0.0).to_array(),
-                c.grid.extend(0.0).extend(0.0).to_array(),
+                c.grid.extend(c.cells as f32).extend(0.0).to_array(),
                 [e[0], e[1], e[2], e[3]],
                 [e[4], e[5], e[6], 0.0],
             ]

@@ -3,7 +3,11 @@
 //! geometry and pipelines of only the paths asked for:
 //!
 //! - **tess**: patches of four control points; factors and culling in the
-//!   control shader, displacement in the evaluation shader.
+//!   control shader, displacement in the evaluation shader. With the error
+//!   LOD, patches that need the data's full resolution are chosen on the
+//!   CPU each frame and drawn with the reference's own triangles (the geomip
+//!   path's level 0), and the control shader gives every edge they share a
+//!   vertex on every sample, so the two meet exactly.
 //! - **geomip**: geomipmapping for devices without tessellation: one
 //!   vertex template and one index list per level and stitched-side mask,
 //!   shared by every patch; levels chosen on the CPU each frame, patches
@@ -21,7 +25,10 @@ use super::material::{GpuAppearance, ShaderVariant};
 use super::shaders;
 use super::uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings};
 use crate::material::Appearance;
-use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_HEIGHTMAP};
+use crate::shader_constants::{
+    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP,
+};
+use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
 use crate::terrain::{geomip, ErrorTable, Terrain};
 use crate::vk::commands::Recorder;
 use crate::vk::memory::{Buffer, Image};
@@ -36,6 +43,8 @@ struct FrameSlot {
     uniforms: Buffer,
     set: vk::DescriptorSet,
     queries: FrameQueries,
+    /// The tess path's full-resolution patches, one bit each (error LOD).
+    full_resolution: Option<Buffer>,
 }
 
 /// Which way the terrain is drawn.
@@ -115,13 +124,25 @@ struct TessGeometry {
     control_points: Buffer,
     indices: Buffer,
     index_count: u32,
+    /// Fractional even spacing, for the distance LOD.
     pipelines: PathPipelines,
+    /// Equal spacing, for the error LOD's whole factors.
+    error_pipelines: PathPipelines,
+    /// Per-patch errors, for choosing the full-resolution patches.
+    errors: ErrorTable,
+    /// This frame's visible full-resolution patches (error LOD), drawn
+    /// with the geomip path's level 0.
+    exact: Vec<GeomipDraw>,
 }
 
 struct GeomipGeometry {
     template: Buffer,
     indices: Buffer,
     variants: Vec<(u32, u32)>,
+    /// (first index, count) of the unstitched full-resolution list of each
+    /// patch size (cells x, z) the grid has: remainder patches at the far
+    /// edges draw only their own cells.
+    full_resolution: Vec<([usize; 2], (u32, u32))>,
     /// The shared layout plus the per-patch push constants.
     layout: vk::PipelineLayout,
     pipelines: PathPipelines,
@@ -179,6 +200,9 @@ pub struct TerrainRenderer {
     /// Milliseconds spent computing the error table in `new` (0 when no
     /// path needs it).
     error_table_ms: f64,
+    /// The largest error the last prepared frame's LOD choice expects on
+    /// screen, in pixels (error LOD only).
+    predicted_max_px: Option<f32>,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -298,20 +322,22 @@ impl TerrainRenderer {
             (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
         ];
         // The tess path's error-bounded factors read the per-patch error
-        // table (7 floats a patch).
-        // Both the tess path's error-bounded factors and the geomip path's
-        // error LOD need the table; it is computed once for either.
+        // table (7 floats a patch); the geomip path's error LOD has its own,
+        // for its fixed diagonal. Both come from one pass.
         let table_start = std::time::Instant::now();
-        let table =
-            (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_table());
+        let tables =
+            (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_tables());
+        let (table, geomip_table) = tables.unzip();
         let error_table_ms = table_start.elapsed().as_secs_f64() * 1e3;
         if wants(RenderPath::Tess) {
-            bindings.push((
-                BINDING_ERROR_TABLE,
-                vk::DescriptorType::STORAGE_BUFFER,
-                vk::ShaderStageFlags::TESSELLATION_CONTROL,
-            ));
-            pool_sizes.push((vk::DescriptorType::STORAGE_BUFFER, 1));
+            for binding in [BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION] {
+                bindings.push((
+                    binding,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
+                ));
+            }
+            pool_sizes.push((vk::DescriptorType::STORAGE_BUFFER, 2));
         }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
         for binding in gpu_appearance.bindings(vertex_stages) {
@@ -335,6 +361,7 @@ impl TerrainRenderer {
             max_patches_per_draw: device.caps.max_patches_per_draw,
             frames: Vec::new(),
             error_table_ms,
+            predicted_max_px: None,
         };
         let built = (|| {
             if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
@@ -369,6 +396,23 @@ impl TerrainRenderer {
                             return Err(e);
                         }
                     };
+                let full_resolution = if renderer.error_table.is_some() {
+                    let words = terrain.grid().patch_count().div_ceil(32).max(1);
+                    match device.create_host_buffer(
+                        &format!("terrain.full_resolution[{i}]"),
+                        vk::BufferUsageFlags::STORAGE_BUFFER,
+                        bytemuck::cast_slice(&vec![0u32; words]),
+                    ) {
+                        Ok(b) => Some(b),
+                        Err(e) => {
+                            device.destroy_buffer(uniforms);
+                            queries.destroy(&device.raw);
+                            return Err(e);
+                        }
+                    }
+                } else {
+                    None
+                };
                 device.write_buffer(
                     set,
                     BINDING_FRAME,
@@ -392,16 +436,35 @@ impl TerrainRenderer {
                         errors.desc.size,
                     );
                 }
+                if let Some(bits) = &full_resolution {
+                    device.write_buffer(
+                        set,
+                        BINDING_FULL_RESOLUTION,
+                        vk::DescriptorType::STORAGE_BUFFER,
+                        bits.raw,
+                        bits.desc.size,
+                    );
+                }
                 renderer.frames.push(FrameSlot {
                     uniforms,
                     set,
                     queries,
+                    full_resolution,
                 });
             }
-            if wants(RenderPath::Tess) {
-                renderer.tess = Some(build_tess(device, &renderer, terrain, options.wireframe)?);
+            if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
+                renderer.tess = Some(build_tess(
+                    device,
+                    &renderer,
+                    terrain,
+                    table.clone(),
+                    options.wireframe,
+                )?);
             }
-            if let (true, Some(table)) = (wants(RenderPath::Geomip), table) {
+            // The tess path draws its full-resolution patches with geomip's
+            // level 0.
+            let geomip_needed = wants(RenderPath::Geomip) || wants(RenderPath::Tess);
+            if let (true, Some(table)) = (geomip_needed, geomip_table) {
                 renderer.geomip = Some(build_geomip(
                     device,
                     &renderer,
@@ -457,12 +520,48 @@ impl TerrainRenderer {
             .mapped_mut()
             .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
             .copy_from_slice(bytemuck::bytes_of(&uniforms));
-        if settings.path == RenderPath::Geomip {
-            if let Some(geomip) = self.geomip.as_mut() {
-                geomip.choose(terrain, view, settings);
+        self.predicted_max_px = None;
+        match (settings.path, settings.lod_metric) {
+            (RenderPath::Geomip, _) => {
+                if let Some(geomip) = self.geomip.as_mut() {
+                    self.predicted_max_px = geomip.choose(terrain, view, settings);
+                }
             }
+            (RenderPath::Tess, LodMetric::Error(pixels)) => {
+                if let (Some(tess), Some(bits)) = (
+                    self.tess.as_mut(),
+                    self.frames[slot].full_resolution.as_mut(),
+                ) {
+                    let choice = choose_tess_error(
+                        terrain,
+                        &tess.errors,
+                        view.eye_local,
+                        view.pixels_per_radian,
+                        pixels,
+                    );
+                    bits.mapped_mut()
+                        .ok_or_else(|| {
+                            VkError::Unsupported("patch flag memory is not host-mapped".into())
+                        })?
+                        .copy_from_slice(bytemuck::cast_slice(&choice.full_resolution));
+                    let geomip = self.geomip.as_ref().ok_or_else(|| {
+                        VkError::Unsupported("the tess path's exact draws need geomip".into())
+                    })?;
+                    self.predicted_max_px =
+                        Some(tess.set_exact_draws(terrain, view, settings, &choice, geomip));
+                }
+            }
+            (RenderPath::Tess | RenderPath::Brute, _) => {}
         }
         Ok(())
+    }
+
+    /// The largest error the last prepared frame's level choice expects on
+    /// screen, in pixels: over the patches in view, each one's error bound
+    /// at its level seen from its nearest point (0 where drawn at full
+    /// resolution). None for the distance LOD and the brute path.
+    pub fn predicted_max_px(&self) -> Option<f32> {
+        self.predicted_max_px
     }
 
     /// Makes the geomip path draw every patch at the given level (one per
@@ -521,8 +620,12 @@ impl TerrainRenderer {
         match settings.path {
             RenderPath::Tess => {
                 let tess = self.tess.as_ref().ok_or_else(not_built)?;
+                let pipelines = match settings.lod_metric {
+                    LodMetric::Distance => &tess.pipelines,
+                    LodMetric::Error(_) => &tess.error_pipelines,
+                };
                 rec.bind_graphics(
-                    tess.pipelines.select(settings.wireframe)?,
+                    pipelines.select(settings.wireframe)?,
                     self.pipeline_layout,
                     frame.set,
                 );
@@ -538,19 +641,14 @@ impl TerrainRenderer {
                     rec.draw_indexed(first, count);
                     first += count;
                 }
+                if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
+                    let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
+                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact)?;
+                }
             }
             RenderPath::Geomip => {
                 let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                rec.bind_graphics(
-                    geomip.pipelines.select(settings.wireframe)?,
-                    geomip.layout,
-                    frame.set,
-                );
-                rec.bind_geometry(geomip.template.raw, geomip.indices.raw);
-                for draw in &geomip.draws {
-                    rec.push_vertex_constants(geomip.layout, bytemuck::bytes_of(&draw.constants));
-                    rec.draw_indexed(draw.first, draw.count);
-                }
+                geomip.draw(rec, frame.set, settings.wireframe, &geomip.draws)?;
             }
             RenderPath::Brute => {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
@@ -580,9 +678,13 @@ impl TerrainRenderer {
         for frame in self.frames {
             device.destroy_buffer(frame.uniforms);
             frame.queries.destroy(&device.raw);
+            if let Some(bits) = frame.full_resolution {
+                device.destroy_buffer(bits);
+            }
         }
         if let Some(tess) = self.tess {
             tess.pipelines.destroy(device);
+            tess.error_pipelines.destroy(device);
             device.destroy_buffer(tess.control_points);
             device.destroy_buffer(tess.indices);
         }
@@ -614,14 +716,21 @@ fn build_pipelines(
     path: RenderPath,
     wireframe: bool,
 ) -> Result<PathPipelines> {
-    build_pipelines_with(device, renderer, renderer.pipeline_layout, path, wireframe)
+    build_pipelines_with(
+        device,
+        renderer,
+        renderer.pipeline_layout,
+        (path, false),
+        wireframe,
+    )
 }
 
+/// `path.1`: the tess path with equal spacing (the error LOD).
 fn build_pipelines_with(
     device: &Device,
     renderer: &TerrainRenderer,
     layout: vk::PipelineLayout,
-    path: RenderPath,
+    path: (RenderPath, bool),
     wireframe: bool,
 ) -> Result<PathPipelines> {
     let variant = &renderer.appearance.variant;
@@ -648,12 +757,16 @@ fn create_pipeline(
     layout: vk::PipelineLayout,
     color_format: vk::Format,
     variant: &ShaderVariant,
-    path: RenderPath,
+    (path, equal_spacing): (RenderPath, bool),
     polygon_mode: vk::PolygonMode,
     suffix: &str,
 ) -> Result<vk::Pipeline> {
     let frag = shaders::spirv("terrain.frag", &variant.fragment_defines());
     let placing = |file| shaders::spirv(file, &variant.vertex_defines());
+    let mut tese_defines = variant.vertex_defines();
+    if equal_spacing {
+        tese_defines.push("EQUAL_SPACING");
+    }
     let (name, stages, topology, patch_control_points, vertex_stride, vertex_attributes): (
         String,
         &[_],
@@ -663,7 +776,11 @@ fn create_pipeline(
         &[_],
     ) = match path {
         RenderPath::Tess => (
-            format!("terrain.pipeline.tess.{suffix}"),
+            if equal_spacing {
+                format!("terrain.pipeline.tess_error.{suffix}")
+            } else {
+                format!("terrain.pipeline.tess.{suffix}")
+            },
             &[
                 (vk::ShaderStageFlags::VERTEX, shaders::terrain_vert()),
                 (
@@ -672,7 +789,7 @@ fn create_pipeline(
                 ),
                 (
                     vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-                    placing("terrain.tese"),
+                    shaders::spirv("terrain.tese", &tese_defines),
                 ),
                 (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
@@ -742,6 +859,7 @@ fn build_tess(
     device: &Device,
     renderer: &TerrainRenderer,
     terrain: &Terrain,
+    errors: ErrorTable,
     wireframe: bool,
 ) -> Result<TessGeometry> {
     let (control_points, indices) = upload_two(
@@ -757,12 +875,32 @@ fn build_tess(
             bytemuck::cast_slice(terrain.indices()),
         ),
     )?;
-    match build_pipelines(device, renderer, RenderPath::Tess, wireframe) {
-        Ok(pipelines) => Ok(TessGeometry {
+    let layout = renderer.pipeline_layout;
+    let built =
+        build_pipelines(device, renderer, RenderPath::Tess, wireframe).and_then(|pipelines| {
+            match build_pipelines_with(
+                device,
+                renderer,
+                layout,
+                (RenderPath::Tess, true),
+                wireframe,
+            ) {
+                Ok(error_pipelines) => Ok((pipelines, error_pipelines)),
+                Err(e) => {
+                    pipelines.destroy(device);
+                    Err(e)
+                }
+            }
+        });
+    match built {
+        Ok((pipelines, error_pipelines)) => Ok(TessGeometry {
             control_points,
             indices,
             index_count: terrain.indices().len() as u32,
             pipelines,
+            error_pipelines,
+            errors,
+            exact: Vec::new(),
         }),
         Err(e) => {
             device.destroy_buffer(control_points);
@@ -780,7 +918,19 @@ fn build_geomip(
     wireframe: bool,
 ) -> Result<GeomipGeometry> {
     let n = terrain.grid().cells_per_patch();
-    let variants = geomip::IndexVariants::build(n);
+    let mut variants = geomip::IndexVariants::build(n);
+    let grid = terrain.grid();
+    let mut full_resolution: Vec<([usize; 2], (u32, u32))> = Vec::new();
+    for p in 0..grid.patch_count() {
+        let rect = grid.sample_rect(grid.patch_id(p));
+        let cells = [rect.cells_x(), rect.cells_z()];
+        if full_resolution.iter().all(|(c, _)| *c != cells) {
+            let list = geomip::full_resolution_indices(n, cells);
+            let range = (variants.indices.len() as u32, list.len() as u32);
+            variants.indices.extend(list);
+            full_resolution.push((cells, range));
+        }
+    }
     let (template, indices) = upload_two(
         device,
         (
@@ -802,7 +952,13 @@ fn build_geomip(
             "terrain.pipeline_layout.geomip",
         )
         .and_then(|layout| {
-            match build_pipelines_with(device, renderer, layout, RenderPath::Geomip, wireframe) {
+            match build_pipelines_with(
+                device,
+                renderer,
+                layout,
+                (RenderPath::Geomip, false),
+                wireframe,
+            ) {
                 Ok(pipelines) => Ok((layout, pipelines)),
                 Err(e) => {
                     device.destroy_pipeline_layout(layout);
@@ -815,6 +971,7 @@ fn build_geomip(
             template,
             indices,
             variants: variants.ranges,
+            full_resolution,
             layout,
             pipelines,
             draws: Vec::new(),
@@ -830,13 +987,19 @@ fn build_geomip(
 }
 
 impl GeomipGeometry {
-    /// Levels by distance, balanced; the visible patches become this
-    /// frame's draws, with their morph factors.
-    fn choose(&mut self, terrain: &Terrain, view: &FrameView, settings: &RenderSettings) {
+    /// Levels by distance or error, balanced; the visible patches become
+    /// this frame's draws, with their morph factors. Returns the largest
+    /// error the error LOD expects on screen.
+    fn choose(
+        &mut self,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+    ) -> Option<f32> {
         if let Some(chosen) = self.given.take() {
             self.set_draws(terrain, view, settings, &chosen);
             self.given = Some(chosen);
-            return;
+            return None;
         }
         let chosen = match settings.lod_metric {
             LodMetric::Distance => {
@@ -851,6 +1014,44 @@ impl GeomipGeometry {
             ),
         };
         self.set_draws(terrain, view, settings, &chosen);
+        let LodMetric::Error(_) = settings.lod_metric else {
+            return None;
+        };
+        let predicted = geomip::predicted_px(
+            terrain,
+            &self.errors,
+            &chosen,
+            view.eye_local,
+            view.pixels_per_radian,
+            settings.geomorph,
+        );
+        Some(max_in_view(terrain, view, settings, &predicted))
+    }
+
+    /// The unstitched full-resolution index list of a patch of `cells`.
+    fn full_resolution_range(&self, cells: [usize; 2]) -> (u32, u32) {
+        self.full_resolution
+            .iter()
+            .find(|(c, _)| *c == cells)
+            .map_or(self.variants[0], |&(_, range)| range)
+    }
+
+    /// Draws `draws` (this path's patches, or the tess path's
+    /// full-resolution ones) with the geomip pipeline.
+    fn draw(
+        &self,
+        rec: &Recorder,
+        set: vk::DescriptorSet,
+        wireframe: bool,
+        draws: &[GeomipDraw],
+    ) -> Result<()> {
+        rec.bind_graphics(self.pipelines.select(wireframe)?, self.layout, set);
+        rec.bind_geometry(self.template.raw, self.indices.raw);
+        for draw in draws {
+            rec.push_vertex_constants(self.layout, bytemuck::bytes_of(&draw.constants));
+            rec.draw_indexed(draw.first, draw.count);
+        }
+        Ok(())
     }
 
     /// The visible patches at their `chosen` levels become this frame's
@@ -865,20 +1066,23 @@ impl GeomipGeometry {
         let grid = terrain.grid();
         self.draws.clear();
         for p in 0..grid.patch_count() {
-            let id = grid.patch_id(p);
-            let (centre, extents) = terrain.patch_aabb(id);
-            if settings.cull && view.frustum.aabb_outside(centre - view.eye_local, extents) {
+            if !in_view(terrain, view, settings, p) {
                 continue;
             }
+            let id = grid.patch_id(p);
             let level = usize::from(chosen.levels[p]);
             let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
-            let (first, count) = self.variants[level * 16 + usize::from(coarser)];
+            let rect = grid.sample_rect(id);
+            let (first, count) = if level == 0 && coarser == 0 {
+                self.full_resolution_range([rect.cells_x(), rect.cells_z()])
+            } else {
+                self.variants[level * 16 + usize::from(coarser)]
+            };
             let (interior, sides) = if settings.geomorph {
                 geomip::patch_morph(chosen, grid, id)
             } else {
                 (0.0, [0.0; 4])
             };
-            let rect = grid.sample_rect(id);
             self.draws.push(GeomipDraw {
                 first,
                 count,
@@ -890,5 +1094,62 @@ impl GeomipGeometry {
                 },
             });
         }
+    }
+}
+
+/// Whether the patch is drawn this frame: culling off, or its box not
+/// outside the frustum.
+fn in_view(terrain: &Terrain, view: &FrameView, settings: &RenderSettings, p: usize) -> bool {
+    let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+    !settings.cull || !view.frustum.aabb_outside(centre - view.eye_local, extents)
+}
+
+/// The largest of per-patch `values` over the patches in view (0 if none).
+fn max_in_view(
+    terrain: &Terrain,
+    view: &FrameView,
+    settings: &RenderSettings,
+    values: &[f32],
+) -> f32 {
+    values
+        .iter()
+        .enumerate()
+        .filter(|&(p, _)| in_view(terrain, view, settings, p))
+        .fold(0.0, |m, (_, &v)| m.max(v))
+}
+
+impl TessGeometry {
+    /// The visible full-resolution patches of `choice` become this frame's
+    /// exact draws (geomip level 0, no stitching: every edge they share is
+    /// tessellated with a vertex on every sample). Returns the largest
+    /// error the choice expects on screen.
+    fn set_exact_draws(
+        &mut self,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+        choice: &TessErrorChoice,
+        geomip: &GeomipGeometry,
+    ) -> f32 {
+        let grid = terrain.grid();
+        self.exact.clear();
+        for p in 0..grid.patch_count() {
+            if !choice.is_full_resolution(p) || !in_view(terrain, view, settings, p) {
+                continue;
+            }
+            let rect = grid.sample_rect(grid.patch_id(p));
+            let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
+            self.exact.push(GeomipDraw {
+                first,
+                count,
+                constants: GeomipConstants {
+                    origin: [rect.col0 as i32, rect.row0 as i32],
+                    level: 0,
+                    interior: 0.0,
+                    sides: [0.0; 4],
+                },
+            });
+        }
+        max_in_view(terrain, view, settings, &choice.predicted_px)
     }
 }

@@ -113,13 +113,16 @@ impl Default for RenderSettings {
 }
 
 impl RenderSettings {
-    /// The defaults with a scene's LOD, lights and fog; with fog, the sky
+    /// The defaults with a scene's LOD (for its terrain), lights and fog; with fog, the sky
     /// behind the terrain takes the fog's colour, so distant ground fades
     /// into it.
-    pub fn for_scene(scene: &Scene) -> Self {
+    pub fn for_scene(scene: &Scene, info: &crate::terrain::TerrainInfo) -> Self {
         let defaults = RenderSettings::default();
         RenderSettings {
-            lod: scene.lod,
+            lod: scene.distance_lod(info),
+            lod_metric: scene
+                .pixel_error
+                .map_or(LodMetric::Distance, LodMetric::Error),
             lighting: scene.lighting,
             fog: scene.fog,
             clear_color: scene

@@ -17,8 +17,11 @@
 //! [terrain]
 //! cells_per_patch = 32
 //!
-//! [lod]
-//! min_distance = 150.0
+//! [lod]                               # no keys: the error LOD at 1 px
+//!                                     # (the distance LOD if layers displace)
+//! pixel_error = 1.0                   # the error LOD, at most this many pixels
+//! min_distance = 150.0                # the distance LOD (the default when these
+//!                                     # are given without pixel_error)
 //! max_distance = 6000.0
 //! min_level = 0.0                     # exponents: factors 2^min_level..2^max_level
 //! max_level = 6.0
@@ -113,6 +116,7 @@ struct TerrainToml {
 #[derive(Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 struct LodToml {
+    pixel_error: Option<Spanned<f32>>,
     min_distance: Option<Spanned<f32>>,
     max_distance: Option<Spanned<f32>>,
     min_level: Option<Spanned<f32>>,
@@ -254,6 +258,22 @@ impl Scene {
                 .unwrap_or(0..0);
             return check.invalid("lod", span, e.to_string());
         }
+        let distances = [&l.min_distance, &l.max_distance, &l.min_level, &l.max_level]
+            .iter()
+            .any(|v| v.is_some());
+        let pixel_error = match &l.pixel_error {
+            Some(px) if !(px.get_ref().is_finite() && *px.get_ref() > 0.0) => {
+                return check.invalid(
+                    "lod.pixel_error",
+                    px.span(),
+                    format!("must be a positive number of pixels, got {}", px.get_ref()),
+                );
+            }
+            Some(px) => Some(*px.get_ref()),
+            None if distances => None,
+            None => Some(1.0),
+        };
+        let lod = distances.then_some(lod);
 
         let camera = match &parsed.camera {
             None => None,
@@ -290,6 +310,17 @@ impl Scene {
         let fog = parse_fog(&check, parsed.fog.as_ref())?;
         let scene_dir = path.parent().unwrap_or(Path::new("."));
         let material = parse_material(&check, parsed.material.as_ref(), scene_dir)?;
+        // The error table bounds the heightmap's surface, not what material
+        // layers displace it by: such a scene keeps the distance LOD unless
+        // it asks for the error LOD.
+        let displaces = material
+            .as_ref()
+            .is_some_and(|m| m.layers.iter().any(|l| l.displacement != 0.0));
+        let pixel_error = if displaces && l.pixel_error.is_none() {
+            None
+        } else {
+            pixel_error
+        };
 
         Ok(Scene {
             heightmap: HeightmapSource::File(resolved),
@@ -306,6 +337,7 @@ impl Scene {
             origin,
             cells_per_patch,
             lod,
+            pixel_error,
             camera,
             lighting,
             lightmap,

@@ -99,7 +99,13 @@ pub struct Scene {
     /// World (x, z) of the terrain's centre.
     pub origin: DVec2,
     pub cells_per_patch: u32,
-    pub lod: DistanceLod,
+    /// The distance LOD's parameters; None: in proportion to the terrain
+    /// (`DistanceLod::for_extent`, see `distance_lod`).
+    pub lod: Option<DistanceLod>,
+    /// The LOD drawn unless told otherwise: the error LOD at this many
+    /// pixels, or with None the distance LOD. A scene that names no LOD
+    /// gets the error LOD at 1 px.
+    pub pixel_error: Option<f32>,
     /// None: an overview of the whole terrain (`camera_for`).
     pub camera: Option<Camera>,
     pub lighting: Lighting,
@@ -163,6 +169,12 @@ impl Scene {
             target: DVec3::new(o.x, mid, o.y + 0.1 * d),
             fov_y_deg: DEFAULT_FOV_DEG,
         }
+    }
+
+    /// The distance LOD's parameters for the scene's terrain.
+    pub fn distance_lod(&self, info: &TerrainInfo) -> DistanceLod {
+        self.lod
+            .unwrap_or_else(|| DistanceLod::for_extent(info.world_width().max(info.world_depth())))
     }
 
     pub fn load_heightmap(&self) -> Result<Heightmap, HeightmapError> {

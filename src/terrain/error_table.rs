@@ -5,29 +5,39 @@
 //! surface height at their position (`Heightmap::interpolate`, what the
 //! displacement in the evaluation shader samples). How the tessellator
 //! splits each quad into two triangles is up to the driver, so the error
-//! must hold for either diagonal. Either split differs from the bilinear
-//! interpolation of the quad's four vertex heights by at most a quarter of
-//! the quad's twist |v00 + v11 - v01 - v10| (at its centre), so the error of
-//! a level is bounded by the largest
+//! must hold for either diagonal.
 //!
-//! |surface(p) - bilinear(p)| + |twist of p's quad| / 4
+//! Only levels below the patch's cell count (its smaller side) are ever
+//! tessellated: a patch that needs more is drawn with the reference's own
+//! triangles, exactly, so those levels have error 0 here. Below it:
 //!
-//! over the points p where the reference surface (the heightmap split as
-//! `height_at` splits it) and a level's triangles can differ most: every
-//! sample, every cell centre (on the reference's fold) and every quad centre
-//! (where a wrong diagonal is furthest off). So even the finest levels carry
-//! an error: with a vertex on every sample the tessellator may still fold a
-//! cell along the other diagonal than the reference, which costs half the
-//! cell's twist. That is the seed article's "max-error vertex" height, made
-//! to hold whatever the triangulation.
+//! - **Exact**, where the level's quads are square runs of whole cells (the
+//!   patch's sides are multiples of L and equal, as on every patch but the
+//!   remainders at the far edges). Each quad's vertices are samples, and
+//!   both of its triangulations are planar pieces whose difference from the
+//!   reference (the heightmap split as `height_at` splits it) is piecewise
+//!   linear. Its extremes lie where the two meshes' edges cross: at the
+//!   samples, and for the diagonal that runs against the reference's, at
+//!   the centres of the cells it crosses. The error is the larger of the
+//!   two diagonals' largest differences there.
+//! - **A bound** elsewhere (remainder patches whose vertices fall between
+//!   samples): either split differs from the bilinear interpolation of the
+//!   quad's four vertex heights by at most a quarter of the quad's twist
+//!   |v00 + v11 - v01 - v10|, so the level's error is at most the largest
+//!   |surface(p) - bilinear(p)| + |twist of p's quad| / 4 over every sample,
+//!   cell centre and quad centre p. That is the seed article's "max-error
+//!   vertex" height, made to hold whatever the triangulation.
+//!
+//! `ErrorTable::compute_pair` also gives the geomip path's table: geomip
+//! draws every quad split like the reference, so its exact error is the
+//! first diagonal's alone, and its level 0 is the reference itself.
 //!
 //! A coarser level can measure less than a finer one on some data (a sample
 //! may happen to sit near a coarse interpolation and away from a finer one),
 //! which would make an error-bounded choice pick the coarse level over a
 //! finer one it rejected. The stored value of each level is therefore the
-//! largest raw error of that level and every finer one: the table is
-//! non-increasing as the level rises, and bounds the error of every level at
-//! or above it.
+//! largest raw error of that level and every finer one that is still
+//! tessellated: the table is non-increasing as the level rises.
 //!
 //! Vertex positions are rational (`k * cells / L`), so their cell indices
 //! and fractions come from exact integer arithmetic.
@@ -51,21 +61,43 @@ pub struct ErrorTable {
 impl ErrorTable {
     pub const LEVELS: usize = ERROR_LEVELS.len();
 
+    /// The tess path's table: either diagonal.
     pub fn compute(heightmap: &Heightmap, grid: &PatchGrid) -> ErrorTable {
-        let mut errors = vec![0.0f32; grid.patch_count() * Self::LEVELS];
-        errors
-            .par_chunks_mut(Self::LEVELS)
+        Self::compute_pair(heightmap, grid).0
+    }
+
+    /// The tess path's table (either diagonal) and the geomip path's (the
+    /// reference's diagonal), in one pass over the samples.
+    pub fn compute_pair(heightmap: &Heightmap, grid: &PatchGrid) -> (ErrorTable, ErrorTable) {
+        let n = grid.patch_count() * Self::LEVELS;
+        let (mut tess, mut geomip) = (vec![0.0f32; n], vec![0.0f32; n]);
+        tess.par_chunks_mut(Self::LEVELS)
+            .zip(geomip.par_chunks_mut(Self::LEVELS))
             .enumerate()
-            .for_each(|(p, out)| {
+            .for_each(|(p, (tess, geomip))| {
                 let rect = grid.sample_rect(grid.patch_id(p));
-                let mut finer_max = 0.0f64;
+                let side = rect.cells_x().min(rect.cells_z());
+                let (mut tess_max, mut geomip_max) = (0.0f64, 0.0f64);
                 for (k, &level) in ERROR_LEVELS.iter().enumerate().rev() {
-                    let raw = level_error(heightmap, rect, level as usize);
-                    finer_max = finer_max.max(raw);
-                    out[k] = finer_max as f32;
+                    let level = level as usize;
+                    if level >= side {
+                        // Drawn with the reference's own triangles.
+                        continue;
+                    }
+                    let (either, reference) = match exact_level_error(heightmap, rect, level) {
+                        Some(errors) => errors,
+                        None => {
+                            let bound = bound_level_error(heightmap, rect, level);
+                            (bound, bound)
+                        }
+                    };
+                    tess_max = tess_max.max(either);
+                    geomip_max = geomip_max.max(reference);
+                    tess[k] = tess_max as f32;
+                    geomip[k] = geomip_max as f32;
                 }
             });
-        ErrorTable { errors }
+        (ErrorTable { errors: tess }, ErrorTable { errors: geomip })
     }
 
     /// The flat table, ready for upload.
@@ -92,10 +124,64 @@ fn split(k: usize, cells: usize, level: usize) -> (usize, usize) {
     (n / level, n % level)
 }
 
+/// Exact errors of one level over one patch whose quads are square runs of
+/// whole cells: (either diagonal, the reference's diagonal); None where the
+/// quads are not (see the module documentation).
+fn exact_level_error(map: &Heightmap, rect: SampleRect, level: usize) -> Option<(f64, f64)> {
+    let (nx, nz) = (rect.cells_x(), rect.cells_z());
+    if nx != nz || nx % level != 0 {
+        return None;
+    }
+    let s = nx / level;
+    let h = |r: usize, c: usize| f64::from(map.get(rect.row0 + r, rect.col0 + c));
+    let (mut either, mut reference) = (0.0f64, 0.0f64);
+    for qi in 0..level {
+        for qj in 0..level {
+            let (r0, c0) = (qi * s, qj * s);
+            // A upper-left, B upper-right, C lower-left, D lower-right.
+            let (a, b) = (h(r0, c0), h(r0, c0 + s));
+            let (c, d) = (h(r0 + s, c0), h(r0 + s, c0 + s));
+            let inv = 1.0 / s as f64;
+            let (mut along, mut against) = (0.0f64, 0.0f64);
+            for i in 0..=s {
+                let v = i as f64 * inv;
+                for j in 0..=s {
+                    let u = j as f64 * inv;
+                    let here = h(r0 + i, c0 + j);
+                    // Split B-C (the reference's): ABC above, DCB below.
+                    let bc = if i + j <= s {
+                        a + u * (b - a) + v * (c - a)
+                    } else {
+                        d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
+                    };
+                    // Split A-D: ABD right of it, ACD left.
+                    let ad = if j >= i {
+                        a + u * (b - a) + v * (d - b)
+                    } else {
+                        a + v * (c - a) + u * (d - c)
+                    };
+                    along = along.max((here - bc).abs());
+                    against = against.max((here - ad).abs());
+                }
+            }
+            // A-D crosses each cell on its way through the centre, where
+            // the reference's diagonal of that cell meets it.
+            for t in 0..s {
+                let centre = 0.5 * (h(r0 + t, c0 + t + 1) + h(r0 + t + 1, c0 + t));
+                let w = (t as f64 + 0.5) * inv;
+                against = against.max((centre - (a + w * (d - a))).abs());
+            }
+            either = either.max(along.max(against));
+            reference = reference.max(along);
+        }
+    }
+    Some((either, reference))
+}
+
 /// Error bound of one level over one patch: the largest, over the
 /// evaluation points, of |surface - bilinear| + |twist| / 4 (see the module
 /// documentation).
-fn level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
+fn bound_level_error(map: &Heightmap, rect: SampleRect, level: usize) -> f64 {
     let (nx, nz) = (rect.cells_x(), rect.cells_z());
     // Vertex heights of the level, (level + 1)^2, row-major.
     let stride = level + 1;

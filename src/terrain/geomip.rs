@@ -57,18 +57,22 @@ pub fn vertex_template(n: usize) -> Vec<[u16; 2]> {
     v
 }
 
+/// The two triangles of the quad from template vertex (i, j) to
+/// (i + step, j + step), split like `height_at`: with A = (i, j),
+/// B = (i, j+step), C = (i+step, j), D = (i+step, j+step), ABC and DCB.
+fn push_quad(out: &mut Vec<u32>, n: usize, i: usize, j: usize, step: usize) {
+    let (a, b) = (vertex(n, i, j), vertex(n, i, j + step));
+    let (c, d) = (vertex(n, i + step, j), vertex(n, i + step, j + step));
+    out.extend_from_slice(&[a, b, c, d, c, b]);
+}
+
 /// Triangles of one patch at `level` whose sides in `coarser` border a patch
 /// one level coarser, as template vertex indices.
 pub fn patch_indices(n: usize, level: usize, coarser: u8) -> Vec<u32> {
     let s = 1usize << level;
     let k = n / s;
     let mut out = Vec::new();
-    let cell = |out: &mut Vec<u32>, i: usize, j: usize, step: usize| {
-        // A = (i, j), B = (i, j+1), C = (i+1, j), D = (i+1, j+1): ABC, DCB.
-        let (a, b) = (vertex(n, i, j), vertex(n, i, j + step));
-        let (c, d) = (vertex(n, i + step, j), vertex(n, i + step, j + step));
-        out.extend_from_slice(&[a, b, c, d, c, b]);
-    };
+    let cell = |out: &mut Vec<u32>, i, j, step| push_quad(out, n, i, j, step);
     if k == 1 || coarser == 0 {
         for bi in 0..k {
             for bj in 0..k {
@@ -126,6 +130,20 @@ pub fn patch_indices(n: usize, level: usize, coarser: u8) -> Vec<u32> {
             for t in 0..ring.len() {
                 out.extend_from_slice(&[centre, ring[t], ring[(t + 1) % ring.len()]]);
             }
+        }
+    }
+    out
+}
+
+/// The reference's own triangles over the first `cells` (columns, rows) of
+/// a patch of `n` cells: level 0 unstitched, cut to a remainder patch at
+/// the terrain's far edges so that it draws no collapsed triangles.
+pub fn full_resolution_indices(n: usize, cells: [usize; 2]) -> Vec<u32> {
+    let [cx, cz] = cells;
+    let mut out = Vec::with_capacity(6 * cx * cz);
+    for i in 0..cz.min(n) {
+        for j in 0..cx.min(n) {
+            push_quad(&mut out, n, i, j, 1);
         }
     }
     out
@@ -380,4 +398,63 @@ pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32,
         side((r + 1 < grid.patch_rows()).then(|| (r + 1, c))),
     ];
     (own, sides)
+}
+
+/// The error each patch's level choice expects on screen, in pixels: its
+/// level's error from its box's nearest point, or while it glides towards
+/// the next coarser level (`geomorph`), the blend of the two by its largest
+/// morph factor; a side stitched to a coarser neighbour adds that level's
+/// error from the nearest point of that side. Level 0 is the reference
+/// itself (error 0).
+pub fn predicted_px(
+    terrain: &Terrain,
+    table: &ErrorTable,
+    chosen: &PatchLevels,
+    eye_local: Vec3,
+    pixels_per_radian: f32,
+    geomorph: bool,
+) -> Vec<f32> {
+    let grid = terrain.grid();
+    let count = level_count(grid.cells_per_patch());
+    let error = |p: usize, level: usize| {
+        if level == 0 {
+            0.0
+        } else {
+            table.error(p, (count - 1) - level.min(count - 1))
+        }
+    };
+    patch_distances(terrain, eye_local)
+        .iter()
+        .enumerate()
+        .map(|(p, &d)| {
+            let id = grid.patch_id(p);
+            let level = usize::from(chosen.levels[p]);
+            let mut e = error(p, level);
+            if geomorph {
+                let (interior, sides) = patch_morph(chosen, grid, id);
+                let m = sides.iter().fold(interior, |a, &b| a.max(b));
+                e = (1.0 - m) * e + m * error(p, level + 1);
+            }
+            let mut px = e * pixels_per_radian / d.max(f32::MIN_POSITIVE);
+            let (coarser, _) = neighbour_masks(&chosen.levels, grid, id);
+            if coarser != 0 {
+                let [ul, ur, ll, lr] = terrain.patch_corners(id).map(|c| c - eye_local);
+                let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
+                let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
+                // Left, top, right, bottom, as the masks' bits.
+                for (bit, (a, b)) in [(ul, ll), (ul, ur), (ur, lr), (ll, lr)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if coarser & (1 << bit) != 0 {
+                        let d = super::lod::edge_distance(xz(a), xz(b), lo, hi);
+                        px = px.max(
+                            error(p, level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE),
+                        );
+                    }
+                }
+            }
+            px
+        })
+        .collect()
 }

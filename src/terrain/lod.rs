@@ -41,6 +41,23 @@ pub enum LodError {
 }
 
 impl DistanceLod {
+    /// Distances in proportion to a terrain `extent` wide (its larger
+    /// world side), for terrains whose scene names none: finest up to 2 %
+    /// of it, coarsest from 75 % on, as the default scene's 150 to 6000 m
+    /// are for its 8 km.
+    pub fn for_extent(extent: f64) -> DistanceLod {
+        let extent = if extent.is_finite() && extent > 0.0 {
+            extent as f32
+        } else {
+            1.0
+        };
+        DistanceLod {
+            min_dist: 0.02 * extent,
+            max_dist: 0.75 * extent,
+            ..DistanceLod::default()
+        }
+    }
+
     /// Checks what a user may type; the factor functions stay finite even
     /// without this check.
     pub fn validate(&self) -> Result<(), LodError> {
@@ -150,6 +167,12 @@ pub fn edge_midpoint(a: Vec3, b: Vec3) -> Vec3 {
 
 /// Edge factors from the edge midpoints and the inside factors from the
 /// patch centre. `corners` are eye-relative, in control point order.
+///
+/// This is the seed's distance formula as it stands: near the eye it may
+/// ask for more segments than the patch has cells, which brings the surface
+/// closer to the reference's split than a vertex on every sample would
+/// (the tessellator folds cells either way). The error LOD instead draws
+/// such patches with the reference's own triangles.
 pub fn patch_tess_factors(
     corners: [Vec3; 4],
     lod: &DistanceLod,
@@ -165,47 +188,61 @@ pub fn patch_tess_factors(
     }
 }
 
-/// Error-bounded tessellation factor (the tess path's `--lod error`).
+/// Error-bounded tessellation factor of a span of `cells` cells (an edge,
+/// or the smaller side of a patch) at `distance` from the eye (the tess
+/// path's `--lod error`).
 ///
-/// `errors[k]` is the largest geometric error of tessellating with 2^k
-/// segments (the error table's levels, non-increasing in k). At `distance`
-/// an error e covers e * pixels_per_radian / distance pixels. The factor is
-/// the smallest level whose projected error is at most `pixel_error`,
-/// interpolated in log space between it and the level before, so it moves
-/// continuously with distance: exactly 2^k where level k's error projects
-/// to `pixel_error`. Finite in [1, 64] for any input.
+/// `errors[k]` bounds the geometric error of tessellating with 2^k
+/// segments (the error table's levels). At `distance` an error e covers
+/// e * pixels_per_radian / distance pixels. The factor is the smallest
+/// power of two below `cells` whose projected error is at most
+/// `pixel_error`. When none is, it is `cells` itself: a vertex on every
+/// sample, the data's full resolution, which the renderer draws with the
+/// reference's own triangles (see `patch_is_full_resolution`). Factors are
+/// whole numbers (the error mode tessellates with equal spacing), so the
+/// surface drawn is the one the table bounds, and a shared edge of `cells`
+/// segments puts its vertices exactly on the samples. A NaN scale gives
+/// the coarsest factor.
 pub fn error_tess_factor(
     errors: &[f32; 7],
     distance: f32,
     pixels_per_radian: f32,
     pixel_error: f32,
+    cells: u32,
 ) -> f32 {
     let scale = pixels_per_radian / distance.max(f32::MIN_POSITIVE);
     if scale.is_nan() {
         return MIN_TESS_FACTOR;
     }
     let tau = pixel_error.max(f32::MIN_POSITIVE);
-    let projected = |k: usize| errors[k] * scale;
-    let mut factor = MAX_TESS_FACTOR;
-    for k in 0..7 {
-        if projected(k) <= tau {
-            factor = if k == 0 {
-                MIN_TESS_FACTOR
-            } else {
-                let (coarse, fine) = (projected(k - 1), projected(k));
-                // Fraction of the way from level k-1 (error coarse > tau) to
-                // level k (error fine <= tau), in log space.
-                let t = if fine > 0.0 {
-                    saturate((coarse.ln() - tau.ln()) / (coarse.ln() - fine.ln()))
-                } else {
-                    saturate((coarse - tau) / coarse)
-                };
-                ((k - 1) as f32 + t).exp2()
-            };
+    let full = (cells as f32).clamp(MIN_TESS_FACTOR, MAX_TESS_FACTOR);
+    for (k, &error) in errors.iter().enumerate() {
+        let factor = (1u32 << k) as f32;
+        if factor >= full {
             break;
         }
+        if error * scale <= tau {
+            return factor;
+        }
     }
-    clamp_tess_factor(factor)
+    full
+}
+
+/// Whether a patch of `cells` (columns, rows) needs the data's full
+/// resolution: no tessellation level coarser than its smaller side keeps
+/// its own errors within `pixel_error` from `distance`. Such a patch is
+/// drawn with the reference's triangles instead of tessellated, and every
+/// edge it shares is tessellated with a vertex on every sample. The inside
+/// factor `patch_error_factors` gives is then the smaller side's count.
+pub fn patch_is_full_resolution(
+    own: &[f32; 7],
+    distance: f32,
+    pixels_per_radian: f32,
+    pixel_error: f32,
+    cells: [u32; 2],
+) -> bool {
+    let side = cells[0].min(cells[1]);
+    error_tess_factor(own, distance, pixels_per_radian, pixel_error, side) >= side as f32
 }
 
 /// Per-level errors of an edge shared by two patches: the larger of each.
@@ -248,31 +285,104 @@ pub fn edge_distance(a: Vec2, b: Vec2, y_lo: f32, y_hi: f32) -> f32 {
 ///   alike, so they agree on its factor;
 /// - the inside from the patch's box: its corners' x and z, `bounds_y`.
 ///
-/// `corners` and both height pairs are eye-relative.
+/// A neighbour given with `true` is drawn at full resolution, so the edge
+/// towards it gets a vertex on every sample. `cells` is the patch's
+/// (columns, rows). `corners` and both height pairs are eye-relative.
+#[allow(clippy::too_many_arguments)]
 pub fn patch_error_factors(
     corners: [Vec3; 4],
     bounds_y: [f32; 2],
     height_range: [f32; 2],
     own: &[f32; 7],
-    neighbours: [Option<&[f32; 7]>; 4],
+    neighbours: [Option<(&[f32; 7], bool)>; 4],
+    cells: [u32; 2],
     pixels_per_radian: f32,
     pixel_error: f32,
 ) -> PatchTessFactors {
     let [ul, ur, ll, lr] = corners;
     let xz = |v: Vec3| Vec2::new(v.x, v.z);
     let ends = [(ul, ll), (ul, ur), (ur, lr), (ll, lr)];
+    let [cx, cz] = cells;
+    let edge_cells = [cz, cx, cz, cx];
     let edges = std::array::from_fn(|i| {
-        let errors = shared_edge_errors(own, neighbours[i]);
+        if let Some((_, true)) = neighbours[i] {
+            return edge_cells[i] as f32;
+        }
+        let errors = shared_edge_errors(own, neighbours[i].map(|(e, _)| e));
         let (a, b) = ends[i];
         let d = edge_distance(xz(a), xz(b), height_range[0], height_range[1]);
-        error_tess_factor(&errors, d, pixels_per_radian, pixel_error)
+        error_tess_factor(&errors, d, pixels_per_radian, pixel_error, edge_cells[i])
     });
-    // Lower-left has the smallest x and z, upper-right the largest.
-    let lo = Vec3::new(ll.x, bounds_y[0], ll.z);
-    let hi = Vec3::new(ur.x, bounds_y[1], ur.z);
-    let inside = error_tess_factor(own, box_distance(lo, hi), pixels_per_radian, pixel_error);
+    let distance = patch_box_distance(corners, bounds_y);
+    let inside = error_tess_factor(own, distance, pixels_per_radian, pixel_error, cx.min(cz));
     PatchTessFactors {
         edges,
         inside: [inside, inside],
+    }
+}
+
+/// Distance from the eye to a patch's box: its corners' x and z (eye-
+/// relative, control point order) and `bounds_y` (eye-relative).
+pub fn patch_box_distance(corners: [Vec3; 4], bounds_y: [f32; 2]) -> f32 {
+    let [_, ur, ll, _] = corners;
+    // Lower-left has the smallest x and z, upper-right the largest.
+    let lo = Vec3::new(ll.x, bounds_y[0], ll.z);
+    let hi = Vec3::new(ur.x, bounds_y[1], ur.z);
+    box_distance(lo, hi)
+}
+
+/// The tess path's error-bounded choice for one frame, made on the CPU
+/// with the control shader's own formulas: which patches are drawn at full
+/// resolution, and what error each is expected to show.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TessErrorChoice {
+    /// One bit a patch, 32 to a word, in patch order: set where the patch
+    /// is drawn at full resolution (`patch_is_full_resolution`).
+    pub full_resolution: Vec<u32>,
+    /// Per patch, its error bound at the level chosen for its inside, in
+    /// pixels from its box's nearest point; 0 at full resolution.
+    pub predicted_px: Vec<f32>,
+}
+
+impl TessErrorChoice {
+    pub fn is_full_resolution(&self, patch: usize) -> bool {
+        self.full_resolution[patch / 32] & (1 << (patch % 32)) != 0
+    }
+}
+
+/// Chooses, for every patch (culled ones too: their neighbours need it),
+/// whether it is drawn at full resolution at `pixel_error` pixels, seen
+/// from `eye_local` (relative to the terrain's centre).
+pub fn choose_tess_error(
+    terrain: &crate::terrain::Terrain,
+    table: &crate::terrain::ErrorTable,
+    eye_local: Vec3,
+    pixels_per_radian: f32,
+    pixel_error: f32,
+) -> TessErrorChoice {
+    let grid = terrain.grid();
+    let count = grid.patch_count();
+    let mut full_resolution = vec![0u32; count.div_ceil(32).max(1)];
+    let mut predicted_px = vec![0.0f32; count];
+    for (p, predicted) in predicted_px.iter_mut().enumerate() {
+        let id = grid.patch_id(p);
+        let rect = grid.sample_rect(id);
+        let cells = [rect.cells_x() as u32, rect.cells_z() as u32];
+        let corners = terrain.patch_corners(id).map(|c| c - eye_local);
+        let [lo, hi] = terrain.y_bounds()[p];
+        let distance = patch_box_distance(corners, [lo - eye_local.y, hi - eye_local.y]);
+        let own: &[f32; 7] = table.patch(p).try_into().expect("7 levels a patch");
+        if patch_is_full_resolution(own, distance, pixels_per_radian, pixel_error, cells) {
+            full_resolution[p / 32] |= 1 << (p % 32);
+            continue;
+        }
+        let side = cells[0].min(cells[1]);
+        let factor = error_tess_factor(own, distance, pixels_per_radian, pixel_error, side);
+        let k = (factor as u32).trailing_zeros() as usize;
+        *predicted = own[k] * pixels_per_radian / distance.max(f32::MIN_POSITIVE);
+    }
+    TessErrorChoice {
+        full_resolution,
+        predicted_px,
     }
 }

@@ -85,6 +85,12 @@ impl Terrain {
         ErrorTable::compute(self.info.heightmap(), &self.grid)
     }
 
+    /// The tess path's error table and the geomip path's, computed together
+    /// (see `ErrorTable::compute_pair`).
+    pub fn error_tables(&self) -> (ErrorTable, ErrorTable) {
+        ErrorTable::compute_pair(self.info.heightmap(), &self.grid)
+    }
+
     /// A patch's corners in local coordinates at their sample heights.
     pub fn patch_corners(&self, id: PatchId) -> [Vec3; 4] {
         grid::patch_corners(&self.info, &self.grid, id)
