@@ -17,10 +17,12 @@ layout(std430, set = 0, binding = BINDING_MIRROR_CASES) readonly buffer Cases {
     vec4 cases[];
 };
 
-// Per case, two vec4s: distance factor, 1 if the box is outside the
+// Per case, three vec4s: distance factor, 1 if the box is outside the
 // frustum, sampled height, error-bounded factor; then the distance to the
 // box (position +- extents) and to the strip on the segment from position
-// to position + extents (x, z) between heights position.y -+ extents.y.
+// to position + extents (x, z) between heights position.y -+ extents.y;
+// then the peers' factors: sphere and edge length for the edge from
+// position to position + extents, CDLOD at position.
 layout(std430, set = 0, binding = BINDING_MIRROR_RESULTS) writeonly buffer Results {
     vec4 results[];
 };
@@ -36,14 +38,19 @@ void main() {
     vec4 e0 = cases[5u * i + 3u];
     vec4 e1 = cases[5u * i + 4u];
     float errors[ERROR_LEVEL_COUNT] = float[ERROR_LEVEL_COUNT](e0.x, e0.y, e0.z, e0.w, e1.x, e1.y, e1.z);
-    results[2u * i] = vec4(
+    results[3u * i] = vec4(
         tess_factor(position.xyz),
         aabb_outside_frustum(position.xyz, extents.xyz) ? 1.0 : 0.0,
         sample_height(grid.xy),
         error_tess_factor(errors, length(position.xyz), int(grid.z)));
-    results[2u * i + 1u] = vec4(
+    results[3u * i + 1u] = vec4(
         box_distance(position.xyz - extents.xyz, position.xyz + extents.xyz),
         edge_distance(position.xz, position.xz + extents.xz,
                       position.y - extents.y, position.y + extents.y),
         0.0, 0.0);
+    results[3u * i + 2u] = vec4(
+        sphere_tess_factor(position.xyz, position.xyz + extents.xyz),
+        edge_length_tess_factor(position.xyz, position.xyz + extents.xyz),
+        cdlod_tess_factor(position.xyz),
+        0.0);
 }

@@ -66,7 +66,10 @@ void main() {
         0.5 * (in_rel[1] + in_rel[3]),
         0.5 * (in_rel[2] + in_rel[3]));
     vec3 centre = 0.25 * (in_rel[0] + in_rel[1] + in_rel[2] + in_rel[3]);
+    // Edge ends: left (0-2), top (0-1), right (1-3), bottom (2-3).
+    ivec2 ends[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
     float inside;
+    vec2 inner = vec2(-1.0);
     if (frame.modes.w == LOD_METRIC_ERROR) {
         // This patch and its neighbours across the left, top, right and
         // bottom edges; an edge uses the larger error of the two patches,
@@ -89,7 +92,6 @@ void main() {
             own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
         }
         ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(1, 0), ivec2(0, 1));
-        ivec2 ends[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
         float y_lo = frame.height_range.x - frame.eye_local.y;
         float y_hi = frame.height_range.y - frame.eye_local.y;
         for (int e = 0; e < 4; ++e) {
@@ -109,6 +111,28 @@ void main() {
             gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d, edge_cells[e]);
         }
         inside = error_tess_factor(own, box_distance(box_min, box_max), min(cells.x, cells.y));
+    } else if (frame.modes.w == LOD_METRIC_SPHERE || frame.modes.w == LOD_METRIC_EDGE_LENGTH) {
+        // The screen-space peers, per edge from its ends; the inside
+        // factors are the means of the edges along them (inner 0 runs
+        // along u: the top and bottom edges). Mirror:
+        // terrain::lod::patch_peer_factors.
+        for (int e = 0; e < 4; ++e) {
+            vec3 a = in_rel[ends[e].x];
+            vec3 b = in_rel[ends[e].y];
+            gl_TessLevelOuter[e] = frame.modes.w == LOD_METRIC_SPHERE
+                ? sphere_tess_factor(a, b)
+                : edge_length_tess_factor(a, b);
+        }
+        inner = vec2(0.5 * (gl_TessLevelOuter[1] + gl_TessLevelOuter[3]),
+                     0.5 * (gl_TessLevelOuter[0] + gl_TessLevelOuter[2]));
+        inside = max(inner.x, inner.y);
+    } else if (frame.modes.w == LOD_METRIC_CDLOD) {
+        // CDLOD's ranges at edge midpoints and the centre.
+        // Mirror: terrain::lod::patch_peer_factors.
+        for (int e = 0; e < 4; ++e) {
+            gl_TessLevelOuter[e] = cdlod_tess_factor(midpoints[e]);
+        }
+        inside = cdlod_tess_factor(centre);
     } else {
         // Edge factors from edge midpoints, so both patches sharing an edge
         // compute the same value; inside factors from the centre. Vulkan's
@@ -119,7 +143,10 @@ void main() {
         }
         inside = tess_factor(centre);
     }
-    gl_TessLevelInner[0] = inside;
-    gl_TessLevelInner[1] = inside;
+    if (inner.x < 0.0) {
+        inner = vec2(inside);
+    }
+    gl_TessLevelInner[0] = inner.x;
+    gl_TessLevelInner[1] = inner.y;
     out_inside_factor = inside;
 }

@@ -27,7 +27,7 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     // culling is on.
     vec4 height_range;
     // x: LOD mode, y: shading mode, z: cells per patch, w: LOD metric
-    // (LOD_METRIC_DISTANCE or LOD_METRIC_ERROR).
+    // (LOD_METRIC_*).
     uvec4 modes;
     // x: largest projected error in pixels (error LOD), y: viewport height
     // over 2 tan(fov / 2), z, w: patch columns and rows.
@@ -38,6 +38,13 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     // x: fog start, y: 1 / fog range (0: no fog); fog_color.rgb.
     vec4 fog;
     vec4 fog_color;
+    // The peers' policies: sphere edge px, sphere factor, edge target px,
+    // CDLOD morph start.
+    vec4 peer;
+    // xy: viewport width and height in pixels.
+    vec4 viewport;
+    // xyz: the camera's right vector.
+    vec4 camera_right;
 } frame;
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with
@@ -197,4 +204,46 @@ vec4 surface_clip_position(vec2 g, float h) {
     precise vec3 rel = vec3(x, h, z) - frame.eye_local.xyz;
     precise vec4 clip = frame.view_proj * vec4(rel, 1.0);
     return clip;
+}
+
+// SaschaWillems's factor for the edge a-b (camera-relative): the edge's
+// sphere, its diameter along the camera's right vector projected to NDC and
+// scaled by the viewport, over peer.x pixels, times peer.y, clamped to
+// [1, 64]. Mirror: terrain::lod::sphere_tess_factor.
+float sphere_tess_factor(vec3 a, vec3 b) {
+    vec3 mid = 0.5 * (a + b);
+    float radius = 0.5 * distance(a, b);
+    vec3 offset = radius * frame.camera_right.xyz;
+    vec4 c0 = frame.view_proj * vec4(mid - offset, 1.0);
+    vec4 c1 = frame.view_proj * vec4(mid + offset, 1.0);
+    c0 /= c0.w;
+    c1 /= c1.w;
+    vec3 p0 = vec3(c0.xy * frame.viewport.xy, c0.z);
+    vec3 p1 = vec3(c1.xy * frame.viewport.xy, c1.z);
+    return clamp_tess_factor(distance(p0, p1) / frame.peer.x * frame.peer.y);
+}
+
+// Dupuy's factor for the edge a-b (camera-relative): its length seen from
+// its centre in pixels over peer.z, clamped to [1, 64].
+// Mirror: terrain::lod::edge_length_tess_factor.
+float edge_length_tess_factor(vec3 a, vec3 b) {
+    float d = max(length(0.5 * (a + b)), 1.17549435e-38);
+    float pixels = distance(a, b) * frame.error_lod.y / d;
+    return clamp_tess_factor(pixels / frame.peer.z);
+}
+
+// CDLOD's factor at a camera-relative position: level l covers distances
+// up to lod.x * 2^l, drawn at 2^(max_exp - l), morphing into the next over
+// the last (1 - peer.w) of its range; never below 2^min_exp.
+// Mirror: terrain::lod::cdlod_tess_factor.
+float cdlod_tess_factor(vec3 rel) {
+    float d = length(rel);
+    float r0 = max(frame.lod.x, 1.17549435e-38);
+    float level = d < r0 ? 0.0 : floor(log2(d / r0)) + 1.0;
+    float hi = r0 * exp2(level);
+    float lo = level == 0.0 ? 0.0 : 0.5 * hi;
+    float start = lo + frame.peer.w * (hi - lo);
+    float morph = lod_saturate((d - start) / max(hi - start, 1.17549435e-38));
+    float exponent = max(frame.lod.w - (level + morph), frame.lod.z);
+    return clamp_tess_factor(exp2(exponent));
 }

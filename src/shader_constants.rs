@@ -19,6 +19,12 @@ pub const ERROR_LEVEL_COUNT: u32 = 7;
 pub const LOD_METRIC_DISTANCE: u32 = 0;
 /// LOD metric: projected error.
 pub const LOD_METRIC_ERROR: u32 = 1;
+/// LOD metric: SaschaWillems's screen-space edge spheres.
+pub const LOD_METRIC_SPHERE: u32 = 2;
+/// LOD metric: Dupuy's target edge length on screen.
+pub const LOD_METRIC_EDGE_LENGTH: u32 = 3;
+/// LOD metric: CDLOD's doubling distance ranges.
+pub const LOD_METRIC_CDLOD: u32 = 4;
 
 /// Uniform block of the material layers' parameters (scenes with layers).
 pub const BINDING_MATERIAL: u32 = 5;
@@ -80,6 +86,9 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
         ("LOD_METRIC_DISTANCE", uint(LOD_METRIC_DISTANCE)),
         ("LOD_METRIC_ERROR", uint(LOD_METRIC_ERROR)),
+        ("LOD_METRIC_SPHERE", uint(LOD_METRIC_SPHERE)),
+        ("LOD_METRIC_EDGE_LENGTH", uint(LOD_METRIC_EDGE_LENGTH)),
+        ("LOD_METRIC_CDLOD", uint(LOD_METRIC_CDLOD)),
         ("BINDING_MATERIAL", BINDING_MATERIAL.to_string()),
         ("BINDING_DIFFUSE_MAPS", BINDING_DIFFUSE_MAPS.to_string()),
         ("BINDING_NORMAL_MAPS", BINDING_NORMAL_MAPS.to_string()),

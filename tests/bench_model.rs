@@ -155,7 +155,16 @@ fn configurations_cover_every_path_and_tolerance() {
     // Without tessellation there are no tess rows, the rest remains.
     let fallback = configs(lod, false, false);
     assert!(fallback.iter().all(|c| c.path() != "tess"));
-    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len());
+    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3);
+    // The peers' policies, each once, in the quick run too.
+    for run in [&full, &quick] {
+        let peers: Vec<_> = run
+            .iter()
+            .filter(|c| matches!(c, Config::TessPeer(_)))
+            .filter_map(|c| c.lod())
+            .collect();
+        assert_eq!(peers, ["sphere", "edge-length", "cdlod"]);
+    }
     // Labels name the parameters, and differ.
     let labels: std::collections::BTreeSet<String> = full.iter().map(Config::label).collect();
     assert_eq!(labels.len(), full.len());

@@ -220,7 +220,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
     let csv = std::fs::read_to_string(dir.path().join("out/results.csv")).unwrap();
     assert_eq!(
         csv.lines().count(),
-        1 + rows.len() + rows.len() - 6,
+        1 + rows.len() + rows.len() - 9,
         "second run has no tess rows"
     );
 

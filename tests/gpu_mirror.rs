@@ -10,7 +10,10 @@ use glam::{DVec2, Vec2, Vec3};
 use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
 use vkterrain::render::{FrameView, LodMetric, RenderSettings};
 use vkterrain::terrain::camera::aabb_outside_frustum;
-use vkterrain::terrain::lod::{box_distance, edge_distance, error_tess_factor, tess_factor};
+use vkterrain::terrain::lod::{
+    box_distance, cdlod_tess_factor, edge_distance, edge_length_tess_factor, error_tess_factor,
+    sphere_tess_factor, tess_factor,
+};
 use vkterrain::terrain::{DistanceLod, DistanceMode};
 use vkterrain::vk::Gpu;
 
@@ -122,6 +125,9 @@ fn glsl_formulas_match_their_rust_mirrors() {
         })
         .collect();
 
+    // Distinct values of each peer's factor, so the agreement is not only
+    // at the clamps.
+    let mut peer_values: [std::collections::BTreeSet<u32>; 3] = Default::default();
     for (lod, pixels) in lods.into_iter().zip([1.0f32, 0.25, 8.0]) {
         for mode in [DistanceMode::Smooth, DistanceMode::Debug] {
             let settings = RenderSettings {
@@ -173,6 +179,35 @@ fn glsl_formulas_match_their_rust_mirrors() {
                     );
                 }
                 if finite && case.extents.is_finite() {
+                    // The peers' factors, in [1, 64] and as in Rust.
+                    let (a, b) = (case.position, case.position + case.extents);
+                    let screen = view.screen();
+                    let peers = [
+                        (
+                            "sphere",
+                            got.sphere_tess_factor,
+                            sphere_tess_factor(a, b, &screen, &settings.peer),
+                        ),
+                        (
+                            "edge length",
+                            got.edge_length_tess_factor,
+                            edge_length_tess_factor(a, b, &screen, &settings.peer),
+                        ),
+                        (
+                            "cdlod",
+                            got.cdlod_tess_factor,
+                            cdlod_tess_factor(a, &lod, &settings.peer),
+                        ),
+                    ];
+                    for (i, &(_, got, _)) in peers.iter().enumerate() {
+                        peer_values[i].insert(got.to_bits());
+                    }
+                    for (name, got, want) in peers {
+                        assert!(
+                            (got - want).abs() <= 1e-3 * want,
+                            "case {k}: {name} at {a} - {b} with {lod:?}: GLSL {got} vs Rust {want}"
+                        );
+                    }
                     let (p, e) = (case.position, case.extents);
                     let want = box_distance(p - e, p + e);
                     assert!(
@@ -210,6 +245,13 @@ fn glsl_formulas_match_their_rust_mirrors() {
                 }
             }
         }
+    }
+    for (name, values) in ["sphere", "edge length", "cdlod"].iter().zip(&peer_values) {
+        assert!(
+            values.len() >= 20,
+            "{name}: only {} distinct factors",
+            values.len()
+        );
     }
     assert_eq!(
         gpu.validation_messages(),

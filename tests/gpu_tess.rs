@@ -913,3 +913,36 @@ fn no_cracks_between_full_resolution_and_tessellated_patches() {
         scene.finish();
     }
 }
+
+/// The peers' policies, run as published, are crack-free too: each edge's
+/// factor comes from its own ends or midpoint, which both patches share.
+#[test]
+fn peer_policies_are_crack_free() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let cams = crack_cameras(&terrain);
+    let (w, h) = (384, 256);
+    let mut scene = GpuScene::new(terrain, w, h, false);
+    for metric in [LodMetric::Sphere, LodMetric::EdgeLength, LodMetric::Cdlod] {
+        let settings = RenderSettings {
+            lod_metric: metric,
+            ..flat_settings(&scene.terrain, DistanceMode::Smooth)
+        };
+        for (view, cam) in &cams {
+            let frame = scene.render(cam, &settings);
+            let stats = frame.measurements.statistics.unwrap();
+            assert!(stats.tes_invocations > 0, "{metric:?}/{view}: tessellated");
+            let holes =
+                enclosed_background(&frame.readback.rgba, w as usize, h as usize, |p| p[0] < 128);
+            assert!(
+                holes.is_empty(),
+                "{metric:?}/{view}: {} holes, first at {:?}",
+                holes.len(),
+                &holes[..holes.len().min(5)]
+            );
+        }
+    }
+    scene.finish();
+}

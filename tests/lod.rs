@@ -199,3 +199,56 @@ fn error_factors_are_powers_of_two_below_the_cells_or_the_cells() {
     assert!(patch_is_full_resolution(&errors, 1.0, 1.0, 1.0, [32, 8]));
     assert!(!patch_is_full_resolution(&errors, 1.0, 1.0, 1.0, [32, 32]));
 }
+
+#[test]
+fn peer_policies_give_shared_edges_identical_factors() {
+    use vkterrain::terrain::lod::{patch_peer_factors, PeerLod, PeerPolicy, ScreenParams};
+    let terrain = Terrain::new(dem_info(16), 0.0).unwrap();
+    let grid = terrain.grid();
+    let eye = Vec3::new(-9000.0, 2500.0, -12000.0);
+    let view = vkterrain::terrain::look_at(Vec3::ZERO, -eye, Vec3::Y);
+    let proj = vkterrain::terrain::perspective(0.9, 16.0 / 9.0, 10.0, 1e5);
+    let screen = ScreenParams {
+        view_proj: proj * view,
+        right: Vec3::new(view.x_axis.x, view.y_axis.x, view.z_axis.x),
+        viewport: glam::Vec2::new(1280.0, 720.0),
+        pixels_per_radian: 720.0 / (2.0 * 0.45f32.tan()),
+    };
+    for policy in [
+        PeerPolicy::Sphere,
+        PeerPolicy::EdgeLength,
+        PeerPolicy::Cdlod,
+    ] {
+        let factors = |row, col| {
+            let corners = terrain.patch_corners(PatchId { row, col }).map(|c| c - eye);
+            patch_peer_factors(corners, policy, &LOD, &screen, &PeerLod::default())
+        };
+        let mut distinct = std::collections::BTreeSet::new();
+        for row in 0..grid.patch_rows() {
+            for col in 0..grid.patch_cols() {
+                let here = factors(row, col);
+                for f in here.edges.iter().chain(&here.inside) {
+                    assert!((1.0..=64.0).contains(f), "{policy:?}: {f}");
+                    distinct.insert(f.to_bits());
+                }
+                if col + 1 < grid.patch_cols() {
+                    assert_eq!(
+                        here.edges[2].to_bits(),
+                        factors(row, col + 1).edges[0].to_bits()
+                    );
+                }
+                if row + 1 < grid.patch_rows() {
+                    assert_eq!(
+                        here.edges[3].to_bits(),
+                        factors(row + 1, col).edges[1].to_bits()
+                    );
+                }
+            }
+        }
+        assert!(
+            distinct.len() > 10,
+            "{policy:?}: {} distinct factors",
+            distinct.len()
+        );
+    }
+}

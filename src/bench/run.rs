@@ -12,6 +12,7 @@ use crate::render::{
     TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
+use crate::terrain::lod::{PeerLod, PeerPolicy};
 use crate::terrain::{geomip, DistanceLod, Terrain};
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::Gpu;
@@ -36,6 +37,10 @@ pub enum Config {
     TessDistance(DistanceLod),
     /// Tessellation factors bounding the projected error to tau pixels.
     TessError(f32),
+    /// A peer's LOD policy with its published parameters
+    /// (`terrain::lod::PeerLod`); CDLOD's ranges start at the scene's first
+    /// LOD distance.
+    TessPeer(PeerPolicy),
     /// Geomip levels by distance, the first level reaching this far.
     GeomipDistance(f32),
     /// Geomip levels bounding the projected error to tau pixels.
@@ -49,7 +54,7 @@ impl Config {
     pub fn path(&self) -> &'static str {
         match self {
             Config::Brute => "brute",
-            Config::TessDistance(_) | Config::TessError(_) => "tess",
+            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => "tess",
             Config::GeomipDistance(_) | Config::GeomipError(_) => "geomip",
             Config::Oracle(_) => "oracle",
         }
@@ -60,6 +65,9 @@ impl Config {
             Config::Brute | Config::Oracle(_) => None,
             Config::TessDistance(_) | Config::GeomipDistance(_) => Some("distance"),
             Config::TessError(_) | Config::GeomipError(_) => Some("error"),
+            Config::TessPeer(PeerPolicy::Sphere) => Some("sphere"),
+            Config::TessPeer(PeerPolicy::EdgeLength) => Some("edge-length"),
+            Config::TessPeer(PeerPolicy::Cdlod) => Some("cdlod"),
         }
     }
 
@@ -79,6 +87,17 @@ impl Config {
                 l.min_dist, l.max_dist, l.min_exp, l.max_exp
             ),
             Config::TessError(t) => format!("tess error {t} px"),
+            Config::TessPeer(PeerPolicy::Sphere) => {
+                let p = PeerLod::default();
+                format!(
+                    "tess SaschaWillems sphere {} px x {}",
+                    p.sphere_edge_px, p.sphere_factor
+                )
+            }
+            Config::TessPeer(PeerPolicy::EdgeLength) => {
+                format!("tess Dupuy edge {} px", PeerLod::default().edge_target_px)
+            }
+            Config::TessPeer(PeerPolicy::Cdlod) => "tess CDLOD".into(),
             Config::GeomipDistance(d) => format!("geomip distance {d} m"),
             Config::GeomipError(t) => format!("geomip error {t} px"),
             Config::Oracle(t) => format!("oracle {t} px"),
@@ -88,7 +107,9 @@ impl Config {
     fn render_path(&self) -> RenderPath {
         match self {
             Config::Brute => RenderPath::Brute,
-            Config::TessDistance(_) | Config::TessError(_) => RenderPath::Tess,
+            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => {
+                RenderPath::Tess
+            }
             _ => RenderPath::Geomip,
         }
     }
@@ -107,6 +128,14 @@ impl Config {
             Config::TessDistance(lod) => RenderSettings { lod, ..base },
             Config::TessError(t) | Config::GeomipError(t) => RenderSettings {
                 lod_metric: LodMetric::Error(t),
+                ..base
+            },
+            Config::TessPeer(policy) => RenderSettings {
+                lod_metric: match policy {
+                    PeerPolicy::Sphere => LodMetric::Sphere,
+                    PeerPolicy::EdgeLength => LodMetric::EdgeLength,
+                    PeerPolicy::Cdlod => LodMetric::Cdlod,
+                },
                 ..base
             },
             Config::GeomipDistance(d) => RenderSettings {
@@ -154,6 +183,14 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
             Config::TessDistance(scaled(s, e.max(scene_lod.min_exp).min(scene_lod.max_exp)))
         }));
         configs.extend(taus.iter().map(|&t| Config::TessError(t)));
+        configs.extend(
+            [
+                PeerPolicy::Sphere,
+                PeerPolicy::EdgeLength,
+                PeerPolicy::Cdlod,
+            ]
+            .map(Config::TessPeer),
+        );
     }
     let geomip_scales: &[f32] = if quick { &[1.0] } else { &[0.5, 1.0, 2.0, 4.0] };
     configs.extend(

@@ -60,6 +60,15 @@ pub enum LodArg {
     Distance,
     /// By each level's largest error projected to the screen.
     Error,
+    /// SaschaWillems/Vulkan terraintessellation: each edge's bounding
+    /// sphere on screen over 20 px, times 0.75 (tess path).
+    Sphere,
+    /// Dupuy's longest-edge-bisection terrain: 7 px edges on screen (tess
+    /// path).
+    EdgeLength,
+    /// CDLOD: distance ranges doubling from --lod-distance's MIN, morphing
+    /// over the last third of each (tess path).
+    Cdlod,
 }
 
 fn positive_pixels(s: &str) -> Result<f32, String> {
@@ -199,6 +208,9 @@ impl ViewArgs {
             .unwrap_or(DEFAULT_PIXEL_ERROR);
         let lod_metric = match (self.lod, self.pixel_error) {
             (Some(LodArg::Distance), _) => LodMetric::Distance,
+            (Some(LodArg::Sphere), _) => LodMetric::Sphere,
+            (Some(LodArg::EdgeLength), _) => LodMetric::EdgeLength,
+            (Some(LodArg::Cdlod), _) => LodMetric::Cdlod,
             (Some(LodArg::Error), _) | (None, Some(_)) => LodMetric::Error(pixels),
             (None, None) => base.lod_metric,
         };

@@ -43,6 +43,11 @@ pub struct MirrorResult {
     /// Distance to the strip on the segment from `position` to `position +
     /// extents` (x, z) between heights `position.y` -+ `extents.y`.
     pub edge_distance: f32,
+    /// The peers' factors: sphere and edge length for the edge from
+    /// `position` to `position + extents`, CDLOD at `position`.
+    pub sphere_tess_factor: f32,
+    pub edge_length_tess_factor: f32,
+    pub cdlod_tess_factor: f32,
 }
 
 const LOCAL_SIZE: u32 = 64;
@@ -75,7 +80,7 @@ pub fn run_mirror_check(
         })
         .collect();
     let uniforms = FrameUniforms::new(terrain, view, settings);
-    let results_size = (cases.len() * 2 * size_of::<[f32; 4]>()) as u64;
+    let results_size = (cases.len() * 3 * size_of::<[f32; 4]>()) as u64;
 
     let heightmap = device.upload_r32f_image(
         "mirror.heightmap",
@@ -179,7 +184,7 @@ pub fn run_mirror_check(
             .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
         let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
         Ok(values
-            .chunks_exact(2)
+            .chunks_exact(3)
             .map(|v| MirrorResult {
                 tess_factor: v[0][0],
                 outside_frustum: v[0][1] != 0.0,
@@ -187,6 +192,9 @@ pub fn run_mirror_check(
                 error_tess_factor: v[0][3],
                 box_distance: v[1][0],
                 edge_distance: v[1][1],
+                sphere_tess_factor: v[2][0],
+                edge_length_tess_factor: v[2][1],
+                cdlod_tess_factor: v[2][2],
             })
             .collect())
     });

@@ -621,8 +621,8 @@ impl TerrainRenderer {
             RenderPath::Tess => {
                 let tess = self.tess.as_ref().ok_or_else(not_built)?;
                 let pipelines = match settings.lod_metric {
-                    LodMetric::Distance => &tess.pipelines,
                     LodMetric::Error(_) => &tess.error_pipelines,
+                    _ => &tess.pipelines,
                 };
                 rec.bind_graphics(
                     pipelines.select(settings.wireframe)?,
@@ -1002,7 +1002,9 @@ impl GeomipGeometry {
             return None;
         }
         let chosen = match settings.lod_metric {
-            LodMetric::Distance => {
+            // The peers' policies are tessellation factors; geomip draws
+            // them by distance.
+            LodMetric::Distance | LodMetric::Sphere | LodMetric::EdgeLength | LodMetric::Cdlod => {
                 geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
             }
             LodMetric::Error(pixels) => geomip::select_levels_by_error(

@@ -8,10 +8,11 @@ use glam::{DVec3, Mat4, Vec3, Vec4};
 use super::renderer::RenderPath;
 use crate::scene::{Fog, Lighting, Scene, MAX_LIGHTS};
 use crate::shader_constants::{
-    LOD_METRIC_DISTANCE, LOD_METRIC_ERROR, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT,
-    SHADE_LOD_COLORS,
+    LOD_METRIC_CDLOD, LOD_METRIC_DISTANCE, LOD_METRIC_EDGE_LENGTH, LOD_METRIC_ERROR,
+    LOD_METRIC_SPHERE, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
 };
 use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
+use crate::terrain::lod::{PeerLod, ScreenParams};
 use crate::terrain::{DistanceLod, DistanceMode, Terrain};
 
 #[repr(C)]
@@ -33,10 +34,17 @@ pub struct FrameUniforms {
     /// start, 1 / range (0: no fog).
     pub fog: [f32; 4],
     pub fog_color: [f32; 4],
+    /// The peers' policies: sphere edge px, sphere factor, edge target px,
+    /// CDLOD morph start.
+    pub peer: [f32; 4],
+    /// Viewport width and height in pixels.
+    pub viewport: [f32; 4],
+    /// The camera's right vector (unit).
+    pub camera_right: [f32; 4],
 }
 
 // std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
-const _: () = assert!(size_of::<FrameUniforms>() == 416);
+const _: () = assert!(size_of::<FrameUniforms>() == 464);
 const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
 const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
 const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
@@ -50,6 +58,9 @@ const _: () = assert!(offset_of!(FrameUniforms, light_color) == 336);
 const _: () = assert!(offset_of!(FrameUniforms, fog) == 384);
 const _: () = assert!(offset_of!(FrameUniforms, fog_color) == 400);
 const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
+const _: () = assert!(offset_of!(FrameUniforms, peer) == 416);
+const _: () = assert!(offset_of!(FrameUniforms, viewport) == 432);
+const _: () = assert!(offset_of!(FrameUniforms, camera_right) == 448);
 
 /// How the fragment shader colours the terrain.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
@@ -73,6 +84,14 @@ pub enum LodMetric {
     Distance,
     /// By the projected error of each level, at most this many pixels.
     Error(f32),
+    /// SaschaWillems's screen-space edge spheres (tess path; geomip uses
+    /// distance). Parameters in `RenderSettings::peer`.
+    Sphere,
+    /// Dupuy's target edge length on screen (tess path).
+    EdgeLength,
+    /// CDLOD's doubling distance ranges from `lod.min_dist`, with morphing
+    /// (tess path).
+    Cdlod,
 }
 
 /// What a frame looks like, apart from the camera.
@@ -92,6 +111,8 @@ pub struct RenderSettings {
     pub cull: bool,
     pub lighting: Lighting,
     pub fog: Option<Fog>,
+    /// The peers' published parameters.
+    pub peer: PeerLod,
 }
 
 impl Default for RenderSettings {
@@ -108,6 +129,7 @@ impl Default for RenderSettings {
             cull: true,
             lighting: Lighting::default(),
             fog: None,
+            peer: PeerLod::default(),
         }
     }
 }
@@ -145,6 +167,10 @@ pub struct FrameView {
     pub pixels_per_radian: f32,
     pub near: f32,
     pub far: f32,
+    /// The camera's right vector.
+    pub right: Vec3,
+    /// Width and height in pixels.
+    pub viewport: glam::Vec2,
 }
 
 impl FrameView {
@@ -178,7 +204,11 @@ impl FrameView {
         // Projection y scale is 1 / tan(fov / 2); the view is a pure
         // rotation, so it is the length of the matrix's second row.
         let row1 = Vec3::new(view_proj.x_axis.y, view_proj.y_axis.y, view_proj.z_axis.y);
+        let view = camera.relative_view();
+        let right = Vec3::new(view.x_axis.x, view.y_axis.x, view.z_axis.x);
         FrameView {
+            right,
+            viewport: glam::Vec2::new(width.max(1) as f32, height.max(1) as f32),
             pixels_per_radian: 0.5 * height.max(1) as f32 * row1.length(),
             view_proj,
             frustum: Frustum::from_view_proj(view_proj),
@@ -211,6 +241,18 @@ impl FrameView {
                 !self.frustum.aabb_outside(centre - self.eye_local, extents)
             })
             .count()
+    }
+}
+
+impl FrameView {
+    /// What the screen-space peers need of the camera.
+    pub fn screen(&self) -> ScreenParams {
+        ScreenParams {
+            view_proj: self.view_proj,
+            right: self.right,
+            viewport: self.viewport,
+            pixels_per_radian: self.pixels_per_radian,
+        }
     }
 }
 
@@ -255,12 +297,15 @@ impl FrameUniforms {
                 match settings.lod_metric {
                     LodMetric::Distance => LOD_METRIC_DISTANCE,
                     LodMetric::Error(_) => LOD_METRIC_ERROR,
+                    LodMetric::Sphere => LOD_METRIC_SPHERE,
+                    LodMetric::EdgeLength => LOD_METRIC_EDGE_LENGTH,
+                    LodMetric::Cdlod => LOD_METRIC_CDLOD,
                 },
             ],
             error_lod: [
                 match settings.lod_metric {
                     LodMetric::Error(pixels) => pixels,
-                    LodMetric::Distance => 0.0,
+                    _ => 0.0,
                 },
                 view.pixels_per_radian,
                 terrain.grid().patch_cols() as f32,
@@ -286,6 +331,14 @@ impl FrameUniforms {
             fog_color: settings
                 .fog
                 .map_or([0.0; 4], |f| f.color.extend(1.0).to_array()),
+            peer: [
+                settings.peer.sphere_edge_px,
+                settings.peer.sphere_factor,
+                settings.peer.edge_target_px,
+                settings.peer.cdlod_morph_start,
+            ],
+            viewport: [view.viewport.x, view.viewport.y, 0.0, 0.0],
+            camera_right: view.right.extend(0.0).to_array(),
         }
     }
 }

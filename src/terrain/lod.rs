@@ -386,3 +386,126 @@ pub fn choose_tess_error(
         predicted_px,
     }
 }
+
+/// Published parameters of the peers' LOD policies, run as they are for
+/// comparison (`--lod sphere | edge-length | cdlod`, and bench rows).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PeerLod {
+    /// SaschaWillems/Vulkan terraintessellation
+    /// (shaders/glsl/terraintessellation/terrain.tesc): an edge's bounding
+    /// sphere projected to the screen, over this many pixels...
+    pub sphere_edge_px: f32,
+    /// ...times this factor.
+    pub sphere_factor: f32,
+    /// Dupuy's longest-edge-bisection terrain (jdupuy/LongestEdgeBisection2D,
+    /// terrain/shaders/TerrainRenderCommon.glsl, TriangleLevelOfDetail):
+    /// an edge's length on screen over this target, in pixels.
+    pub edge_target_px: f32,
+    /// CDLOD (fstrugar/CDLOD; Strugar, "Continuous Distance-Dependent Level
+    /// of Detail for Rendering Heightmaps", 2010): each level's range twice
+    /// the last, and a level starts morphing into the next this far through
+    /// its range.
+    pub cdlod_morph_start: f32,
+}
+
+impl Default for PeerLod {
+    fn default() -> Self {
+        PeerLod {
+            sphere_edge_px: 20.0,
+            sphere_factor: 0.75,
+            edge_target_px: 7.0,
+            cdlod_morph_start: 0.66,
+        }
+    }
+}
+
+/// The camera for the screen-space peers: its view-projection
+/// (camera-relative), its right vector, and the viewport in pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenParams {
+    pub view_proj: glam::Mat4,
+    pub right: Vec3,
+    pub viewport: Vec2,
+    pub pixels_per_radian: f32,
+}
+
+/// SaschaWillems's factor for the edge `a`-`b` (eye-relative): the sphere
+/// around it, its diameter along the camera's right vector projected to
+/// normalised device coordinates and scaled by the viewport, over
+/// `sphere_edge_px`, times `sphere_factor`, clamped to [1, 64].
+pub fn sphere_tess_factor(a: Vec3, b: Vec3, screen: &ScreenParams, peer: &PeerLod) -> f32 {
+    let mid = 0.5 * (a + b);
+    let radius = 0.5 * a.distance(b);
+    let project = |p: Vec3| {
+        let clip = screen.view_proj * p.extend(1.0);
+        let ndc = clip / clip.w;
+        Vec3::new(ndc.x * screen.viewport.x, ndc.y * screen.viewport.y, ndc.z)
+    };
+    let span = project(mid - radius * screen.right).distance(project(mid + radius * screen.right));
+    clamp_tess_factor(span / peer.sphere_edge_px * peer.sphere_factor)
+}
+
+/// Dupuy's factor for the edge `a`-`b` (eye-relative): its length seen
+/// from its centre, in pixels, over `edge_target_px` segments' worth,
+/// clamped to [1, 64].
+pub fn edge_length_tess_factor(a: Vec3, b: Vec3, screen: &ScreenParams, peer: &PeerLod) -> f32 {
+    let distance = (0.5 * (a + b)).length().max(f32::MIN_POSITIVE);
+    let pixels = a.distance(b) * screen.pixels_per_radian / distance;
+    clamp_tess_factor(pixels / peer.edge_target_px)
+}
+
+/// CDLOD's factor at `rel` (eye-relative): level l covers distances up to
+/// `min_dist * 2^l` (level 0 from the eye), drawn at 2^(max_exp - l) and
+/// morphing into the next level over the last (1 - `cdlod_morph_start`) of
+/// its range; never below 2^min_exp. Continuous in distance.
+pub fn cdlod_tess_factor(rel: Vec3, lod: &DistanceLod, peer: &PeerLod) -> f32 {
+    let d = rel.length();
+    let r0 = lod.min_dist.max(f32::MIN_POSITIVE);
+    let level = if d < r0 {
+        0.0
+    } else {
+        (d / r0).log2().floor() + 1.0
+    };
+    let hi = r0 * level.exp2();
+    let lo = if level == 0.0 { 0.0 } else { 0.5 * hi };
+    let start = lo + peer.cdlod_morph_start * (hi - lo);
+    let morph = saturate((d - start) / ((hi - start).max(f32::MIN_POSITIVE)));
+    let exponent = (lod.max_exp - (level + morph)).max(lod.min_exp);
+    clamp_tess_factor(exponent.exp2())
+}
+
+/// Which peer policy `patch_peer_factors` applies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PeerPolicy {
+    Sphere,
+    EdgeLength,
+    Cdlod,
+}
+
+/// Factors of one patch by a peer's policy, as its source sets them: the
+/// screen-space policies per edge from its ends, the inside factors the
+/// means of the edges along them; CDLOD at edge midpoints and the centre.
+pub fn patch_peer_factors(
+    corners: [Vec3; 4],
+    policy: PeerPolicy,
+    lod: &DistanceLod,
+    screen: &ScreenParams,
+    peer: &PeerLod,
+) -> PatchTessFactors {
+    let [ul, ur, ll, lr] = corners;
+    let ends = [(ul, ll), (ul, ur), (ur, lr), (ll, lr)];
+    let edges = ends.map(|(a, b)| match policy {
+        PeerPolicy::Sphere => sphere_tess_factor(a, b, screen, peer),
+        PeerPolicy::EdgeLength => edge_length_tess_factor(a, b, screen, peer),
+        PeerPolicy::Cdlod => cdlod_tess_factor(edge_midpoint(a, b), lod, peer),
+    });
+    let inside = match policy {
+        PeerPolicy::Cdlod => {
+            let f = cdlod_tess_factor(0.25 * (ul + ur + ll + lr), lod, peer);
+            [f, f]
+        }
+        // Inner 0 runs along u (the top and bottom edges), inner 1 along v.
+        _ => [0.5 * (edges[1] + edges[3]), 0.5 * (edges[0] + edges[2])],
+    };
+    PatchTessFactors { edges, inside }
+}
