@@ -49,6 +49,7 @@ fn a_quick_run_measures_every_configuration() {
         height: 64,
         quick: true,
         flythrough_frames: 3,
+        single_frame: false,
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 96, 64).expect("bench objects");
     let mut progress = Count(0, 0);
@@ -274,4 +275,41 @@ fn bench_refuses_bad_arguments() {
         "not the results of an earlier run",
     );
     fail(&["bench"], "--out");
+}
+
+/// `--single-frame`: every named view once, timed, no flythrough.
+#[test]
+fn a_single_frame_run_renders_each_view_once() {
+    if skip_gpu() {
+        return;
+    }
+    let gpu = Gpu::new(true).expect("a Vulkan device with the validation layer");
+    let info =
+        TerrainInfo::new(noise_map(33, 33, 7), DVec2::new(4.0, 4.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let lod = DistanceLod::for_extent(128.0);
+    let configs = configs(lod, true, true);
+    let options = BenchOptions {
+        width: 64,
+        height: 48,
+        quick: false,
+        flythrough_frames: 0,
+        single_frame: true,
+    };
+    let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 64, 48).expect("bench objects");
+    let mut progress = Count(0, 0);
+    let rows = bench
+        .run("single", &configs, &options, &mut progress)
+        .expect("the run completes");
+    bench.destroy();
+    assert_eq!(gpu.validation_messages(), 0);
+    // Three views, one render of each configuration, plus the oracle's
+    // uniform levels (5 for 16-cell patches) per view.
+    assert_eq!(progress.1, 3 * (configs.len() as u64 + 5));
+    assert_eq!(progress.0, progress.1);
+    assert_eq!(rows.len(), 3 * configs.len());
+    for r in &rows {
+        assert_eq!(r.frames, 1);
+        assert!(r.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+    }
 }

@@ -637,3 +637,57 @@ fn device_loss_and_allocation_failure_at_any_point_fail_cleanly() {
     let allocations = fails_cleanly_at_every_point("out-of-memory", "Out of memory");
     assert!(allocations >= 16, "{allocations} allocations");
 }
+
+/// A bare heightmap gets the error LOD at 1 px, whatever its size: far
+/// fewer triangles than brute on a smooth map. Distances on the command
+/// line ask for the distance LOD.
+#[test]
+fn a_bare_heightmap_renders_with_the_error_lod() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // 257x257 16-bit samples of smooth hills.
+    let mut bytes = Vec::new();
+    for r in 0..257u32 {
+        for c in 0..257u32 {
+            let h = 30_000.0 + 2_000.0 * (c as f32 * 0.05).sin() * (r as f32 * 0.04).cos();
+            bytes.extend_from_slice(&(h as u16).to_le_bytes());
+        }
+    }
+    let map = temp_file(&dir, "hills.r16", &bytes);
+    let map = map.to_str().unwrap();
+    let render = |name: &str, extra: &[&str]| {
+        let json = format!("{name}.json");
+        let png = format!("{name}.png");
+        let mut args = vec![
+            "render",
+            "--validate",
+            "--heightmap",
+            map,
+            "--width",
+            "160",
+            "--height",
+            "120",
+            "--out",
+            &png,
+            "--stats",
+            &json,
+        ];
+        args.extend_from_slice(extra);
+        ok(&vkterrain(dir.path(), &args));
+        stats(&dir.path().join(json))
+    };
+    let bare = render("bare", &[]);
+    assert_eq!(bare["lod"], serde_json::json!({ "error": 1.0 }));
+    assert!(bare["predicted_max_px"].as_f64().unwrap() <= 1.0);
+    let brute = render("brute", &["--path", "brute"]);
+    let (t, b) = (
+        bare["triangles"].as_u64().unwrap(),
+        brute["triangles"].as_u64().unwrap(),
+    );
+    assert!(10 * t < b, "{t} triangles against brute's {b}");
+    let distance = render("distance", &["--lod-distance", "10,200"]);
+    assert_eq!(distance["lod"], "distance");
+    assert!(distance["predicted_max_px"].is_null());
+}

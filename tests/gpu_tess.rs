@@ -878,9 +878,6 @@ fn no_cracks_between_full_resolution_and_tessellated_patches() {
             if full > 0 && full < count {
                 mixed += 1;
             }
-            let background = |f: &vkterrain::render::HeadlessFrame| {
-                enclosed_background(&f.readback.rgba, w as usize, h as usize, |p| p[0] < 128)
-            };
             let brute = scene.render(
                 cam,
                 &RenderSettings {
@@ -888,22 +885,10 @@ fn no_cracks_between_full_resolution_and_tessellated_patches() {
                     ..settings
                 },
             );
-            let pockets = background(&brute);
-            let holes: Vec<_> = background(&frame)
-                .into_iter()
-                .filter(|p| !pockets.contains(p))
-                .collect();
-            if !holes.is_empty() {
-                frame
-                    .rgba_image()
-                    .save(format!("{name}-{view}-exact-cracks.png"))
-                    .unwrap();
-            }
-            assert!(
-                holes.is_empty(),
-                "{name}/{view}: {} background pixels inside the terrain ({full} of {count} patches at full resolution), first at {:?}",
-                holes.len(),
-                &holes[..holes.len().min(5)]
+            assert_no_holes(
+                &format!("{name}/{view} ({full} of {count} patches at full resolution)"),
+                &frame,
+                &holes_in(&brute),
             );
         }
         assert!(
@@ -934,15 +919,119 @@ fn peer_policies_are_crack_free() {
             let frame = scene.render(cam, &settings);
             let stats = frame.measurements.statistics.unwrap();
             assert!(stats.tes_invocations > 0, "{metric:?}/{view}: tessellated");
-            let holes =
-                enclosed_background(&frame.readback.rgba, w as usize, h as usize, |p| p[0] < 128);
-            assert!(
-                holes.is_empty(),
-                "{metric:?}/{view}: {} holes, first at {:?}",
-                holes.len(),
-                &holes[..holes.len().min(5)]
-            );
+            assert_no_holes(&format!("{metric:?}/{view}"), &frame, &[]);
         }
     }
+    scene.finish();
+}
+
+/// Background pixels enclosed by terrain in a flat-shaded frame.
+fn holes_in(frame: &vkterrain::render::HeadlessFrame) -> Vec<(usize, usize)> {
+    let (w, h) = (
+        frame.readback.width as usize,
+        frame.readback.height as usize,
+    );
+    enclosed_background(&frame.readback.rgba, w, h, |p| p[0] < 128)
+}
+
+/// No enclosed background in `frame` beyond the `pockets` the reference
+/// shows too (on failure the frame is saved as NAME-cracks.png).
+fn assert_no_holes(
+    name: &str,
+    frame: &vkterrain::render::HeadlessFrame,
+    pockets: &[(usize, usize)],
+) {
+    let holes: Vec<_> = holes_in(frame)
+        .into_iter()
+        .filter(|p| !pockets.contains(p))
+        .collect();
+    if !holes.is_empty() {
+        let file = format!("{}-cracks.png", name.replace(['/', ' ', '(', ')'], "_"));
+        frame.rgba_image().save(file).unwrap();
+    }
+    assert!(
+        holes.is_empty(),
+        "{name}: {} background pixels inside the terrain, first at {:?}",
+        holes.len(),
+        &holes[..holes.len().min(5)]
+    );
+}
+
+/// Popping of the tess error LOD: as the camera sinks slowly, looking
+/// straight down, levels switch and patches go to full resolution, and each
+/// pixel's error against brute
+/// (signed, in pixels) jumps between frames by no more than twice tau, the
+/// most two surfaces each within tau of the reference can differ.
+#[test]
+fn error_lod_popping_stays_within_twice_tau() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let table = terrain.error_table();
+    let (w, h) = (320, 240);
+    let mut scene = GpuScene::new(terrain, w, h, false);
+    let tau = 2.0f32;
+    let settings = error_settings(tau);
+    let brute_settings = RenderSettings {
+        path: RenderPath::Brute,
+        ..RenderSettings::default()
+    };
+    let mut previous: Option<Vec<Option<f64>>> = None;
+    let (mut worst, mut switches, mut compared) = (0.0f64, 0usize, 0usize);
+    let mut last_full: Option<Vec<bool>> = None;
+    // Straight down, as a top-down view has no silhouettes for a level
+    // switch to move.
+    for k in 0..30 {
+        let height = 5000.0 - 120.0 * f64::from(k);
+        let cam = camera([1000.0, height, 1500.0], [1000.0, 0.0, 1500.001], 50.0);
+        let frame = scene.render(&cam, &settings);
+        let reference = scene.render(&cam, &brute_settings);
+        let choice = choose_tess_error(
+            &scene.terrain,
+            &table,
+            frame.view.eye_local,
+            frame.view.pixels_per_radian,
+            tau,
+        );
+        let full: Vec<bool> = (0..scene.terrain.grid().patch_count())
+            .map(|p| choice.is_full_resolution(p))
+            .collect();
+        if let Some(last) = &last_full {
+            switches += last.iter().zip(&full).filter(|(a, b)| a != b).count();
+        }
+        last_full = Some(full);
+        let k_px = f64::from(frame.view.pixels_per_radian);
+        let errors: Vec<Option<f64>> = world_positions(&frame, &cam)
+            .into_iter()
+            .zip(world_positions(&reference, &cam))
+            .map(|(t, r)| match (t, r) {
+                (Some(t), Some(r)) => Some((t.y - r.y) * k_px / (r - cam.eye).length()),
+                _ => None,
+            })
+            .collect();
+        if let Some(prev) = &previous {
+            for (a, b) in prev.iter().zip(&errors) {
+                if let (Some(a), Some(b)) = (a, b) {
+                    worst = worst.max((a - b).abs());
+                    compared += 1;
+                }
+            }
+        }
+        previous = Some(errors);
+    }
+    eprintln!(
+        "tess error {tau} px: largest per-pixel error jump {worst:.3} px between frames \
+         over {compared} pixel pairs, {switches} full-resolution switches"
+    );
+    assert!(
+        switches > 0,
+        "the descent switches patches to full resolution"
+    );
+    assert!(compared > 500_000);
+    assert!(
+        worst <= 2.0 * f64::from(tau),
+        "a pixel's error jumped {worst} px between frames"
+    );
     scene.finish();
 }

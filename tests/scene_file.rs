@@ -65,14 +65,20 @@ fn write_scene(dir: &tempfile::TempDir, text: &str) -> std::path::PathBuf {
     temp_file(dir, "scene.toml", text.as_bytes())
 }
 
-#[test]
-fn heightmap_paths_are_relative_to_the_scene() {
+/// A temporary directory holding the DEM as dem.r16.
+fn dir_with_dem() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(
         data_path("jacksboro_fault_dem.r16"),
         dir.path().join("dem.r16"),
     )
     .unwrap();
+    dir
+}
+
+#[test]
+fn heightmap_paths_are_relative_to_the_scene() {
+    let dir = dir_with_dem();
     let path = write_scene(
         &dir,
         "[heightmap]\npath = \"dem.r16\"\nsize = [403, 344]\nheight_scale = 65535.0\ncell_spacing = [74.48, 92.15]\norigin = [1000.0, -50.0]\n\n[terrain]\ncells_per_patch = 16\n",
@@ -95,12 +101,7 @@ fn heightmap_paths_are_relative_to_the_scene() {
 
 #[test]
 fn a_scene_without_lod_draws_the_error_lod_at_one_pixel() {
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::copy(
-        data_path("jacksboro_fault_dem.r16"),
-        dir.path().join("dem.r16"),
-    )
-    .unwrap();
+    let dir = dir_with_dem();
     let head = "[heightmap]\npath = \"dem.r16\"\nsize = [403, 344]\ncell_spacing = 10.0\n";
     let load = |extra: &str| Scene::load(&write_scene(&dir, &format!("{head}{extra}"))).unwrap();
     let bare = load("");

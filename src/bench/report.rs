@@ -464,8 +464,21 @@ fn plotted<'a>(rows: &'a [Row], scene: &str, device: &str) -> Vec<&'a Row> {
 }
 
 fn series(rows: &[&Row], value: impl Fn(&Row) -> Option<f64>) -> Vec<Series> {
-    let families: [(&str, &str, Option<&str>, RGBColor); 6] = [
+    let families: [(&str, &str, Option<&str>, RGBColor); 9] = [
         ("brute", "brute", None, RGBColor(0, 0, 0)),
+        (
+            "SaschaWillems sphere",
+            "tess",
+            Some("sphere"),
+            RGBColor(140, 86, 75),
+        ),
+        (
+            "Dupuy edge length",
+            "tess",
+            Some("edge-length"),
+            RGBColor(227, 119, 194),
+        ),
+        ("CDLOD", "tess", Some("cdlod"), RGBColor(127, 127, 127)),
         (
             "tess distance",
             "tess",

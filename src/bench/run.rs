@@ -212,6 +212,9 @@ pub struct BenchOptions {
     pub quick: bool,
     /// Frames of the flythrough (0: none).
     pub flythrough_frames: usize,
+    /// Each named view rendered and timed once, without warm-up: for
+    /// terrains whose brute frame takes seconds on a CPU rasteriser.
+    pub single_frame: bool,
 }
 
 /// One configuration seen from one camera (or the whole flythrough).
@@ -305,6 +308,8 @@ pub struct Bench<'a> {
     headless: Option<Headless>,
     target_bytes: u64,
     renderers: Vec<PathRenderer>,
+    /// Untimed samples at the start of each configuration's sequence.
+    warm_up: usize,
 }
 
 impl<'a> Bench<'a> {
@@ -325,6 +330,7 @@ impl<'a> Bench<'a> {
             headless: None,
             target_bytes: 0,
             renderers: Vec::new(),
+            warm_up: WARM_UP,
         };
         let before = gpu.device.memory_in_use();
         bench.headless = Some(Headless::new(gpu, width, height)?);
@@ -393,7 +399,7 @@ impl<'a> Bench<'a> {
                 gathered.predicted_max_px =
                     Some(gathered.predicted_max_px.map_or(px, |m| m.max(px)));
             }
-            if first_sample + r >= WARM_UP {
+            if first_sample + r >= self.warm_up {
                 gathered.gpu_ms.extend(frame.measurements.gpu_ms);
                 gathered.cpu_ms.push(frame.cpu_ms);
             }
@@ -557,9 +563,15 @@ impl<'a> Bench<'a> {
         progress: &mut dyn Progress,
     ) -> anyhow::Result<Vec<Row>> {
         let info = self.terrain.info();
+        let repeats = if options.single_frame {
+            1
+        } else {
+            WARM_UP + TIMED_FRAMES
+        };
+        self.warm_up = if options.single_frame { 0 } else { WARM_UP };
         let mut views: Vec<(String, Vec<Camera>, usize)> = named_views(info)
             .into_iter()
-            .map(|v| (v.name.to_string(), vec![v.camera], WARM_UP + TIMED_FRAMES))
+            .map(|v| (v.name.to_string(), vec![v.camera], repeats))
             .collect();
         if options.quick {
             views.truncate(1);

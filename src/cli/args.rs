@@ -213,6 +213,11 @@ impl TerrainArgs {
             scene.lightmap = false;
             scene.fog = None;
             scene.lighting = Lighting::default();
+            // Nor do its LOD distances, meant for its 8 km: a heightmap of
+            // any size gets the error LOD at 1 px (and distances in
+            // proportion to it when the distance LOD is asked for).
+            scene.lod = None;
+            scene.pixel_error = Some(crate::cli::render::DEFAULT_PIXEL_ERROR);
         }
         let load = &mut scene.load;
         load.format = self.format.or(load.format);

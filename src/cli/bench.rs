@@ -40,6 +40,11 @@ pub struct BenchCmd {
     #[arg(long)]
     pub quick: bool,
 
+    /// Render and time each fixed view once, without warm-up, and leave the
+    /// flythrough out: for terrains whose brute frame takes seconds.
+    #[arg(long)]
+    pub single_frame: bool,
+
     /// Frames of the flythrough (0 leaves it out).
     #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
     pub frames: usize,
@@ -155,7 +160,12 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         width: cmd.size.width,
         height: cmd.size.height,
         quick: cmd.quick,
-        flythrough_frames: if cmd.quick { 0 } else { cmd.frames },
+        flythrough_frames: if cmd.quick || cmd.single_frame {
+            0
+        } else {
+            cmd.frames
+        },
+        single_frame: cmd.single_frame,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")

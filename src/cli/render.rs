@@ -153,6 +153,7 @@ pub struct ViewArgs {
 
     /// Largest projected error in pixels for the error LOD (implies
     /// --lod error unless --lod says otherwise). Default: the scene's, or 1.
+    /// --lod-distance or --lod-levels without --lod imply --lod distance.
     #[arg(long, value_name = "PIXELS", value_parser = positive_pixels)]
     pub pixel_error: Option<f32>,
 
@@ -212,6 +213,10 @@ impl ViewArgs {
             (Some(LodArg::EdgeLength), _) => LodMetric::EdgeLength,
             (Some(LodArg::Cdlod), _) => LodMetric::Cdlod,
             (Some(LodArg::Error), _) | (None, Some(_)) => LodMetric::Error(pixels),
+            // Distances on the command line ask for the distance LOD.
+            (None, None) if self.lod_distance.is_some() || self.lod_levels.is_some() => {
+                LodMetric::Distance
+            }
             (None, None) => base.lod_metric,
         };
         RenderSettings {
@@ -299,6 +304,8 @@ pub struct FrameStats {
     pub device: String,
     pub driver: String,
     pub path: RenderPath,
+    /// How levels were chosen, with the error LOD's tolerance.
+    pub lod: LodMetric,
     pub width: u32,
     pub height: u32,
     pub patches_total: usize,
@@ -436,6 +443,7 @@ pub fn render_scene(
         device: caps.device_name.clone(),
         driver: format!("{} ({})", caps.driver_name, caps.driver_info),
         path: settings.path,
+        lod: settings.lod_metric,
         width,
         height,
         patches_total: terrain.grid().patch_count(),
