@@ -910,7 +910,7 @@ fn peer_policies_are_crack_free() {
     let cams = crack_cameras(&terrain);
     let (w, h) = (384, 256);
     let mut scene = GpuScene::new(terrain, w, h, false);
-    for metric in [LodMetric::Sphere, LodMetric::EdgeLength, LodMetric::Cdlod] {
+    for metric in vkterrain::terrain::lod::PeerPolicy::ALL.map(LodMetric::Peer) {
         let settings = RenderSettings {
             lod_metric: metric,
             ..flat_settings(&scene.terrain, DistanceMode::Smooth)

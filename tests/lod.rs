@@ -214,11 +214,7 @@ fn peer_policies_give_shared_edges_identical_factors() {
         viewport: glam::Vec2::new(1280.0, 720.0),
         pixels_per_radian: 720.0 / (2.0 * 0.45f32.tan()),
     };
-    for policy in [
-        PeerPolicy::Sphere,
-        PeerPolicy::EdgeLength,
-        PeerPolicy::Cdlod,
-    ] {
+    for policy in PeerPolicy::ALL {
         let factors = |row, col| {
             let corners = terrain.patch_corners(PatchId { row, col }).map(|c| c - eye);
             patch_peer_factors(corners, policy, &LOD, &screen, &PeerLod::default())

@@ -65,9 +65,7 @@ impl Config {
             Config::Brute | Config::Oracle(_) => None,
             Config::TessDistance(_) | Config::GeomipDistance(_) => Some("distance"),
             Config::TessError(_) | Config::GeomipError(_) => Some("error"),
-            Config::TessPeer(PeerPolicy::Sphere) => Some("sphere"),
-            Config::TessPeer(PeerPolicy::EdgeLength) => Some("edge-length"),
-            Config::TessPeer(PeerPolicy::Cdlod) => Some("cdlod"),
+            Config::TessPeer(policy) => Some(policy.name()),
         }
     }
 
@@ -131,11 +129,7 @@ impl Config {
                 ..base
             },
             Config::TessPeer(policy) => RenderSettings {
-                lod_metric: match policy {
-                    PeerPolicy::Sphere => LodMetric::Sphere,
-                    PeerPolicy::EdgeLength => LodMetric::EdgeLength,
-                    PeerPolicy::Cdlod => LodMetric::Cdlod,
-                },
+                lod_metric: LodMetric::Peer(policy),
                 ..base
             },
             Config::GeomipDistance(d) => RenderSettings {
@@ -183,14 +177,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
             Config::TessDistance(scaled(s, e.max(scene_lod.min_exp).min(scene_lod.max_exp)))
         }));
         configs.extend(taus.iter().map(|&t| Config::TessError(t)));
-        configs.extend(
-            [
-                PeerPolicy::Sphere,
-                PeerPolicy::EdgeLength,
-                PeerPolicy::Cdlod,
-            ]
-            .map(Config::TessPeer),
-        );
+        configs.extend(PeerPolicy::ALL.map(Config::TessPeer));
     }
     let geomip_scales: &[f32] = if quick { &[1.0] } else { &[0.5, 1.0, 2.0, 4.0] };
     configs.extend(

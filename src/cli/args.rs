@@ -217,7 +217,7 @@ impl TerrainArgs {
             // any size gets the error LOD at 1 px (and distances in
             // proportion to it when the distance LOD is asked for).
             scene.lod = None;
-            scene.pixel_error = Some(crate::cli::render::DEFAULT_PIXEL_ERROR);
+            scene.pixel_error = Some(crate::scene::DEFAULT_PIXEL_ERROR);
         }
         let load = &mut scene.load;
         load.format = self.format.or(load.format);

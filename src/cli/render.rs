@@ -18,15 +18,12 @@ use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
     Shading, TerrainRenderer,
 };
-use crate::scene::Scene;
+use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
 use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::lod::PeerPolicy;
 use crate::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
-
-/// The error LOD's tolerance when neither the command line nor the scene
-/// gives one, in pixels.
-pub const DEFAULT_PIXEL_ERROR: f32 = 1.0;
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::Capabilities;
 
@@ -209,9 +206,9 @@ impl ViewArgs {
             .unwrap_or(DEFAULT_PIXEL_ERROR);
         let lod_metric = match (self.lod, self.pixel_error) {
             (Some(LodArg::Distance), _) => LodMetric::Distance,
-            (Some(LodArg::Sphere), _) => LodMetric::Sphere,
-            (Some(LodArg::EdgeLength), _) => LodMetric::EdgeLength,
-            (Some(LodArg::Cdlod), _) => LodMetric::Cdlod,
+            (Some(LodArg::Sphere), _) => LodMetric::Peer(PeerPolicy::Sphere),
+            (Some(LodArg::EdgeLength), _) => LodMetric::Peer(PeerPolicy::EdgeLength),
+            (Some(LodArg::Cdlod), _) => LodMetric::Peer(PeerPolicy::Cdlod),
             (Some(LodArg::Error), _) | (None, Some(_)) => LodMetric::Error(pixels),
             // Distances on the command line ask for the distance LOD.
             (None, None) if self.lod_distance.is_some() || self.lod_levels.is_some() => {

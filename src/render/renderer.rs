@@ -524,7 +524,8 @@ impl TerrainRenderer {
         match (settings.path, settings.lod_metric) {
             (RenderPath::Geomip, _) => {
                 if let Some(geomip) = self.geomip.as_mut() {
-                    self.predicted_max_px = geomip.choose(terrain, view, settings);
+                    let drawn = view.patches_drawn(terrain, settings.cull);
+                    self.predicted_max_px = geomip.choose(terrain, view, settings, &drawn);
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
@@ -547,8 +548,9 @@ impl TerrainRenderer {
                     let geomip = self.geomip.as_ref().ok_or_else(|| {
                         VkError::Unsupported("the tess path's exact draws need geomip".into())
                     })?;
+                    let drawn = view.patches_drawn(terrain, settings.cull);
                     self.predicted_max_px =
-                        Some(tess.set_exact_draws(terrain, view, settings, &choice, geomip));
+                        Some(tess.set_exact_draws(terrain, &drawn, &choice, geomip));
                 }
             }
             (RenderPath::Tess | RenderPath::Brute, _) => {}
@@ -987,24 +989,25 @@ fn build_geomip(
 }
 
 impl GeomipGeometry {
-    /// Levels by distance or error, balanced; the visible patches become
-    /// this frame's draws, with their morph factors. Returns the largest
+    /// Levels by distance or error, balanced; the patches `drawn` this
+    /// frame become its draws, with their morph factors. Returns the largest
     /// error the error LOD expects on screen.
     fn choose(
         &mut self,
         terrain: &Terrain,
         view: &FrameView,
         settings: &RenderSettings,
+        drawn: &[bool],
     ) -> Option<f32> {
         if let Some(chosen) = self.given.take() {
-            self.set_draws(terrain, view, settings, &chosen);
+            self.set_draws(terrain, settings, drawn, &chosen);
             self.given = Some(chosen);
             return None;
         }
         let chosen = match settings.lod_metric {
             // The peers' policies are tessellation factors; geomip draws
             // them by distance.
-            LodMetric::Distance | LodMetric::Sphere | LodMetric::EdgeLength | LodMetric::Cdlod => {
+            LodMetric::Distance | LodMetric::Peer(_) => {
                 geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
             }
             LodMetric::Error(pixels) => geomip::select_levels_by_error(
@@ -1015,7 +1018,7 @@ impl GeomipGeometry {
                 pixels,
             ),
         };
-        self.set_draws(terrain, view, settings, &chosen);
+        self.set_draws(terrain, settings, drawn, &chosen);
         let LodMetric::Error(_) = settings.lod_metric else {
             return None;
         };
@@ -1027,7 +1030,7 @@ impl GeomipGeometry {
             view.pixels_per_radian,
             settings.geomorph,
         );
-        Some(max_in_view(terrain, view, settings, &predicted))
+        Some(max_drawn(drawn, &predicted))
     }
 
     /// The unstitched full-resolution index list of a patch of `cells`.
@@ -1056,21 +1059,18 @@ impl GeomipGeometry {
         Ok(())
     }
 
-    /// The visible patches at their `chosen` levels become this frame's
+    /// The patches `drawn` this frame, at their `chosen` levels, become its
     /// draws.
     fn set_draws(
         &mut self,
         terrain: &Terrain,
-        view: &FrameView,
         settings: &RenderSettings,
+        drawn: &[bool],
         chosen: &geomip::PatchLevels,
     ) {
         let grid = terrain.grid();
         self.draws.clear();
-        for p in 0..grid.patch_count() {
-            if !in_view(terrain, view, settings, p) {
-                continue;
-            }
+        for (p, _) in drawn.iter().enumerate().filter(|&(_, &d)| d) {
             let id = grid.patch_id(p);
             let level = usize::from(chosen.levels[p]);
             let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
@@ -1099,44 +1099,31 @@ impl GeomipGeometry {
     }
 }
 
-/// Whether the patch is drawn this frame: culling off, or its box not
-/// outside the frustum.
-fn in_view(terrain: &Terrain, view: &FrameView, settings: &RenderSettings, p: usize) -> bool {
-    let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
-    !settings.cull || !view.frustum.aabb_outside(centre - view.eye_local, extents)
-}
-
-/// The largest of per-patch `values` over the patches in view (0 if none).
-fn max_in_view(
-    terrain: &Terrain,
-    view: &FrameView,
-    settings: &RenderSettings,
-    values: &[f32],
-) -> f32 {
+/// The largest of per-patch `values` over the patches `drawn` (0 if none).
+fn max_drawn(drawn: &[bool], values: &[f32]) -> f32 {
     values
         .iter()
-        .enumerate()
-        .filter(|&(p, _)| in_view(terrain, view, settings, p))
-        .fold(0.0, |m, (_, &v)| m.max(v))
+        .zip(drawn)
+        .filter(|&(_, &d)| d)
+        .fold(0.0, |m, (&v, _)| m.max(v))
 }
 
 impl TessGeometry {
-    /// The visible full-resolution patches of `choice` become this frame's
-    /// exact draws (geomip level 0, no stitching: every edge they share is
-    /// tessellated with a vertex on every sample). Returns the largest
-    /// error the choice expects on screen.
+    /// The full-resolution patches of `choice` that are `drawn` this frame
+    /// become its exact draws (geomip level 0, no stitching: every edge
+    /// they share is tessellated with a vertex on every sample). Returns
+    /// the largest error the choice expects on screen.
     fn set_exact_draws(
         &mut self,
         terrain: &Terrain,
-        view: &FrameView,
-        settings: &RenderSettings,
+        drawn: &[bool],
         choice: &TessErrorChoice,
         geomip: &GeomipGeometry,
     ) -> f32 {
         let grid = terrain.grid();
         self.exact.clear();
-        for p in 0..grid.patch_count() {
-            if !choice.is_full_resolution(p) || !in_view(terrain, view, settings, p) {
+        for (p, _) in drawn.iter().enumerate().filter(|&(_, &d)| d) {
+            if !choice.is_full_resolution(p) {
                 continue;
             }
             let rect = grid.sample_rect(grid.patch_id(p));
@@ -1152,6 +1139,6 @@ impl TessGeometry {
                 },
             });
         }
-        max_in_view(terrain, view, settings, &choice.predicted_px)
+        max_drawn(drawn, &choice.predicted_px)
     }
 }

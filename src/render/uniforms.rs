@@ -12,7 +12,7 @@ use crate::shader_constants::{
     LOD_METRIC_SPHERE, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
 };
 use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
-use crate::terrain::lod::{PeerLod, ScreenParams};
+use crate::terrain::lod::{PeerLod, PeerPolicy, ScreenParams};
 use crate::terrain::{DistanceLod, DistanceMode, Terrain};
 
 #[repr(C)]
@@ -84,14 +84,11 @@ pub enum LodMetric {
     Distance,
     /// By the projected error of each level, at most this many pixels.
     Error(f32),
-    /// SaschaWillems's screen-space edge spheres (tess path; geomip uses
-    /// distance). Parameters in `RenderSettings::peer`.
-    Sphere,
-    /// Dupuy's target edge length on screen (tess path).
-    EdgeLength,
-    /// CDLOD's doubling distance ranges from `lod.min_dist`, with morphing
-    /// (tess path).
-    Cdlod,
+    /// A peer's policy with its published parameters
+    /// (`RenderSettings::peer`): SaschaWillems's screen-space edge spheres,
+    /// Dupuy's target edge length, or CDLOD's doubling distance ranges from
+    /// `lod.min_dist`. Tess path; geomip draws them by distance.
+    Peer(PeerPolicy),
 }
 
 /// What a frame looks like, apart from the camera.
@@ -232,19 +229,28 @@ impl FrameView {
         }
     }
 
-    /// Patches whose box is not outside the frustum: the CPU's version of
-    /// the test the control shader makes.
+    /// Whether patch `p`'s box is not outside the frustum: the CPU's
+    /// version of the test the control shader makes.
+    pub fn patch_in_frustum(&self, terrain: &Terrain, p: usize) -> bool {
+        let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+        !self.frustum.aabb_outside(centre - self.eye_local, extents)
+    }
+
+    /// Patches whose box is not outside the frustum.
     pub fn patches_in_frustum(&self, terrain: &Terrain) -> usize {
         (0..terrain.grid().patch_count())
-            .filter(|&p| {
-                let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
-                !self.frustum.aabb_outside(centre - self.eye_local, extents)
-            })
+            .filter(|&p| self.patch_in_frustum(terrain, p))
             .count()
     }
-}
 
-impl FrameView {
+    /// Per patch, whether it is drawn this frame: culling off, or
+    /// `patch_in_frustum`.
+    pub fn patches_drawn(&self, terrain: &Terrain, cull: bool) -> Vec<bool> {
+        (0..terrain.grid().patch_count())
+            .map(|p| !cull || self.patch_in_frustum(terrain, p))
+            .collect()
+    }
+
     /// What the screen-space peers need of the camera.
     pub fn screen(&self) -> ScreenParams {
         ScreenParams {
@@ -297,9 +303,9 @@ impl FrameUniforms {
                 match settings.lod_metric {
                     LodMetric::Distance => LOD_METRIC_DISTANCE,
                     LodMetric::Error(_) => LOD_METRIC_ERROR,
-                    LodMetric::Sphere => LOD_METRIC_SPHERE,
-                    LodMetric::EdgeLength => LOD_METRIC_EDGE_LENGTH,
-                    LodMetric::Cdlod => LOD_METRIC_CDLOD,
+                    LodMetric::Peer(PeerPolicy::Sphere) => LOD_METRIC_SPHERE,
+                    LodMetric::Peer(PeerPolicy::EdgeLength) => LOD_METRIC_EDGE_LENGTH,
+                    LodMetric::Peer(PeerPolicy::Cdlod) => LOD_METRIC_CDLOD,
                 },
             ],
             error_lod: [

@@ -271,7 +271,7 @@ impl Scene {
             }
             Some(px) => Some(*px.get_ref()),
             None if distances => None,
-            None => Some(1.0),
+            None => Some(super::DEFAULT_PIXEL_ERROR),
         };
         let lod = distances.then_some(lod);
 

@@ -78,6 +78,10 @@ pub const DEFAULT_SCENE_ASSETS: &[(&str, &[u8])] = &[
 /// Vertical field of view when a scene gives none.
 pub const DEFAULT_FOV_DEG: f32 = 55.0;
 
+/// The error LOD's tolerance in pixels where neither the command line nor
+/// the scene gives one: a scene with no `[lod]`, or a bare heightmap.
+pub const DEFAULT_PIXEL_ERROR: f32 = 1.0;
+
 /// Where a scene's heights come from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum HeightmapSource {

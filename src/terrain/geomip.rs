@@ -438,14 +438,11 @@ pub fn predicted_px(
             let mut px = e * pixels_per_radian / d.max(f32::MIN_POSITIVE);
             let (coarser, _) = neighbour_masks(&chosen.levels, grid, id);
             if coarser != 0 {
-                let [ul, ur, ll, lr] = terrain.patch_corners(id).map(|c| c - eye_local);
+                let corners = terrain.patch_corners(id).map(|c| c - eye_local);
                 let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
                 let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
                 // Left, top, right, bottom, as the masks' bits.
-                for (bit, (a, b)) in [(ul, ll), (ul, ur), (ur, lr), (ll, lr)]
-                    .into_iter()
-                    .enumerate()
-                {
+                for (bit, (a, b)) in super::lod::patch_edges(corners).into_iter().enumerate() {
                     if coarser & (1 << bit) != 0 {
                         let d = super::lod::edge_distance(xz(a), xz(b), lo, hi);
                         px = px.max(

@@ -165,6 +165,15 @@ pub fn edge_midpoint(a: Vec3, b: Vec3) -> Vec3 {
     0.5 * (a + b)
 }
 
+/// A patch's edges as (first, second) ends, from its corners in control
+/// point order, in the order of the factors (and of the control shader's
+/// `ends`): left (0-2), top (0-1), right (1-3), bottom (2-3). The patches
+/// either side of an edge list its ends the same way round.
+pub fn patch_edges(corners: [Vec3; 4]) -> [(Vec3, Vec3); 4] {
+    let [ul, ur, ll, lr] = corners;
+    [(ul, ll), (ul, ur), (ur, lr), (ll, lr)]
+}
+
 /// Edge factors from the edge midpoints and the inside factors from the
 /// patch centre. `corners` are eye-relative, in control point order.
 ///
@@ -179,11 +188,10 @@ pub fn patch_tess_factors(
     mode: DistanceMode,
 ) -> PatchTessFactors {
     let [ul, ur, ll, lr] = corners;
-    let edge = |a, b| tess_factor(edge_midpoint(a, b), lod, mode);
     let centre = 0.25 * (ul + ur + ll + lr);
     let inside = tess_factor(centre, lod, mode);
     PatchTessFactors {
-        edges: [edge(ul, ll), edge(ul, ur), edge(ur, lr), edge(ll, lr)],
+        edges: patch_edges(corners).map(|(a, b)| tess_factor(edge_midpoint(a, b), lod, mode)),
         inside: [inside, inside],
     }
 }
@@ -241,8 +249,22 @@ pub fn patch_is_full_resolution(
     pixel_error: f32,
     cells: [u32; 2],
 ) -> bool {
+    patch_inside_factor(own, distance, pixels_per_radian, pixel_error, cells).is_none()
+}
+
+/// The inside factor of a patch of `cells` (columns, rows) whose box is
+/// `distance` away: the error-bounded factor over its smaller side, or None
+/// where that is the side itself (full resolution).
+pub fn patch_inside_factor(
+    own: &[f32; 7],
+    distance: f32,
+    pixels_per_radian: f32,
+    pixel_error: f32,
+    cells: [u32; 2],
+) -> Option<f32> {
     let side = cells[0].min(cells[1]);
-    error_tess_factor(own, distance, pixels_per_radian, pixel_error, side) >= side as f32
+    let factor = error_tess_factor(own, distance, pixels_per_radian, pixel_error, side);
+    (factor < side as f32).then_some(factor)
 }
 
 /// Per-level errors of an edge shared by two patches: the larger of each.
@@ -299,9 +321,8 @@ pub fn patch_error_factors(
     pixels_per_radian: f32,
     pixel_error: f32,
 ) -> PatchTessFactors {
-    let [ul, ur, ll, lr] = corners;
     let xz = |v: Vec3| Vec2::new(v.x, v.z);
-    let ends = [(ul, ll), (ul, ur), (ur, lr), (ll, lr)];
+    let ends = patch_edges(corners);
     let [cx, cz] = cells;
     let edge_cells = [cz, cx, cz, cx];
     let edges = std::array::from_fn(|i| {
@@ -314,7 +335,8 @@ pub fn patch_error_factors(
         error_tess_factor(&errors, d, pixels_per_radian, pixel_error, edge_cells[i])
     });
     let distance = patch_box_distance(corners, bounds_y);
-    let inside = error_tess_factor(own, distance, pixels_per_radian, pixel_error, cx.min(cz));
+    let inside = patch_inside_factor(own, distance, pixels_per_radian, pixel_error, cells)
+        .unwrap_or(cx.min(cz) as f32);
     PatchTessFactors {
         edges,
         inside: [inside, inside],
@@ -372,14 +394,13 @@ pub fn choose_tess_error(
         let [lo, hi] = terrain.y_bounds()[p];
         let distance = patch_box_distance(corners, [lo - eye_local.y, hi - eye_local.y]);
         let own: &[f32; 7] = table.patch(p).try_into().expect("7 levels a patch");
-        if patch_is_full_resolution(own, distance, pixels_per_radian, pixel_error, cells) {
-            full_resolution[p / 32] |= 1 << (p % 32);
-            continue;
+        match patch_inside_factor(own, distance, pixels_per_radian, pixel_error, cells) {
+            None => full_resolution[p / 32] |= 1 << (p % 32),
+            Some(factor) => {
+                let k = (factor as u32).trailing_zeros() as usize;
+                *predicted = own[k] * pixels_per_radian / distance.max(f32::MIN_POSITIVE);
+            }
         }
-        let side = cells[0].min(cells[1]);
-        let factor = error_tess_factor(own, distance, pixels_per_radian, pixel_error, side);
-        let k = (factor as u32).trailing_zeros() as usize;
-        *predicted = own[k] * pixels_per_radian / distance.max(f32::MIN_POSITIVE);
     }
     TessErrorChoice {
         full_resolution,
@@ -475,11 +496,29 @@ pub fn cdlod_tess_factor(rel: Vec3, lod: &DistanceLod, peer: &PeerLod) -> f32 {
 }
 
 /// Which peer policy `patch_peer_factors` applies.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum PeerPolicy {
     Sphere,
     EdgeLength,
     Cdlod,
+}
+
+impl PeerPolicy {
+    pub const ALL: [PeerPolicy; 3] = [
+        PeerPolicy::Sphere,
+        PeerPolicy::EdgeLength,
+        PeerPolicy::Cdlod,
+    ];
+
+    /// Its name on the command line and in bench rows.
+    pub fn name(self) -> &'static str {
+        match self {
+            PeerPolicy::Sphere => "sphere",
+            PeerPolicy::EdgeLength => "edge-length",
+            PeerPolicy::Cdlod => "cdlod",
+        }
+    }
 }
 
 /// Factors of one patch by a peer's policy, as its source sets them: the
@@ -493,8 +532,7 @@ pub fn patch_peer_factors(
     peer: &PeerLod,
 ) -> PatchTessFactors {
     let [ul, ur, ll, lr] = corners;
-    let ends = [(ul, ll), (ul, ur), (ur, lr), (ll, lr)];
-    let edges = ends.map(|(a, b)| match policy {
+    let edges = patch_edges(corners).map(|(a, b)| match policy {
         PeerPolicy::Sphere => sphere_tess_factor(a, b, screen, peer),
         PeerPolicy::EdgeLength => edge_length_tess_factor(a, b, screen, peer),
         PeerPolicy::Cdlod => cdlod_tess_factor(edge_midpoint(a, b), lod, peer),
