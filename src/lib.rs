@@ -11,6 +11,10 @@
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
 //!   table, height queries, frustum and LOD maths). No GPU types.
 //! - [`shader_constants`]: constants shared with GLSL.
+//!
+//! `unsafe` is denied everywhere but in [`vk`], by the lint below.
+
+#![deny(unsafe_code)]
 
 pub mod app;
 pub mod bench;
@@ -22,4 +26,5 @@ pub mod scene;
 /// Constants shared with GLSL, passed to the shader compiler by build.rs.
 pub mod shader_constants;
 pub mod terrain;
+#[allow(unsafe_code)]
 pub mod vk;

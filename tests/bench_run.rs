@@ -56,14 +56,10 @@ fn a_quick_run_measures_every_configuration() {
     let rows = bench
         .run("noise", &configs, &options, &mut progress)
         .expect("the run");
-    bench.destroy();
+    drop(bench);
     assert_eq!(gpu.device.memory_in_use(), 0, "memory left allocated");
-    assert_eq!(
-        gpu.validation_messages(),
-        0,
-        "{:#?}",
-        gpu.instance.validation_log().messages()
-    );
+    let report = gpu.shutdown();
+    assert_eq!(report.count, 0, "{:#?}", report.messages);
     assert_eq!(
         progress.0, progress.1,
         "the progress total is what was rendered"
@@ -301,8 +297,9 @@ fn a_single_frame_run_renders_each_view_once() {
     let rows = bench
         .run("single", &configs, &options, &mut progress)
         .expect("the run completes");
-    bench.destroy();
-    assert_eq!(gpu.validation_messages(), 0);
+    drop(bench);
+    let report = gpu.shutdown();
+    assert_eq!(report.count, 0, "{:#?}", report.messages);
     // Three views, one render of each configuration, plus the oracle's
     // uniform levels (5 for 16-cell patches) per view.
     assert_eq!(progress.1, 3 * (configs.len() as u64 + 5));

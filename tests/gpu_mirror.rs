@@ -253,11 +253,7 @@ fn glsl_formulas_match_their_rust_mirrors() {
             values.len()
         );
     }
-    assert_eq!(
-        gpu.validation_messages(),
-        0,
-        "{:#?}",
-        gpu.instance.validation_log().messages()
-    );
     assert_eq!(gpu.device.memory_in_use(), 0);
+    let report = gpu.shutdown();
+    assert_eq!(report.count, 0, "{:#?}", report.messages);
 }

@@ -87,10 +87,14 @@ fn shutdown_reports_objects_left_alive() {
         )
         .unwrap();
     std::mem::forget(leaked);
-    let (count, messages) = gpu.shutdown();
-    assert!(count > 0, "a buffer left alive is reported");
+    let report = gpu.shutdown();
+    assert!(report.count > 0, "a buffer left alive is reported");
     assert!(
-        messages.iter().any(|m| m.contains("VkBuffer")),
-        "{messages:#?}"
+        report
+            .messages
+            .iter()
+            .any(|m| m.contains("BUFFER \"leaked\"") && m.contains("leak")),
+        "{:#?}",
+        report.messages
     );
 }

@@ -23,9 +23,11 @@ use crate::render::{
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
-use crate::vk::memory::{transition_images, Buffer, BufferDesc, Transition};
+use crate::vk::commands::CommandSlots;
+use crate::vk::memory::{Buffer, BufferDesc};
+use crate::vk::owned::Semaphore;
 use crate::vk::swapchain::{surface_extensions, Acquired, Surface, Swapchain};
-use crate::vk::{Device, DisabledFeatures, Gpu, Instance};
+use crate::vk::{Gpu, GpuOptions, ValidationReport};
 use camera::{CameraController, Mode, Movement};
 
 /// Frames the CPU may record ahead of the GPU.
@@ -53,15 +55,11 @@ pub struct DemoOptions {
     pub width: u32,
     pub height: u32,
     pub present_mode: vk::PresentModeKHR,
-    pub validate: bool,
+    /// Validation, disabled features, memory budget and injected faults
+    /// (the window adds its surface's extensions).
+    pub gpu: GpuOptions,
     /// Eye height above the ground when walking.
     pub walk_height: f64,
-    /// Features to behave as if the device lacked.
-    pub disabled: DisabledFeatures,
-    /// Largest GPU memory to allocate, in bytes.
-    pub memory_budget: Option<u64>,
-    /// A failure to inject (`--inject-fault`).
-    pub fault: Option<crate::vk::Fault>,
     /// Stop after this many rendered frames.
     pub frames: Option<u64>,
     /// Resize at this frame, then to a tiny size two frames later, then back.
@@ -78,8 +76,8 @@ pub struct DemoOptions {
 pub struct DemoSummary {
     pub frames: u64,
     pub seconds: f64,
-    pub validation_messages: u32,
-    pub first_messages: Vec<String>,
+    /// Counted after the device was destroyed.
+    pub validation: ValidationReport,
     pub last: FrameMeasurements,
     pub device: String,
     /// Swapchains built, the first one included.
@@ -113,15 +111,24 @@ struct App {
     summary: Option<DemoSummary>,
 }
 
-/// Per-frame-in-flight synchronisation.
-struct FrameSync {
-    cmd: vk::CommandBuffer,
-    /// Signalled when this slot's last submission finished.
-    fence: vk::Fence,
-    image_available: vk::Semaphore,
-    submitted: bool,
+/// The window's GPU objects. They free themselves; fields drop in
+/// declaration order, so the frames' work is waited for (by the renderer
+/// and swapchain, which wait for idle) before the surface goes, and the
+/// device goes last.
+struct Graphics {
+    /// One command buffer and fence per frame in flight.
+    commands: CommandSlots,
+    /// Per frame in flight: signalled when its swapchain image is ready.
+    image_available: Vec<Semaphore>,
+    /// Where a screenshot is copied (one swapchain size).
+    screenshot_buffer: Option<Buffer>,
+    renderer: TerrainRenderer,
+    swapchain: Option<Swapchain>,
+    surface: Surface,
+    gpu: Gpu,
 }
 
+/// Keys held down.
 #[derive(Default)]
 struct Keys {
     forward: bool,
@@ -134,25 +141,18 @@ struct Keys {
     looking: bool,
 }
 
-struct Running {
-    // Vulkan objects are torn down explicitly in `shutdown`; the window is
-    // the last field so it outlives the surface made from it.
-    gpu: Gpu,
-    surface: Option<Surface>,
-    swapchain: Option<Swapchain>,
-    renderer: Option<TerrainRenderer>,
-    pool: vk::CommandPool,
-    frames: Vec<FrameSync>,
-    screenshot_buffer: Option<Buffer>,
-    frame: u64,
-    rebuild: bool,
-    /// Resize-storm requests made so far.
-    storm_step: u64,
+/// The camera and what moves it.
+struct Input {
     controller: CameraController,
     keys: Keys,
-    settings: RenderSettings,
+    /// The frustum culling keeps while frozen (F4).
     frozen: Option<FrameView>,
     last_tick: Instant,
+}
+
+/// What the title bar and the summary report.
+struct Stats {
+    frame: u64,
     started: Instant,
     fps_window: (Instant, u64),
     fps: f64,
@@ -161,6 +161,17 @@ struct Running {
     screenshots: u32,
     swapchains_built: u32,
     sizes: Vec<(u32, u32)>,
+    /// Resize-storm requests made so far.
+    storm_step: u64,
+}
+
+struct Running {
+    graphics: Graphics,
+    input: Input,
+    stats: Stats,
+    settings: RenderSettings,
+    rebuild: bool,
+    /// The last field, so it outlives the surface made from it.
     window: Window,
 }
 
@@ -199,7 +210,7 @@ impl ApplicationHandler for App {
                 state,
                 ..
             } => {
-                running.keys.looking = state == ElementState::Pressed;
+                running.input.keys.looking = state == ElementState::Pressed;
                 Ok(())
             }
             WindowEvent::RedrawRequested => running.redraw(event_loop, &self.options),
@@ -214,8 +225,8 @@ impl ApplicationHandler for App {
     fn device_event(&mut self, _event_loop: &ActiveEventLoop, _id: DeviceId, event: DeviceEvent) {
         if let (Some(running), DeviceEvent::MouseMotion { delta }) = (self.running.as_mut(), event)
         {
-            if running.keys.looking {
-                running.controller.look(delta.0, delta.1);
+            if running.input.keys.looking {
+                running.input.controller.look(delta.0, delta.1);
             }
         }
     }
@@ -228,16 +239,78 @@ impl ApplicationHandler for App {
 
     fn exiting(&mut self, _event_loop: &ActiveEventLoop) {
         if let Some(running) = self.running.take() {
-            match running.shutdown() {
-                Ok(summary) => self.summary = Some(summary),
-                Err(e) => {
-                    if self.error.is_none() {
-                        self.error = Some(e);
-                    }
-                }
-            }
+            self.summary = Some(running.shutdown());
         }
     }
+}
+
+impl Graphics {
+    /// The device, the window's surface, a first swapchain (its format is
+    /// the pipelines'), the renderer and the frames in flight.
+    fn new(window: &Window, options: &DemoOptions) -> Result<Graphics> {
+        let display = window
+            .display_handle()
+            .context("reading the display handle")?
+            .as_raw();
+        let handle = window
+            .window_handle()
+            .context("reading the window handle")?
+            .as_raw();
+        let gpu = Gpu::open(&GpuOptions {
+            instance_extensions: surface_extensions(display)?.to_vec(),
+            device_extensions: vec![ash::khr::swapchain::NAME],
+            ..options.gpu.clone()
+        })
+        .context("starting Vulkan")?;
+        let device = &gpu.device;
+        let surface = Surface::new(device, display, handle)?;
+        let size = window.inner_size();
+        let swapchain = Swapchain::new(
+            device,
+            &surface,
+            vk::Extent2D {
+                width: size.width.max(1),
+                height: size.height.max(1),
+            },
+            options.present_mode,
+            None,
+        )
+        .context("building the swapchain")?;
+        let renderer = TerrainRenderer::with_appearance(
+            &gpu,
+            &options.terrain,
+            &options.appearance,
+            swapchain.format.format,
+            FRAMES_IN_FLIGHT as u32,
+            &RendererOptions {
+                paths: paths(&device.caps),
+                // Line pipelines are cheap to have ready for F2.
+                wireframe: device.caps.fill_mode_non_solid,
+            },
+        )
+        .context("preparing the terrain for the GPU")?;
+        let image_available = (0..FRAMES_IN_FLIGHT)
+            .map(|i| device.create_semaphore(&format!("demo.image_available[{i}]")))
+            .collect::<crate::vk::Result<Vec<_>>>()?;
+        Ok(Graphics {
+            commands: device.create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?,
+            image_available,
+            screenshot_buffer: None,
+            renderer,
+            swapchain: Some(swapchain),
+            surface,
+            gpu,
+        })
+    }
+}
+
+/// The paths a device can draw, in the order F6 cycles through them.
+fn paths(caps: &crate::vk::Capabilities) -> Vec<RenderPath> {
+    let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
+    if caps.tessellation_shader {
+        paths.insert(0, RenderPath::Tess);
+    }
+    paths
 }
 
 impl Running {
@@ -249,137 +322,62 @@ impl Running {
                     .with_inner_size(PhysicalSize::new(options.width, options.height)),
             )
             .context("creating the window")?;
-        let display = window
-            .display_handle()
-            .context("reading the display handle")?
-            .as_raw();
-        let handle = window
-            .window_handle()
-            .context("reading the window handle")?
-            .as_raw();
-        let validate =
-            options.validate || std::env::var(crate::vk::VALIDATE_ENV).is_ok_and(|v| v == "1");
-        let instance =
-            Instance::new(validate, surface_extensions(display)?).context("starting Vulkan")?;
-        let surface = Surface::new(&instance, display, handle)?;
-        let device = match Device::new(&instance, &[ash::khr::swapchain::NAME], &options.disabled) {
-            Ok(d) => d,
-            Err(e) => {
-                surface.destroy();
-                return Err(e).context("opening the Vulkan device");
-            }
-        };
-        device.set_memory_budget(options.memory_budget);
-        device.set_fault(options.fault);
-        let gpu = Gpu { device, instance };
-        if let Err(e) = surface.check_support(&gpu.device) {
-            surface.destroy();
-            return Err(e.into());
+        let graphics = Graphics::new(&window, options)?;
+        let mut notes = Vec::new();
+        let settings =
+            crate::render::with_fallback(options.settings, &graphics.gpu.device.caps, &mut notes);
+        for note in notes {
+            log::warn!("{note}");
         }
         let mut running = Running {
-            surface: Some(surface),
-            swapchain: None,
-            renderer: None,
-            pool: vk::CommandPool::null(),
-            frames: Vec::new(),
-            screenshot_buffer: None,
-            frame: 0,
-            rebuild: true,
-            controller: CameraController {
-                eye_height: options.walk_height,
-                ..CameraController::new(&options.camera, speed_for(&options.terrain))
-            },
-            keys: Keys::default(),
-            settings: options.settings,
-            frozen: None,
-            last_tick: Instant::now(),
-            started: Instant::now(),
-            fps_window: (Instant::now(), 0),
-            fps: 0.0,
-            last: FrameMeasurements::default(),
-            patches_drawn: 0,
-            screenshots: 0,
-            swapchains_built: 0,
-            sizes: Vec::new(),
-            storm_step: 0,
-            window,
-            gpu,
-        };
-        if let Err(e) = running.create_frame_resources(options) {
-            let _ = running.shutdown();
-            return Err(e);
-        }
-        let mut notes = Vec::new();
-        running.settings =
-            crate::render::with_fallback(running.settings, &running.gpu.device.caps, &mut notes);
-        for note in notes {
-            println!("{note}");
-        }
-        if running.settings.wireframe && !running.gpu.device.caps.fill_mode_non_solid {
-            running.settings.wireframe = false;
-            log::warn!("wireframe needs fillModeNonSolid, which this device lacks");
-        }
-        println!("{HELP}");
-        Ok(running)
-    }
-
-    fn create_frame_resources(&mut self, options: &DemoOptions) -> Result<()> {
-        // The swapchain's format is needed for the pipeline: make it first.
-        self.rebuild_swapchain(options)?;
-        let format = self
-            .swapchain
-            .as_ref()
-            .map(|s| s.format.format)
-            .unwrap_or(vk::Format::B8G8R8A8_SRGB);
-        let wireframe = self.gpu.device.caps.fill_mode_non_solid;
-        self.renderer = Some(
-            TerrainRenderer::with_appearance(
-                &self.gpu,
-                &options.terrain,
-                &options.appearance,
-                format,
-                FRAMES_IN_FLIGHT as u32,
-                // Brute adds pipelines only (no buffers): cheap to have ready
-                // for the path key.
-                &RendererOptions {
-                    paths: self.paths(),
-                    wireframe,
+            input: Input {
+                controller: CameraController {
+                    eye_height: options.walk_height,
+                    ..CameraController::new(&options.camera, speed_for(&options.terrain))
                 },
-            )
-            .context("preparing the terrain for the GPU")?,
-        );
-        let device = &self.gpu.device;
-        self.pool = device.create_command_pool("demo.command_pool")?;
-        let cmds =
-            device.allocate_command_buffers(self.pool, FRAMES_IN_FLIGHT as u32, "demo.commands")?;
-        for (i, cmd) in cmds.into_iter().enumerate() {
-            self.frames.push(FrameSync {
-                cmd,
-                fence: device.create_fence(&format!("demo.frame_fence[{i}]"), true)?,
-                image_available: device.create_semaphore(&format!("demo.image_available[{i}]"))?,
-                submitted: false,
-            });
+                keys: Keys::default(),
+                frozen: None,
+                last_tick: Instant::now(),
+            },
+            stats: Stats {
+                frame: 0,
+                started: Instant::now(),
+                fps_window: (Instant::now(), 0),
+                fps: 0.0,
+                last: FrameMeasurements::default(),
+                patches_drawn: 0,
+                screenshots: 0,
+                swapchains_built: 0,
+                sizes: Vec::new(),
+                storm_step: 0,
+            },
+            settings,
+            rebuild: false,
+            graphics,
+            window,
+        };
+        if let Some(swapchain) = &running.graphics.swapchain {
+            let size = (swapchain.extent.width, swapchain.extent.height);
+            running.stats.swapchains_built = 1;
+            running.stats.sizes.push(size);
         }
-        Ok(())
+        Ok(running)
     }
 
     /// Rebuilds the swapchain for the window's current size; a zero-sized
     /// (minimised) window leaves none, and drawing pauses.
     fn rebuild_swapchain(&mut self, options: &DemoOptions) -> Result<()> {
         let size = self.window.inner_size();
-        self.gpu.device.wait_idle()?;
-        let old = self.swapchain.take();
+        let graphics = &mut self.graphics;
+        let old = graphics.swapchain.take();
         if size.width == 0 || size.height == 0 {
-            if let Some(old) = old {
-                old.destroy(&self.gpu.device);
-            }
+            // Dropping the old swapchain waits for its frames.
+            drop(old);
             return Ok(());
         }
-        let surface = self.surface.as_ref().expect("surface lives while running");
         let swapchain = Swapchain::new(
-            &self.gpu.instance,
-            &self.gpu.device,
-            surface,
+            &graphics.gpu.device,
+            &graphics.surface,
             vk::Extent2D {
                 width: size.width,
                 height: size.height,
@@ -388,21 +386,19 @@ impl Running {
             old,
         )
         .context("building the swapchain")?;
-        if let Some(renderer) = &self.renderer {
-            if renderer.color_format() != swapchain.format.format {
-                bail!(
-                    "the swapchain changed format from {:?} to {:?}",
-                    renderer.color_format(),
-                    swapchain.format.format
-                );
-            }
+        if graphics.renderer.color_format() != swapchain.format.format {
+            bail!(
+                "the swapchain changed format from {:?} to {:?}",
+                graphics.renderer.color_format(),
+                swapchain.format.format
+            );
         }
-        self.swapchains_built += 1;
+        self.stats.swapchains_built += 1;
         let size = (swapchain.extent.width, swapchain.extent.height);
-        if self.sizes.last() != Some(&size) {
-            self.sizes.push(size);
+        if self.stats.sizes.last() != Some(&size) {
+            self.stats.sizes.push(size);
         }
-        self.swapchain = Some(swapchain);
+        graphics.swapchain = Some(swapchain);
         self.rebuild = false;
         Ok(())
     }
@@ -417,7 +413,7 @@ impl Running {
             return Ok(());
         };
         let pressed = event.state == ElementState::Pressed;
-        let keys = &mut self.keys;
+        let keys = &mut self.input.keys;
         match code {
             KeyCode::KeyW => keys.forward = pressed,
             KeyCode::KeyS => keys.back = pressed,
@@ -428,14 +424,20 @@ impl Running {
             KeyCode::ShiftLeft | KeyCode::ShiftRight => keys.fast = pressed,
             _ if !pressed || event.repeat => {}
             KeyCode::Escape => event_loop.exit(),
-            KeyCode::Digit2 => self.controller.set_mode(Mode::Walk, options.terrain.info()),
-            KeyCode::Digit3 => self.controller.set_mode(Mode::Fly, options.terrain.info()),
-            KeyCode::F1 => println!("{HELP}"),
+            KeyCode::Digit2 => self
+                .input
+                .controller
+                .set_mode(Mode::Walk, options.terrain.info()),
+            KeyCode::Digit3 => self
+                .input
+                .controller
+                .set_mode(Mode::Fly, options.terrain.info()),
+            KeyCode::F1 => log::info!("{HELP}"),
             KeyCode::F2 => {
-                if self.gpu.device.caps.fill_mode_non_solid {
+                if self.graphics.gpu.device.caps.fill_mode_non_solid {
                     self.settings.wireframe = !self.settings.wireframe;
                 } else {
-                    println!("wireframe is unavailable: the device lacks fillModeNonSolid");
+                    log::warn!("wireframe is unavailable: the device lacks fillModeNonSolid");
                 }
             }
             KeyCode::F3 => {
@@ -445,19 +447,19 @@ impl Running {
                 }
             }
             KeyCode::F4 => {
-                self.frozen = match self.frozen {
+                self.input.frozen = match self.input.frozen {
                     Some(_) => None,
                     None => Some(self.view(&options.terrain)),
                 }
             }
             KeyCode::F6 => {
-                let paths = self.paths();
+                let paths = paths(&self.graphics.gpu.device.caps);
                 let next = paths
                     .iter()
                     .position(|&p| p == self.settings.path)
                     .map_or(0, |i| (i + 1) % paths.len());
                 self.settings.path = paths[next];
-                println!("render path: {:?}", self.settings.path);
+                log::info!("render path: {:?}", self.settings.path);
             }
             KeyCode::F5 => {
                 self.settings.lod_mode = match self.settings.lod_mode {
@@ -469,33 +471,28 @@ impl Running {
                 let scale = if code == KeyCode::Equal { 1.25 } else { 0.8 };
                 self.settings.lod.min_dist *= scale;
                 self.settings.lod.max_dist *= scale;
-                println!(
+                log::info!(
                     "LOD distances {:.0}..{:.0}",
-                    self.settings.lod.min_dist, self.settings.lod.max_dist
+                    self.settings.lod.min_dist,
+                    self.settings.lod.max_dist
                 );
             }
             KeyCode::F12 => {
-                self.screenshots += 1;
-                let path = PathBuf::from(format!("vkterrain-screenshot-{}.png", self.screenshots));
+                self.stats.screenshots += 1;
+                let path = PathBuf::from(format!(
+                    "vkterrain-screenshot-{}.png",
+                    self.stats.screenshots
+                ));
                 self.screenshot(&path, options)?;
-                println!("wrote {}", path.display());
+                log::info!("wrote {}", path.display());
             }
             _ => {}
         }
         Ok(())
     }
 
-    /// The paths this device can draw, in the order F6 cycles through them.
-    fn paths(&self) -> Vec<RenderPath> {
-        let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
-        if self.gpu.device.caps.tessellation_shader {
-            paths.insert(0, RenderPath::Tess);
-        }
-        paths
-    }
-
     fn view(&self, terrain: &Terrain) -> FrameView {
-        let extent = self.swapchain.as_ref().map_or(
+        let extent = self.graphics.swapchain.as_ref().map_or(
             vk::Extent2D {
                 width: 1,
                 height: 1,
@@ -504,7 +501,7 @@ impl Running {
         );
         FrameView::new(
             terrain,
-            &self.controller.camera(),
+            &self.input.controller.camera(),
             extent.width,
             extent.height,
         )
@@ -515,11 +512,11 @@ impl Running {
     /// step, a minimise that the next step undoes; after `count` steps, the
     /// starting size again.
     fn storm(&mut self, count: u64, options: &DemoOptions) {
-        let step = self.storm_step;
+        let step = self.stats.storm_step;
         if step > count {
             return;
         }
-        self.storm_step += 1;
+        self.stats.storm_step += 1;
         self.rebuild = true;
         if step == count {
             self.window.set_minimized(false);
@@ -544,9 +541,9 @@ impl Running {
 
     fn redraw(&mut self, event_loop: &ActiveEventLoop, options: &DemoOptions) -> Result<()> {
         let now = Instant::now();
-        let dt = (now - self.last_tick).as_secs_f64().min(0.25);
-        self.last_tick = now;
-        let k = &self.keys;
+        let dt = (now - self.input.last_tick).as_secs_f64().min(0.25);
+        self.input.last_tick = now;
+        let k = &self.input.keys;
         let axis = |a: bool, b: bool| f64::from(u8::from(a)) - f64::from(u8::from(b));
         let movement = Movement {
             forward: axis(k.forward, k.back),
@@ -554,10 +551,12 @@ impl Running {
             up: axis(k.up, k.down),
             fast: k.fast,
         };
-        self.controller.update(dt, movement, options.terrain.info());
+        self.input
+            .controller
+            .update(dt, movement, options.terrain.info());
 
         if let Some(resize_at) = options.resize_at {
-            let size = match self.frame {
+            let size = match self.stats.frame {
                 f if f == resize_at => Some((options.width * 2 / 3, options.height * 2 / 3)),
                 f if f == resize_at + 2 => Some((16, 12)),
                 f if f == resize_at + 4 => Some((options.width, options.height)),
@@ -574,22 +573,20 @@ impl Running {
         if self.rebuild {
             self.rebuild_swapchain(options)?;
         }
-        if self.swapchain.is_none() {
+        if self.graphics.swapchain.is_none() {
             // Minimised: nothing to draw into until the window comes back.
             return Ok(());
         }
-        let last_scripted = options.frames.is_some_and(|n| self.frame + 1 >= n);
+        let last_scripted = options.frames.is_some_and(|n| self.stats.frame + 1 >= n);
         let drawn = self.draw(options, last_scripted && options.screenshot.is_some())?;
         if !drawn {
             return Ok(());
         }
-        self.frame += 1;
+        self.stats.frame += 1;
         self.update_title(options);
         if last_scripted {
-            if let (Some(path), Some(buffer)) = (&options.screenshot, &self.screenshot_buffer) {
-                self.gpu.device.wait_idle()?;
-                let swapchain = self.swapchain.as_ref().expect("drawn into a swapchain");
-                save_swapchain_copy(buffer, swapchain, path)?;
+            if let Some(path) = &options.screenshot {
+                self.save_screenshot(path)?;
             }
             event_loop.exit();
         }
@@ -598,21 +595,16 @@ impl Running {
 
     /// Renders one frame; false when the swapchain had to be rebuilt first.
     fn draw(&mut self, options: &DemoOptions, capture: bool) -> Result<bool> {
-        let slot = (self.frame % FRAMES_IN_FLIGHT as u64) as usize;
-        let device = &self.gpu.device;
-        let renderer = self
-            .renderer
-            .as_mut()
-            .expect("renderer lives while running");
-        let sync = &mut self.frames[slot];
-        // This slot's uniforms, queries and command buffer were last used two
-        // frames ago; wait for that frame before touching them.
-        device.wait_fence(sync.fence)?;
-        if sync.submitted {
-            self.last = renderer.measurements(device, slot)?;
+        let slot = (self.stats.frame % FRAMES_IN_FLIGHT as u64) as usize;
+        let graphics = &mut self.graphics;
+        let device = &graphics.gpu.device;
+        // This slot's uniforms, queries and command buffer were last used
+        // two frames ago; wait for that frame before touching them.
+        if graphics.commands.wait(slot)? {
+            self.stats.last = graphics.renderer.measurements(slot)?;
         }
-        let swapchain = self.swapchain.as_ref().expect("checked by the caller");
-        let (index, suboptimal) = match swapchain.acquire(sync.image_available)? {
+        let swapchain = graphics.swapchain.as_ref().expect("checked by the caller");
+        let (index, suboptimal) = match swapchain.acquire(&graphics.image_available[slot])? {
             Acquired::Image { index, suboptimal } => (index, suboptimal),
             Acquired::OutOfDate => {
                 self.rebuild = true;
@@ -622,23 +614,28 @@ impl Running {
         let extent = swapchain.extent;
         let mut view = FrameView::new(
             &options.terrain,
-            &self.controller.camera(),
+            &self.input.controller.camera(),
             extent.width,
             extent.height,
         );
-        if let Some(frozen) = &self.frozen {
+        if let Some(frozen) = &self.input.frozen {
             view = view.with_frustum_of(frozen);
         }
-        renderer.prepare(slot, &options.terrain, &view, &self.settings)?;
+        graphics
+            .renderer
+            .prepare(slot, &options.terrain, &view, &self.settings)?;
         // Every path draws what the frustum test keeps, or all with culling off.
-        self.patches_drawn = if self.settings.cull {
+        self.stats.patches_drawn = if self.settings.cull {
             view.patches_in_frustum(&options.terrain)
         } else {
             options.terrain.grid().patch_count()
         };
 
-        if capture && swapchain.readable && self.screenshot_buffer.is_none() {
-            self.screenshot_buffer = Some(device.create_buffer(
+        if capture && !swapchain.readable {
+            bail!("this swapchain's images cannot be read back for a screenshot");
+        }
+        if capture && graphics.screenshot_buffer.is_none() {
+            graphics.screenshot_buffer = Some(device.create_buffer(
                 BufferDesc {
                     size: u64::from(extent.width) * u64::from(extent.height) * 4,
                     usage: vk::BufferUsageFlags::TRANSFER_DST,
@@ -647,186 +644,120 @@ impl Running {
                 "demo.screenshot",
             )?);
         }
-        let capture_into = if capture {
-            self.screenshot_buffer.as_ref()
-        } else {
-            None
-        };
-        if capture && capture_into.is_none() {
-            bail!("this swapchain's images cannot be read back for a screenshot");
-        }
+        let capture_into = graphics.screenshot_buffer.as_ref().filter(|_| capture);
 
         let views = swapchain.views(index);
-        let rec = device.begin_commands(sync.cmd)?;
-        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        transition_images(
-            rec.device,
-            rec.cmd,
-            &[
-                Transition {
-                    image: views.color_image,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                    // Ordered after the acquire semaphore's wait stage.
-                    from: (L::UNDEFINED, S::COLOR_ATTACHMENT_OUTPUT, A::NONE),
-                    to: (
-                        L::COLOR_ATTACHMENT_OPTIMAL,
-                        S::COLOR_ATTACHMENT_OUTPUT,
-                        A::COLOR_ATTACHMENT_WRITE,
-                    ),
-                },
-                Transition {
-                    image: views.depth_image,
-                    aspect: vk::ImageAspectFlags::DEPTH,
-                    // The depth image is shared by the frames in flight: the
-                    // previous frame's depth writes must finish first.
-                    from: (
-                        L::UNDEFINED,
-                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                        A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                    ),
-                    to: (
-                        L::DEPTH_ATTACHMENT_OPTIMAL,
-                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                        A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                    ),
-                },
-            ],
-        );
-        renderer.record(&rec, slot, &views, &self.settings)?;
-        let to_present = |from| Transition {
-            image: views.color_image,
-            aspect: vk::ImageAspectFlags::COLOR,
-            from,
-            // Presentation waits on the semaphore, which covers all commands.
-            to: (L::PRESENT_SRC_KHR, S::NONE, A::NONE),
-        };
-        match capture_into {
-            Some(buffer) => {
-                transition_images(
-                    rec.device,
-                    rec.cmd,
-                    &[Transition::color_output_to_copy(views.color_image)],
-                );
-                rec.copy_color_to_buffer(views.color_image, extent, buffer.raw);
-                transition_images(
-                    rec.device,
-                    rec.cmd,
-                    &[to_present((L::TRANSFER_SRC_OPTIMAL, S::COPY, A::NONE))],
-                );
-            }
-            None => transition_images(
-                rec.device,
-                rec.cmd,
-                &[to_present((
-                    L::COLOR_ATTACHMENT_OPTIMAL,
-                    S::COLOR_ATTACHMENT_OUTPUT,
-                    A::COLOR_ATTACHMENT_WRITE,
-                ))],
-            ),
-        }
-        let cmd = rec.finish()?;
-        device.reset_fence(sync.fence)?;
-        device.submit_frame(
-            cmd,
-            sync.image_available,
+        let rec = graphics.commands.begin(slot)?;
+        swapchain.record_begin(&rec, index);
+        graphics
+            .renderer
+            .record(&rec, slot, &views, &self.settings)?;
+        swapchain.record_present(&rec, index, capture_into);
+        rec.submit_frame(
+            &graphics.image_available[slot],
             swapchain.render_finished(index),
-            sync.fence,
         )?;
-        sync.submitted = true;
-        if swapchain.present(device, index)? || suboptimal {
+        if swapchain.present(index)? || suboptimal {
             self.rebuild = true;
         }
         Ok(true)
     }
 
     fn update_title(&mut self, options: &DemoOptions) {
-        let (since, frames) = self.fps_window;
+        let stats = &mut self.stats;
+        let (since, frames) = stats.fps_window;
         let elapsed = since.elapsed().as_secs_f64();
         if elapsed >= 0.5 {
-            self.fps = (self.frame - frames) as f64 / elapsed;
-            self.fps_window = (Instant::now(), self.frame);
+            stats.fps = (stats.frame - frames) as f64 / elapsed;
+            stats.fps_window = (Instant::now(), stats.frame);
         }
-        let gpu = self
+        let gpu = stats
             .last
             .gpu_ms
             .map_or("n/a".into(), |ms| format!("{ms:.1} ms"));
-        let triangles = self
+        let triangles = stats
             .last
             .statistics
             .map_or("n/a".into(), |s| s.clipping_primitives.to_string());
         let mut title = format!(
             "vkterrain | {:?} | {:.1} fps | GPU {gpu} | {triangles} triangles | {}/{} patches",
             self.settings.path,
-            self.fps,
-            self.patches_drawn,
+            stats.fps,
+            stats.patches_drawn,
             options.terrain.grid().patch_count()
         );
-        if self.controller.mode == Mode::Walk {
+        if self.input.controller.mode == Mode::Walk {
             title.push_str(" | walking");
         }
-        if self.frozen.is_some() {
+        if self.input.frozen.is_some() {
             title.push_str(" | culling frozen");
         }
         self.window.set_title(&title);
     }
 
-    /// F12: renders nothing new; copies the image last presented is not
-    /// possible, so the next frame is captured.
+    /// F12: the image last presented cannot be read back, so the next
+    /// frame is drawn and captured.
     fn screenshot(&mut self, path: &std::path::Path, options: &DemoOptions) -> Result<()> {
-        if self.swapchain.is_none() {
+        if self.graphics.swapchain.is_none() {
             bail!("no window contents to capture while minimised");
         }
         if !self.draw(options, true)? {
             return Ok(());
         }
-        self.frame += 1;
-        self.gpu.device.wait_idle()?;
-        let (Some(buffer), Some(swapchain)) = (&self.screenshot_buffer, &self.swapchain) else {
-            bail!("this swapchain's images cannot be read back");
-        };
-        save_swapchain_copy(buffer, swapchain, path)?;
+        self.stats.frame += 1;
+        self.save_screenshot(path)?;
         // The buffer matches one size only; the next capture makes its own.
-        let buffer = self.screenshot_buffer.take().expect("checked above");
-        self.gpu.device.destroy_buffer(buffer);
+        self.graphics.screenshot_buffer = None;
         Ok(())
     }
 
-    /// Waits for the GPU, then destroys everything in reverse creation
-    /// order. The surface goes before the instance (which `gpu` owns).
-    fn shutdown(mut self) -> Result<DemoSummary> {
-        let idle = self.gpu.device.wait_idle();
-        let device = &self.gpu.device;
-        for sync in self.frames.drain(..) {
-            device.destroy_fence(sync.fence);
-            device.destroy_semaphore(sync.image_available);
+    /// Writes the last captured frame, once the GPU has finished it.
+    fn save_screenshot(&self, path: &std::path::Path) -> Result<()> {
+        let graphics = &self.graphics;
+        graphics.gpu.device.wait_idle()?;
+        let (Some(buffer), Some(swapchain)) = (&graphics.screenshot_buffer, &graphics.swapchain)
+        else {
+            bail!("this swapchain's images cannot be read back");
+        };
+        save_swapchain_copy(buffer, swapchain, path)
+    }
+
+    /// Tears the GPU objects down (they free themselves, waiting for the
+    /// GPU first) and reports the run, with validation counted after the
+    /// device is destroyed.
+    fn shutdown(self) -> DemoSummary {
+        let Running {
+            graphics, stats, ..
+        } = self;
+        let device = graphics.gpu.device.caps.device_name.clone();
+        let Graphics {
+            commands,
+            image_available,
+            screenshot_buffer,
+            renderer,
+            swapchain,
+            surface,
+            gpu,
+        } = graphics;
+        // In this order (a tuple drops front to back), before the device.
+        drop((
+            commands,
+            image_available,
+            screenshot_buffer,
+            renderer,
+            swapchain,
+            surface,
+        ));
+        let validation = gpu.shutdown();
+        DemoSummary {
+            frames: stats.frame,
+            seconds: stats.started.elapsed().as_secs_f64(),
+            validation,
+            last: stats.last,
+            device,
+            swapchains_built: stats.swapchains_built,
+            sizes: stats.sizes,
         }
-        if self.pool != vk::CommandPool::null() {
-            device.destroy_command_pool(self.pool);
-        }
-        if let Some(buffer) = self.screenshot_buffer.take() {
-            device.destroy_buffer(buffer);
-        }
-        if let Some(renderer) = self.renderer.take() {
-            renderer.destroy(device);
-        }
-        if let Some(swapchain) = self.swapchain.take() {
-            swapchain.destroy(device);
-        }
-        if let Some(surface) = self.surface.take() {
-            surface.destroy();
-        }
-        idle?;
-        let log = self.gpu.instance.validation_log();
-        Ok(DemoSummary {
-            frames: self.frame,
-            seconds: self.started.elapsed().as_secs_f64(),
-            validation_messages: log.count(),
-            first_messages: log.messages(),
-            last: self.last,
-            device: device.caps.device_name.clone(),
-            swapchains_built: self.swapchains_built,
-            sizes: self.sizes,
-        })
     }
 }
 

@@ -287,12 +287,12 @@ struct PathRenderer {
     bytes: u64,
 }
 
-/// The GPU objects of a run.
+/// The GPU objects of a run; they free themselves when it drops.
 pub struct Bench<'a> {
     gpu: &'a Gpu,
     terrain: &'a Terrain,
     scene_lod: DistanceLod,
-    headless: Option<Headless>,
+    headless: Headless,
     target_bytes: u64,
     renderers: Vec<PathRenderer>,
     /// Untimed samples at the start of each configuration's sequence.
@@ -310,18 +310,17 @@ impl<'a> Bench<'a> {
         width: u32,
         height: u32,
     ) -> anyhow::Result<Self> {
+        let before = gpu.device.memory_in_use();
+        let headless = Headless::new(gpu, width, height)?;
         let mut bench = Bench {
             gpu,
             terrain,
             scene_lod,
-            headless: None,
-            target_bytes: 0,
+            headless,
+            target_bytes: gpu.device.memory_in_use() - before,
             renderers: Vec::new(),
             warm_up: WARM_UP,
         };
-        let before = gpu.device.memory_in_use();
-        bench.headless = Some(Headless::new(gpu, width, height)?);
-        bench.target_bytes = gpu.device.memory_in_use() - before;
         for path in [RenderPath::Brute, RenderPath::Tess, RenderPath::Geomip] {
             if !configs.iter().any(|c| c.render_path() == path) {
                 continue;
@@ -352,14 +351,15 @@ impl<'a> Bench<'a> {
         config: &Config,
         levels: Option<&[u8]>,
     ) -> anyhow::Result<HeadlessFrame> {
-        let (gpu, terrain) = (self.gpu, self.terrain);
+        let terrain = self.terrain;
         let settings = config.settings(self.scene_lod);
-        let headless = self.headless.as_mut().expect("built in new");
         let target = renderer_for(&mut self.renderers, settings.path);
         if settings.path == RenderPath::Geomip {
             target.renderer.set_geomip_levels(terrain, levels)?;
         }
-        Ok(headless.render(gpu, &mut target.renderer, terrain, camera, &settings)?)
+        Ok(self
+            .headless
+            .render(&mut target.renderer, terrain, camera, &settings)?)
     }
 
     /// Renders `config` `repeats` times from `camera`; timings of samples
@@ -622,17 +622,6 @@ impl<'a> Bench<'a> {
             }
         }
         Ok(rows)
-    }
-
-    /// Frees everything; the device's memory in use is back where it was.
-    pub fn destroy(mut self) {
-        let device = &self.gpu.device;
-        if let Some(h) = self.headless.take() {
-            h.destroy(self.gpu);
-        }
-        for r in self.renderers.drain(..) {
-            r.renderer.destroy(device);
-        }
     }
 }
 

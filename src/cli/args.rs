@@ -326,14 +326,26 @@ fn parse_budget(s: &str) -> Result<u64, String> {
 }
 
 impl FeatureArgs {
-    /// Opens the device these options describe.
-    pub fn gpu(&self, validate: bool) -> anyhow::Result<crate::vk::Gpu> {
-        use anyhow::Context;
-        let gpu =
-            crate::vk::Gpu::with_disabled(validate, &self.disabled()).context("starting Vulkan")?;
-        gpu.device.set_memory_budget(self.gpu_memory_budget);
-        gpu.device.set_fault(self.inject_fault);
-        Ok(gpu)
+    /// How to open the device these options describe.
+    pub fn gpu_options(&self, validate: bool) -> crate::vk::GpuOptions {
+        crate::vk::GpuOptions {
+            validate,
+            disabled: self.disabled(),
+            memory_budget: self.gpu_memory_budget,
+            fault: self.inject_fault,
+            ..Default::default()
+        }
+    }
+
+    /// Opens the device, runs `work` with it, then tears it down and counts
+    /// validation messages after the device is destroyed, so leaked
+    /// objects count (see `with_gpu`).
+    pub fn with_gpu<T>(
+        &self,
+        validate: bool,
+        work: impl FnOnce(&crate::vk::Gpu) -> anyhow::Result<T>,
+    ) -> anyhow::Result<(T, crate::vk::ValidationReport)> {
+        with_gpu(&self.gpu_options(validate), work)
     }
 
     pub fn disabled(&self) -> crate::vk::DisabledFeatures {
@@ -391,4 +403,24 @@ pub fn fuzz_parse(text: &str) {
     use clap::Parser;
     let args = std::iter::once("vkterrain").chain(text.split_whitespace());
     let _ = super::Cli::try_parse_from(args);
+}
+
+/// Opens the device, runs `work` with it, then tears it down and counts
+/// validation messages after the device is destroyed, so objects left
+/// alive count too. A run that worked fails if validation reported
+/// anything; a run that failed says so as well, naming its own error.
+pub fn with_gpu<T>(
+    options: &crate::vk::GpuOptions,
+    work: impl FnOnce(&crate::vk::Gpu) -> anyhow::Result<T>,
+) -> anyhow::Result<(T, crate::vk::ValidationReport)> {
+    use anyhow::Context;
+    let gpu = crate::vk::Gpu::open(options).context("starting Vulkan")?;
+    let result = work(&gpu);
+    let report = gpu.shutdown();
+    match (result, report.check()) {
+        (Ok(value), Ok(())) => Ok((value, report)),
+        (Ok(_), Err(validation)) => Err(validation.into()),
+        (Err(e), Ok(())) => Err(e),
+        (Err(e), Err(validation)) => Err(e.context(validation.to_string())),
+    }
 }

@@ -145,61 +145,54 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
-    let gpu = cmd.features.gpu(cmd.validate)?;
-    let tessellation = gpu.device.caps.tessellation_shader;
-    if !tessellation {
-        writeln!(
-            out,
-            "{}: tessellationShader is unavailable, so the tess rows are left out",
-            gpu.device.caps.device_name
-        )?;
-    }
-    let scene_lod = scene.distance_lod(terrain.info());
-    let configs = configs(scene_lod, cmd.quick, tessellation);
-    let options = BenchOptions {
-        width: cmd.size.width,
-        height: cmd.size.height,
-        quick: cmd.quick,
-        flythrough_frames: if cmd.quick || cmd.single_frame {
-            0
-        } else {
-            cmd.frames
-        },
-        single_frame: cmd.single_frame,
-    };
-    let bar = ProgressBar::new(0).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
-    let mut progress = Bar {
-        bar,
-        last_logged: 0,
-    };
-    let mut bench = Bench::new(
-        &gpu,
-        &terrain,
-        scene_lod,
-        &configs,
-        options.width,
-        options.height,
-    )?;
-    let rows = bench.run(&name, &configs, &options, &mut progress);
-    bench.destroy();
-    progress.bar.finish_and_clear();
-    let rows = rows?;
-    let messages = gpu.validation_messages();
-    if messages > 0 {
-        bail!(
-            "the validation layer reported {messages} messages, first: {}",
-            gpu.instance
-                .validation_log()
-                .messages()
-                .first()
-                .map_or("", String::as_str)
-        );
-    }
-
+    // Validation is counted after the device is destroyed, so leaked
+    // objects count.
+    let ((rows, device_name, options), validation) =
+        cmd.features.with_gpu(cmd.validate, |gpu| {
+            let tessellation = gpu.device.caps.tessellation_shader;
+            if !tessellation {
+                writeln!(
+                    out,
+                    "{}: tessellationShader is unavailable, so the tess rows are left out",
+                    gpu.device.caps.device_name
+                )?;
+            }
+            let scene_lod = scene.distance_lod(terrain.info());
+            let configs = configs(scene_lod, cmd.quick, tessellation);
+            let options = BenchOptions {
+                width: cmd.size.width,
+                height: cmd.size.height,
+                quick: cmd.quick,
+                flythrough_frames: if cmd.quick || cmd.single_frame {
+                    0
+                } else {
+                    cmd.frames
+                },
+                single_frame: cmd.single_frame,
+            };
+            let bar = ProgressBar::new(0).with_style(
+                ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}",
+                )
+                .expect("a valid template")
+                .progress_chars("=> "),
+            );
+            let mut progress = Bar {
+                bar,
+                last_logged: 0,
+            };
+            let mut bench = Bench::new(
+                gpu,
+                &terrain,
+                scene_lod,
+                &configs,
+                options.width,
+                options.height,
+            )?;
+            let rows = bench.run(&name, &configs, &options, &mut progress);
+            progress.bar.finish_and_clear();
+            Ok((rows?, gpu.device.caps.device_name.clone(), options))
+        })?;
     let all = report::merge(&cmd.out, rows.clone())?;
     report::write_all(&cmd.out, &all, &notes, cmd.publish.as_deref())?;
     writeln!(
@@ -209,9 +202,9 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         name,
         options.width,
         options.height,
-        gpu.device.caps.device_name,
-        messages,
-        if gpu.instance.validation_enabled() {
+        device_name,
+        validation.count,
+        if validation.enabled {
             ""
         } else {
             " (validation off)"

@@ -90,6 +90,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
     let appearance = Appearance::load(&scene, &info)?;
     let terrain = Terrain::new(info, appearance.y_margin())?;
+    writeln!(out, "{}", app::HELP)?;
     let summary = app::run(DemoOptions {
         terrain,
         appearance,
@@ -102,11 +103,8 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
             PresentModeArg::Mailbox => vk::PresentModeKHR::MAILBOX,
             PresentModeArg::Immediate => vk::PresentModeKHR::IMMEDIATE,
         },
-        validate: cmd.validate,
+        gpu: cmd.view.features.gpu_options(cmd.validate),
         walk_height: cmd.walk_height,
-        disabled: cmd.view.features.disabled(),
-        memory_budget: cmd.view.features.gpu_memory_budget,
-        fault: cmd.view.features.inject_fault,
         frames: cmd.frames,
         resize_at: cmd.resize_at,
         resize_storm: cmd.resize_storm,
@@ -124,7 +122,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
             .last
             .statistics
             .map_or("n/a".into(), |s| s.clipping_primitives.to_string()),
-        summary.validation_messages,
+        summary.validation.count,
     )?;
     let sizes: Vec<String> = summary
         .sizes
@@ -140,13 +138,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     if let Some(path) = &cmd.screenshot {
         writeln!(out, "wrote {}", path.display())?;
     }
-    if summary.validation_messages > 0 {
-        bail!(
-            "the validation layer reported {} messages, first: {}",
-            summary.validation_messages,
-            summary.first_messages.first().map_or("", String::as_str)
-        );
-    }
+    summary.validation.check()?;
     Ok(())
 }
 

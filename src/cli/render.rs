@@ -361,14 +361,14 @@ pub fn resident_bytes() -> Option<u64> {
 pub struct RenderOutput {
     pub frame: HeadlessFrame,
     pub stats: FrameStats,
-    pub validation_log: Vec<String>,
     /// What changed from what was asked for, and why (fallbacks).
     pub notes: Vec<String>,
 }
 
-/// Renders one frame of `scene` headless: builds the GPU objects, draws,
-/// reads back, and tears everything down again.
-/// Renders `scene` with the settings `view` gives for its terrain.
+/// Renders one frame of `scene` headless, with the settings `view` gives
+/// for its terrain: builds the GPU objects, draws, reads back, and tears
+/// everything down again, counting validation messages after the device
+/// is destroyed (any fails the render).
 pub fn render_scene(
     scene: &Scene,
     view: &ViewArgs,
@@ -389,91 +389,86 @@ pub fn render_scene(
     let started = std::time::Instant::now();
     let terrain = Terrain::new(info, appearance.y_margin())?;
     let bounds_ms = ms(started);
-    let gpu = features.gpu(validate)?;
-    let mut notes = Vec::new();
-    let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
-    let caps = &gpu.device.caps;
-    if !caps.pipeline_statistics_query {
-        notes.push(format!(
-            "{}: pipelineStatisticsQuery is unavailable, so triangle counts are not measured",
-            caps.device_name
-        ));
-    }
-    if caps.timestamp_period_ns.is_none() {
-        notes.push(format!(
-            "{}: timestamp queries are unavailable, so GPU time is not measured",
-            caps.device_name
-        ));
-    }
-    let started = std::time::Instant::now();
-    let mut renderer = TerrainRenderer::with_appearance(
-        &gpu,
-        &terrain,
-        &appearance,
-        OFFSCREEN_COLOR_FORMAT,
-        1,
-        &RendererOptions {
-            paths: vec![settings.path],
-            wireframe: settings.wireframe,
-        },
-    )
-    .context("preparing the terrain for the GPU")?;
-    let error_table_ms = renderer.error_table_ms();
-    let gpu_setup_ms = ms(started) - error_table_ms;
-    let mut headless = match Headless::new(&gpu, width, height) {
-        Ok(h) => h,
-        Err(e) => {
-            renderer.destroy(&gpu.device);
-            return Err(e).context("creating the offscreen target");
+    let ((frame, mut stats, notes), validation) = features.with_gpu(validate, |gpu| {
+        let mut notes = Vec::new();
+        let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
+        let caps = &gpu.device.caps;
+        if !caps.pipeline_statistics_query {
+            notes.push(format!(
+                "{}: pipelineStatisticsQuery is unavailable, so triangle counts are not measured",
+                caps.device_name
+            ));
         }
-    };
-    let frame = headless.render(&gpu, &mut renderer, &terrain, &camera, settings);
-    let predicted_max_px = renderer.predicted_max_px();
-    // Memory is reported while everything is still allocated.
-    let gpu_memory: BTreeMap<String, u64> = gpu.device.memory_report().into_iter().collect();
-    headless.destroy(&gpu);
-    renderer.destroy(&gpu.device);
-    let frame = frame.context("rendering")?;
-    let caps: &Capabilities = &gpu.device.caps;
-    let statistics = frame.measurements.statistics;
-    let stats = FrameStats {
-        device: caps.device_name.clone(),
-        driver: format!("{} ({})", caps.driver_name, caps.driver_info),
-        path: settings.path,
-        lod: settings.lod_metric,
-        width,
-        height,
-        patches_total: terrain.grid().patch_count(),
-        patches_in_frustum: frame.patches_in_frustum,
-        tcs_patches: statistics.map(|s| s.tcs_patches),
-        tes_invocations: statistics.map(|s| s.tes_invocations),
-        triangles: statistics.map(|s| s.clipping_primitives),
-        vertex_invocations: statistics.map(|s| s.vertex_invocations),
-        clipping_invocations: statistics.map(|s| s.clipping_invocations),
-        gpu_ms: frame.measurements.gpu_ms,
-        predicted_max_px,
-        cpu_ms: frame.cpu_ms,
-        gpu_memory_bytes: gpu_memory.values().sum(),
-        gpu_memory,
-        validation_enabled: gpu.instance.validation_enabled(),
-        validation_messages: gpu.validation_messages(),
-        eye: camera.eye.to_array(),
-        target: camera.target.to_array(),
-        fov_deg: camera.fov_y_deg,
-        startup: StartupStats {
-            load_ms,
-            material_ms,
-            bounds_ms,
-            error_table_ms,
-            gpu_setup_ms,
-            resident_bytes: resident_bytes().unwrap_or(0),
-        },
-    };
-    let validation_log = gpu.instance.validation_log().messages();
+        if caps.timestamp_period_ns.is_none() {
+            notes.push(format!(
+                "{}: timestamp queries are unavailable, so GPU time is not measured",
+                caps.device_name
+            ));
+        }
+        let started = std::time::Instant::now();
+        let mut renderer = TerrainRenderer::with_appearance(
+            gpu,
+            &terrain,
+            &appearance,
+            OFFSCREEN_COLOR_FORMAT,
+            1,
+            &RendererOptions {
+                paths: vec![settings.path],
+                wireframe: settings.wireframe,
+            },
+        )
+        .context("preparing the terrain for the GPU")?;
+        let error_table_ms = renderer.error_table_ms();
+        let gpu_setup_ms = ms(started) - error_table_ms;
+        let mut headless =
+            Headless::new(gpu, width, height).context("creating the offscreen target")?;
+        let frame = headless
+            .render(&mut renderer, &terrain, &camera, settings)
+            .context("rendering")?;
+        // Memory is reported while everything is still allocated.
+        let gpu_memory: BTreeMap<String, u64> = gpu.device.memory_report().into_iter().collect();
+        let statistics = frame.measurements.statistics;
+        let stats = FrameStats {
+            device: caps.device_name.clone(),
+            driver: format!("{} ({})", caps.driver_name, caps.driver_info),
+            path: settings.path,
+            lod: settings.lod_metric,
+            width,
+            height,
+            patches_total: terrain.grid().patch_count(),
+            patches_in_frustum: frame.patches_in_frustum,
+            tcs_patches: statistics.map(|s| s.tcs_patches),
+            tes_invocations: statistics.map(|s| s.tes_invocations),
+            triangles: statistics.map(|s| s.clipping_primitives),
+            vertex_invocations: statistics.map(|s| s.vertex_invocations),
+            clipping_invocations: statistics.map(|s| s.clipping_invocations),
+            gpu_ms: frame.measurements.gpu_ms,
+            predicted_max_px: renderer.predicted_max_px(),
+            cpu_ms: frame.cpu_ms,
+            gpu_memory_bytes: gpu_memory.values().sum(),
+            gpu_memory,
+            // Set from the report once the device is gone.
+            validation_enabled: false,
+            validation_messages: 0,
+            eye: camera.eye.to_array(),
+            target: camera.target.to_array(),
+            fov_deg: camera.fov_y_deg,
+            startup: StartupStats {
+                load_ms,
+                material_ms,
+                bounds_ms,
+                error_table_ms,
+                gpu_setup_ms,
+                resident_bytes: resident_bytes().unwrap_or(0),
+            },
+        };
+        Ok((frame, stats, notes))
+    })?;
+    stats.validation_enabled = validation.enabled;
+    stats.validation_messages = validation.count;
     Ok(RenderOutput {
         frame,
         stats,
-        validation_log,
         notes,
     })
 }
@@ -515,13 +510,6 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         s.cpu_ms,
         s.validation_messages,
     )?;
-    if s.validation_messages > 0 {
-        bail!(
-            "the validation layer reported {} messages, first: {}",
-            s.validation_messages,
-            output.validation_log.first().map_or("", String::as_str)
-        );
-    }
     Ok(())
 }
 
@@ -547,8 +535,10 @@ struct InfoReport<'a> {
 }
 
 pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
-    let gpu = cmd.features.gpu(cmd.validate)?;
-    let caps = &gpu.device.caps;
+    let ((caps, validation), _) = cmd.features.with_gpu(cmd.validate, |gpu| {
+        Ok((gpu.device.caps.clone(), gpu.validation_enabled()))
+    })?;
+    let caps = &caps;
     let optional = [
         (
             "tessellationShader (the tess path; geomip otherwise)",
@@ -572,7 +562,7 @@ pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
         device: caps,
         used,
         missing,
-        validation: gpu.instance.validation_enabled(),
+        validation,
     };
     serde_json::to_writer_pretty(&mut *out, &report)?;
     writeln!(out)?;

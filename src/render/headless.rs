@@ -3,14 +3,13 @@
 
 use std::time::Instant;
 
-use ash::vk;
-
 use super::renderer::{FrameMeasurements, TerrainRenderer};
 use super::uniforms::{FrameView, RenderSettings};
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
+use crate::vk::commands::CommandSlots;
 use crate::vk::target::{OffscreenTarget, Readback};
-use crate::vk::{Gpu, Result};
+use crate::vk::{Device, Gpu, Result};
 
 /// One rendered frame.
 pub struct HeadlessFrame {
@@ -34,79 +33,57 @@ impl HeadlessFrame {
     }
 }
 
+/// An offscreen target and the command buffer that draws into it. Dropping
+/// it waits for the device to go idle first.
 pub struct Headless {
+    commands: CommandSlots,
     target: OffscreenTarget,
-    pool: vk::CommandPool,
-    cmd: vk::CommandBuffer,
-    fence: vk::Fence,
+    device: Device,
 }
 
 impl Headless {
     pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
         let device = &gpu.device;
-        let target = OffscreenTarget::new(device, &gpu.instance, width, height)?;
-        let pool = match device.create_command_pool("headless.command_pool") {
-            Ok(p) => p,
-            Err(e) => {
-                target.destroy(device);
-                return Err(e);
-            }
-        };
-        let rest = device
-            .allocate_command_buffers(pool, 1, "headless.commands")
-            .and_then(|cmds| Ok((cmds[0], device.create_fence("headless.fence", false)?)));
-        match rest {
-            Ok((cmd, fence)) => Ok(Headless {
-                target,
-                pool,
-                cmd,
-                fence,
-            }),
-            Err(e) => {
-                device.destroy_command_pool(pool);
-                target.destroy(device);
-                Err(e)
-            }
-        }
+        Ok(Headless {
+            target: OffscreenTarget::new(device, width, height)?,
+            commands: device.create_command_slots(1, "headless.commands")?,
+            device: device.clone(),
+        })
     }
 
     /// Renders `terrain` from `camera` and waits for the result.
     pub fn render(
         &mut self,
-        gpu: &Gpu,
         renderer: &mut TerrainRenderer,
         terrain: &Terrain,
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<HeadlessFrame> {
-        let device = &gpu.device;
         let start = Instant::now();
         let views = self.target.views();
         let view = FrameView::new(terrain, camera, views.extent.width, views.extent.height);
         let patches_in_frustum = view.patches_in_frustum(terrain);
+        // The one slot's last frame has completed: `render` waits for it.
         renderer.prepare(0, terrain, &view, settings)?;
-        let rec = device.begin_commands(self.cmd)?;
-        self.target.record_begin(rec.device, rec.cmd);
+        let rec = self.commands.begin(0)?;
+        self.target.record_begin(&rec);
         renderer.record(&rec, 0, &views, settings)?;
         self.target.record_readback(&rec);
-        let cmd = rec.finish()?;
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
-        device.reset_fence(self.fence)?;
-        device.submit(cmd, self.fence)?;
-        device.wait_fence(self.fence)?;
+        rec.submit_and_wait()?;
         Ok(HeadlessFrame {
             readback: self.target.read()?,
-            measurements: renderer.measurements(device, 0)?,
+            measurements: renderer.measurements(0)?,
             cpu_ms,
             view,
             patches_in_frustum,
         })
     }
+}
 
-    pub fn destroy(self, gpu: &Gpu) {
-        let device = &gpu.device;
-        device.destroy_fence(self.fence);
-        device.destroy_command_pool(self.pool);
-        self.target.destroy(device);
+impl Drop for Headless {
+    fn drop(&mut self) {
+        // A failed frame may have left work in flight.
+        let _ = self.device.wait_idle();
     }
 }

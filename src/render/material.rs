@@ -14,7 +14,9 @@ use crate::shader_constants::{
     BINDING_MATERIAL, BINDING_NORMAL_MAPS, MAX_LAYERS, SPEC_BLEND_MAP_COUNT, SPEC_LAYER_COUNT,
 };
 use crate::terrain::TerrainInfo;
+use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::{Buffer, Image, TexelUpload};
+use crate::vk::owned::Sampler;
 use crate::vk::{Device, Result, VkError};
 
 const _: () = assert!(MAX_LAYERS as usize == crate::terrain::shading::MAX_LAYERS);
@@ -172,9 +174,9 @@ pub struct GpuAppearance {
     blend_maps: Option<Image>,
     lightmap: Option<Image>,
     /// Repeating, for layer textures.
-    tiling: Option<vk::Sampler>,
+    tiling: Option<Sampler>,
     /// Clamped, for maps stretched over the terrain.
-    stretched: Option<vk::Sampler>,
+    stretched: Option<Sampler>,
 }
 
 fn vk_format(format: TexelFormat) -> vk::Format {
@@ -201,38 +203,22 @@ impl GpuAppearance {
         }
     }
 
-    /// Uploads what `appearance` holds. On failure everything created so
-    /// far is freed.
-    pub fn new(
-        device: &Device,
-        instance: &crate::vk::Instance,
-        appearance: &Appearance,
-        info: &TerrainInfo,
-    ) -> Result<Self> {
+    /// Uploads what `appearance` holds. On failure what was created so far
+    /// frees itself.
+    pub fn new(device: &Device, appearance: &Appearance, info: &TerrainInfo) -> Result<Self> {
         let mut gpu = GpuAppearance::none();
         gpu.variant = ShaderVariant::of(appearance);
-        match gpu.fill(device, instance, appearance, info) {
-            Ok(()) => Ok(gpu),
-            Err(e) => {
-                gpu.destroy(device);
-                Err(e)
-            }
-        }
+        gpu.fill(device, appearance, info)?;
+        Ok(gpu)
     }
 
-    fn fill(
-        &mut self,
-        device: &Device,
-        instance: &crate::vk::Instance,
-        appearance: &Appearance,
-        info: &TerrainInfo,
-    ) -> Result<()> {
+    fn fill(&mut self, device: &Device, appearance: &Appearance, info: &TerrainInfo) -> Result<()> {
         let upload = |name: &str, t: &TextureArray| -> Result<Image> {
             let format = vk_format(t.format);
             let needed = vk::FormatFeatureFlags::SAMPLED_IMAGE
                 | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR
                 | vk::FormatFeatureFlags::TRANSFER_DST;
-            let has = device.format_features(instance, format);
+            let has = device.format_features(format);
             if !has.contains(needed) {
                 return Err(VkError::Unsupported(format!(
                     "{} cannot filter {format:?} textures ({has:?})",
@@ -327,47 +313,26 @@ impl GpuAppearance {
     }
 
     /// Points `set`'s bindings (from `bindings`) at the objects.
-    pub fn write(&self, device: &Device, set: vk::DescriptorSet) {
+    pub fn write(&self, device: &Device, set: DescriptorSet) {
         if let Some(u) = &self.uniforms {
             device.write_buffer(
                 set,
                 BINDING_MATERIAL,
                 vk::DescriptorType::UNIFORM_BUFFER,
-                u.raw,
+                u,
                 u.desc.size,
             );
         }
         for (image, binding, sampler) in [
-            (&self.diffuse, BINDING_DIFFUSE_MAPS, self.tiling),
-            (&self.normals, BINDING_NORMAL_MAPS, self.tiling),
-            (&self.heights, BINDING_HEIGHT_MAPS, self.tiling),
-            (&self.blend_maps, BINDING_BLEND_MAPS, self.stretched),
-            (&self.lightmap, BINDING_LIGHTMAP, self.stretched),
+            (&self.diffuse, BINDING_DIFFUSE_MAPS, &self.tiling),
+            (&self.normals, BINDING_NORMAL_MAPS, &self.tiling),
+            (&self.heights, BINDING_HEIGHT_MAPS, &self.tiling),
+            (&self.blend_maps, BINDING_BLEND_MAPS, &self.stretched),
+            (&self.lightmap, BINDING_LIGHTMAP, &self.stretched),
         ] {
             if let (Some(image), Some(sampler)) = (image, sampler) {
-                device.write_sampled_image(set, binding, image.view, sampler);
+                device.write_sampled_image(set, binding, image, sampler);
             }
-        }
-    }
-
-    pub fn destroy(self, device: &Device) {
-        if let Some(u) = self.uniforms {
-            device.destroy_buffer(u);
-        }
-        for image in [
-            self.diffuse,
-            self.normals,
-            self.heights,
-            self.blend_maps,
-            self.lightmap,
-        ]
-        .into_iter()
-        .flatten()
-        {
-            device.destroy_image(image);
-        }
-        for sampler in [self.tiling, self.stretched].into_iter().flatten() {
-            device.destroy_sampler(sampler);
         }
     }
 }

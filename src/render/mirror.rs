@@ -129,9 +129,9 @@ pub fn run_mirror_check(
         ],
         "mirror.set_layout",
     )?;
-    let layout = device.create_pipeline_layout(&[set_layout], "mirror.pipeline_layout")?;
-    let (pool, sets) = device.allocate_descriptor_sets(
-        set_layout,
+    let layout = device.create_pipeline_layout(&[&set_layout], "mirror.pipeline_layout")?;
+    let sets = device.allocate_descriptor_sets(
+        &set_layout,
         &[
             (vk::DescriptorType::UNIFORM_BUFFER, 1),
             (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
@@ -140,71 +140,51 @@ pub fn run_mirror_check(
         1,
         "mirror.set",
     )?;
-    let set = sets[0];
+    let set = sets.get(0);
     device.write_buffer(
         set,
         BINDING_FRAME,
         vk::DescriptorType::UNIFORM_BUFFER,
-        frame.raw,
+        &frame,
         size_of::<FrameUniforms>() as u64,
     );
-    device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap.view, sampler);
+    device.write_sampled_image(set, BINDING_HEIGHTMAP, &heightmap, &sampler);
     device.write_buffer(
         set,
         BINDING_MIRROR_CASES,
         vk::DescriptorType::STORAGE_BUFFER,
-        input.raw,
+        &input,
         (inputs.len() * 16) as u64,
     );
     device.write_buffer(
         set,
         BINDING_MIRROR_RESULTS,
         vk::DescriptorType::STORAGE_BUFFER,
-        output.raw,
+        &output,
         results_size,
     );
     let pipeline =
-        device.create_compute_pipeline(shaders::mirror_check_comp(), layout, "mirror.pipeline");
-
-    let ran = pipeline.and_then(|pipeline| {
-        let groups = (cases.len() as u32).div_ceil(LOCAL_SIZE);
-        let done = device.one_shot("mirror.commands", |cmd| {
-            let rec = crate::vk::commands::Recorder {
-                device: &device.raw,
-                cmd,
-            };
-            rec.dispatch_for_host(pipeline, layout, set, groups);
-        });
-        device.destroy_pipeline(pipeline);
-        done
-    });
-    let results = ran.and_then(|()| {
-        let bytes = output
-            .mapped()
-            .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
-        let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
-        Ok(values
-            .chunks_exact(3)
-            .map(|v| MirrorResult {
-                tess_factor: v[0][0],
-                outside_frustum: v[0][1] != 0.0,
-                height: v[0][2],
-                error_tess_factor: v[0][3],
-                box_distance: v[1][0],
-                edge_distance: v[1][1],
-                sphere_tess_factor: v[2][0],
-                edge_length_tess_factor: v[2][1],
-                cdlod_tess_factor: v[2][2],
-            })
-            .collect())
-    });
-    device.destroy_pipeline_layout(layout);
-    device.destroy_descriptor_pool(pool);
-    device.destroy_descriptor_set_layout(set_layout);
-    device.destroy_buffer(output);
-    device.destroy_buffer(input);
-    device.destroy_buffer(frame);
-    device.destroy_sampler(sampler);
-    device.destroy_image(heightmap);
-    results
+        device.create_compute_pipeline(shaders::mirror_check_comp(), &layout, "mirror.pipeline")?;
+    let groups = (cases.len() as u32).div_ceil(LOCAL_SIZE);
+    device.one_shot("mirror.commands", |rec| {
+        rec.dispatch_for_host(&pipeline, &layout, set, groups);
+    })?;
+    let bytes = output
+        .mapped()
+        .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
+    let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
+    Ok(values
+        .chunks_exact(3)
+        .map(|v| MirrorResult {
+            tess_factor: v[0][0],
+            outside_frustum: v[0][1] != 0.0,
+            height: v[0][2],
+            error_tess_factor: v[0][3],
+            box_distance: v[1][0],
+            edge_distance: v[1][1],
+            sphere_tess_factor: v[2][0],
+            edge_length_tess_factor: v[2][1],
+            cdlod_tess_factor: v[2][2],
+        })
+        .collect())
 }

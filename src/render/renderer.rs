@@ -31,7 +31,9 @@ use crate::shader_constants::{
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
 use crate::terrain::{geomip, ErrorTable, Terrain};
 use crate::vk::commands::Recorder;
+use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
 use crate::vk::memory::{Buffer, Image};
+use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::pipeline::GraphicsPipelineDesc;
 use crate::vk::queries::{FrameQueries, PipelineStatistics};
 use crate::vk::target::{TargetViews, DEPTH_FORMAT};
@@ -41,7 +43,7 @@ use crate::vk::{Device, Gpu, Result, VkError};
 /// so a frame still on the GPU keeps its own.
 struct FrameSlot {
     uniforms: Buffer,
-    set: vk::DescriptorSet,
+    set: DescriptorSet,
     queries: FrameQueries,
     /// The tess path's full-resolution patches, one bit each (error LOD).
     full_resolution: Option<Buffer>,
@@ -99,24 +101,18 @@ pub struct RendererOptions {
 
 /// Fill and (when asked for) wireframe pipelines of one path.
 struct PathPipelines {
-    fill: vk::Pipeline,
-    wireframe: Option<vk::Pipeline>,
+    fill: Pipeline,
+    wireframe: Option<Pipeline>,
 }
 
 impl PathPipelines {
-    fn select(&self, wireframe: bool) -> Result<vk::Pipeline> {
+    fn select(&self, wireframe: bool) -> Result<&Pipeline> {
         if !wireframe {
-            return Ok(self.fill);
+            return Ok(&self.fill);
         }
-        self.wireframe.ok_or_else(|| {
+        self.wireframe.as_ref().ok_or_else(|| {
             VkError::Unsupported("the wireframe pipeline was not built for this renderer".into())
         })
-    }
-
-    fn destroy(self, device: &Device) {
-        for pipeline in std::iter::once(self.fill).chain(self.wireframe) {
-            device.destroy_pipeline(pipeline);
-        }
     }
 }
 
@@ -143,9 +139,9 @@ struct GeomipGeometry {
     /// patch size (cells x, z) the grid has: remainder patches at the far
     /// edges draw only their own cells.
     full_resolution: Vec<([usize; 2], (u32, u32))>,
-    /// The shared layout plus the per-patch push constants.
-    layout: vk::PipelineLayout,
     pipelines: PathPipelines,
+    /// The shared layout plus the per-patch push constants.
+    layout: PipelineLayout,
     /// This frame's visible patches.
     draws: Vec<GeomipDraw>,
     /// Per-patch errors of each level, for choosing levels by projected error.
@@ -180,23 +176,28 @@ struct BruteGeometry {
     pipelines: PathPipelines,
 }
 
-/// Draws a terrain into any target, by the paths it was built for.
+/// Draws a terrain into any target, by the paths it was built for. Its
+/// Vulkan objects free themselves; dropping it first waits for the device
+/// to go idle, so no submitted frame still uses them. Fields drop in
+/// declaration order: the users of the descriptor sets and layouts before
+/// them.
 pub struct TerrainRenderer {
-    heightmap: Image,
-    /// Material layers, blend maps and lightmap, as the scene needs.
-    appearance: GpuAppearance,
-    sampler: vk::Sampler,
-    set_layout: vk::DescriptorSetLayout,
-    pipeline_layout: vk::PipelineLayout,
-    descriptor_pool: vk::DescriptorPool,
+    frames: Vec<FrameSlot>,
     tess: Option<TessGeometry>,
     geomip: Option<GeomipGeometry>,
     brute: Option<BruteGeometry>,
     /// Per-patch errors for the tess path's error-bounded factors.
     error_table: Option<Buffer>,
+    sets: DescriptorSets,
+    pipeline_layout: PipelineLayout,
+    set_layout: DescriptorSetLayout,
+    heightmap: Image,
+    sampler: Sampler,
+    /// Material layers, blend maps and lightmap, as the scene needs.
+    appearance: GpuAppearance,
+    device: Device,
     color_format: vk::Format,
     max_patches_per_draw: Option<u32>,
-    frames: Vec<FrameSlot>,
     /// Milliseconds spent computing the error table in `new` (0 when no
     /// path needs it).
     error_table_ms: f64,
@@ -244,255 +245,152 @@ impl TerrainRenderer {
         options: &RendererOptions,
     ) -> Result<Self> {
         let device = &gpu.device;
-        let info = terrain.info();
-        let (cols, rows) = (info.cols() as u32, info.rows() as u32);
-        let limit = device.caps.max_image_dimension_2d;
-        if cols > limit || rows > limit {
-            return Err(VkError::Unsupported(format!(
-                "heightmap of {cols}x{rows} samples exceeds this device's largest image ({limit}x{limit})"
-            )));
-        }
-        let features = device.format_features(&gpu.instance, vk::Format::R32_SFLOAT);
-        if !features
-            .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::TRANSFER_DST)
-        {
-            return Err(VkError::Unsupported(format!(
-                "{} cannot sample R32_SFLOAT images ({features:?})",
-                device.caps.device_name
-            )));
-        }
-        if options.wireframe && !device.caps.fill_mode_non_solid {
-            return Err(VkError::Unsupported(format!(
-                "wireframe needs fillModeNonSolid, which {} lacks",
-                device.caps.device_name
-            )));
-        }
+        check_device(device, terrain, options)?;
         let wants = |path| options.paths.contains(&path);
-        if wants(RenderPath::Tess) && !device.caps.tessellation_shader {
-            return Err(VkError::Unsupported(format!(
-                "the tess path needs tessellationShader, which {} lacks",
-                device.caps.device_name
-            )));
-        }
-        // Brute draws 6 vertices per cell, counted by a signed index in GLSL.
-        let brute_vertices = 6 * u64::from(cols - 1) * u64::from(rows - 1);
-        if wants(RenderPath::Brute) && brute_vertices > i32::MAX as u64 {
-            return Err(VkError::Unsupported(format!(
-                "the brute path draws {brute_vertices} vertices for {cols}x{rows} samples, over the {} one draw can address",
-                i32::MAX
-            )));
-        }
-
+        let info = terrain.info();
         let heightmap = device.upload_r32f_image(
             "terrain.heightmap",
-            cols,
-            rows,
+            info.cols() as u32,
+            info.rows() as u32,
             info.heightmap().heights(),
         )?;
-        let sampler = match device.create_nearest_sampler("terrain.heightmap_sampler") {
-            Ok(s) => s,
-            Err(e) => {
-                device.destroy_image(heightmap);
-                return Err(e);
-            }
-        };
-        let gpu_appearance = match GpuAppearance::new(device, &gpu.instance, appearance, info) {
-            Ok(a) => a,
-            Err(e) => {
-                device.destroy_sampler(sampler);
-                device.destroy_image(heightmap);
-                return Err(e);
-            }
-        };
-        let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
-        if wants(RenderPath::Tess) {
-            stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
-                | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
-        }
-        let mut bindings = vec![
-            (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
-            (
-                BINDING_HEIGHTMAP,
-                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                stages,
-            ),
-        ];
-        let mut pool_sizes = vec![
-            (vk::DescriptorType::UNIFORM_BUFFER, 1),
-            (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
-        ];
+        let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
+        let appearance = GpuAppearance::new(device, appearance, info)?;
+        let layout = DescriptorPlan::new(options, &appearance);
+        let set_layout =
+            device.create_descriptor_set_layout(&layout.bindings, "terrain.set_layout")?;
+        let pipeline_layout =
+            device.create_pipeline_layout(&[&set_layout], "terrain.pipeline_layout")?;
+        let sets = device.allocate_descriptor_sets(
+            &set_layout,
+            &layout.pool_sizes,
+            frames_in_flight,
+            "terrain.frame_set",
+        )?;
         // The tess path's error-bounded factors read the per-patch error
         // table (7 floats a patch); the geomip path's error LOD has its own,
-        // for its fixed diagonal. Both come from one pass.
+        // for its fixed diagonal. Both come from one pass, kept by the
+        // terrain.
         let table_start = std::time::Instant::now();
         let tables =
             (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_tables());
-        let (table, geomip_table) = tables.unzip();
         let error_table_ms = table_start.elapsed().as_secs_f64() * 1e3;
-        if wants(RenderPath::Tess) {
-            for binding in [BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION] {
-                bindings.push((
-                    binding,
-                    vk::DescriptorType::STORAGE_BUFFER,
-                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
-                ));
-            }
-            pool_sizes.push((vk::DescriptorType::STORAGE_BUFFER, 2));
-        }
-        let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
-        for binding in gpu_appearance.bindings(vertex_stages) {
-            pool_sizes.push((binding.1, 1));
-            bindings.push(binding);
-        }
-        // Null handles until made; destroying a null handle does nothing,
-        // so a failure part-way tears down exactly what was built.
+        let error_table = match (wants(RenderPath::Tess), tables) {
+            (true, Some((table, _))) => Some(device.upload_buffer(
+                "terrain.error_table",
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytemuck::cast_slice(table.as_slice()),
+            )?),
+            _ => None,
+        };
         let mut renderer = TerrainRenderer {
-            heightmap,
-            appearance: gpu_appearance,
-            sampler,
-            set_layout: vk::DescriptorSetLayout::null(),
-            pipeline_layout: vk::PipelineLayout::null(),
-            descriptor_pool: vk::DescriptorPool::null(),
+            frames: Vec::new(),
             tess: None,
             geomip: None,
             brute: None,
-            error_table: None,
+            error_table,
+            sets,
+            pipeline_layout,
+            set_layout,
+            heightmap,
+            sampler,
+            appearance,
+            device: device.clone(),
             color_format,
             max_patches_per_draw: device.caps.max_patches_per_draw,
-            frames: Vec::new(),
             error_table_ms,
             predicted_max_px: None,
         };
-        let built = (|| {
-            if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
-                renderer.error_table = Some(device.upload_buffer(
-                    "terrain.error_table",
-                    vk::BufferUsageFlags::STORAGE_BUFFER,
-                    bytemuck::cast_slice(table.as_slice()),
-                )?);
-            }
-            renderer.set_layout =
-                device.create_descriptor_set_layout(&bindings, "terrain.set_layout")?;
-            renderer.pipeline_layout =
-                device.create_pipeline_layout(&[renderer.set_layout], "terrain.pipeline_layout")?;
-            let (descriptor_pool, sets) = device.allocate_descriptor_sets(
-                renderer.set_layout,
-                &pool_sizes,
-                frames_in_flight,
-                "terrain.frame_set",
+        renderer.frames = renderer.build_frames(terrain)?;
+        if let (true, Some((table, _))) = (wants(RenderPath::Tess), tables) {
+            renderer.tess = Some(build_tess(
+                &renderer,
+                terrain,
+                table.clone(),
+                options.wireframe,
+            )?);
+        }
+        // The tess path draws its full-resolution patches with geomip's
+        // level 0.
+        let geomip_needed = wants(RenderPath::Geomip) || wants(RenderPath::Tess);
+        if let (true, Some((_, table))) = (geomip_needed, tables) {
+            renderer.geomip = Some(build_geomip(
+                &renderer,
+                terrain,
+                table.clone(),
+                options.wireframe,
+            )?);
+        }
+        if wants(RenderPath::Brute) {
+            renderer.brute = Some(BruteGeometry {
+                vertex_count: brute_vertex_count(terrain) as u32,
+                pipelines: build_pipelines(
+                    &renderer,
+                    &renderer.pipeline_layout,
+                    (RenderPath::Brute, false),
+                    options.wireframe,
+                )?,
+            });
+        }
+        Ok(renderer)
+    }
+
+    /// One uniform block, query set and (error LOD) full-resolution bit
+    /// buffer per descriptor set, with the set written.
+    fn build_frames(&self, terrain: &Terrain) -> Result<Vec<FrameSlot>> {
+        let device = &self.device;
+        let mut frames = Vec::new();
+        for (i, set) in self.sets.iter().enumerate() {
+            let uniforms = device.create_host_buffer(
+                &format!("terrain.frame_uniforms[{i}]"),
+                vk::BufferUsageFlags::UNIFORM_BUFFER,
+                bytemuck::bytes_of(&FrameUniforms::default()),
             )?;
-            renderer.descriptor_pool = descriptor_pool;
-            for (i, set) in sets.into_iter().enumerate() {
-                let uniforms = device.create_host_buffer(
-                    &format!("terrain.frame_uniforms[{i}]"),
-                    vk::BufferUsageFlags::UNIFORM_BUFFER,
-                    bytemuck::bytes_of(&FrameUniforms::default()),
-                )?;
-                let queries =
-                    match FrameQueries::new(device, &format!("terrain.frame_queries[{i}]")) {
-                        Ok(q) => q,
-                        Err(e) => {
-                            device.destroy_buffer(uniforms);
-                            return Err(e);
-                        }
-                    };
-                let full_resolution = if renderer.error_table.is_some() {
+            let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
+            let full_resolution = match &self.error_table {
+                Some(_) => {
                     let words = terrain.grid().patch_count().div_ceil(32).max(1);
-                    match device.create_host_buffer(
+                    Some(device.create_host_buffer(
                         &format!("terrain.full_resolution[{i}]"),
                         vk::BufferUsageFlags::STORAGE_BUFFER,
                         bytemuck::cast_slice(&vec![0u32; words]),
-                    ) {
-                        Ok(b) => Some(b),
-                        Err(e) => {
-                            device.destroy_buffer(uniforms);
-                            queries.destroy(&device.raw);
-                            return Err(e);
-                        }
-                    }
-                } else {
-                    None
-                };
-                device.write_buffer(
-                    set,
-                    BINDING_FRAME,
-                    vk::DescriptorType::UNIFORM_BUFFER,
-                    uniforms.raw,
-                    size_of::<FrameUniforms>() as u64,
-                );
-                device.write_sampled_image(
-                    set,
-                    BINDING_HEIGHTMAP,
-                    renderer.heightmap.view,
-                    renderer.sampler,
-                );
-                renderer.appearance.write(device, set);
-                if let Some(errors) = &renderer.error_table {
+                    )?)
+                }
+                None => None,
+            };
+            device.write_buffer(
+                set,
+                BINDING_FRAME,
+                vk::DescriptorType::UNIFORM_BUFFER,
+                &uniforms,
+                size_of::<FrameUniforms>() as u64,
+            );
+            device.write_sampled_image(set, BINDING_HEIGHTMAP, &self.heightmap, &self.sampler);
+            self.appearance.write(device, set);
+            let storage = [
+                (BINDING_ERROR_TABLE, self.error_table.as_ref()),
+                (BINDING_FULL_RESOLUTION, full_resolution.as_ref()),
+            ];
+            for (binding, buffer) in storage {
+                if let Some(buffer) = buffer {
+                    let size = buffer.desc.size;
                     device.write_buffer(
                         set,
-                        BINDING_ERROR_TABLE,
+                        binding,
                         vk::DescriptorType::STORAGE_BUFFER,
-                        errors.raw,
-                        errors.desc.size,
+                        buffer,
+                        size,
                     );
                 }
-                if let Some(bits) = &full_resolution {
-                    device.write_buffer(
-                        set,
-                        BINDING_FULL_RESOLUTION,
-                        vk::DescriptorType::STORAGE_BUFFER,
-                        bits.raw,
-                        bits.desc.size,
-                    );
-                }
-                renderer.frames.push(FrameSlot {
-                    uniforms,
-                    set,
-                    queries,
-                    full_resolution,
-                });
             }
-            if let (true, Some(table)) = (wants(RenderPath::Tess), &table) {
-                renderer.tess = Some(build_tess(
-                    device,
-                    &renderer,
-                    terrain,
-                    table.clone(),
-                    options.wireframe,
-                )?);
-            }
-            // The tess path draws its full-resolution patches with geomip's
-            // level 0.
-            let geomip_needed = wants(RenderPath::Geomip) || wants(RenderPath::Tess);
-            if let (true, Some(table)) = (geomip_needed, geomip_table) {
-                renderer.geomip = Some(build_geomip(
-                    device,
-                    &renderer,
-                    terrain,
-                    table,
-                    options.wireframe,
-                )?);
-            }
-            if wants(RenderPath::Brute) {
-                renderer.brute = Some(BruteGeometry {
-                    vertex_count: brute_vertices as u32,
-                    pipelines: build_pipelines(
-                        device,
-                        &renderer,
-                        RenderPath::Brute,
-                        options.wireframe,
-                    )?,
-                });
-            }
-            Ok(())
-        })();
-        match built {
-            Ok(()) => Ok(renderer),
-            Err(e) => {
-                renderer.destroy(device);
-                Err(e)
-            }
+            frames.push(FrameSlot {
+                uniforms,
+                set,
+                queries,
+                full_resolution,
+            });
         }
+        Ok(frames)
     }
 
     /// Milliseconds `new` spent computing the per-patch error table.
@@ -616,9 +514,9 @@ impl TerrainRenderer {
             ))
         };
         let frame = &self.frames[slot];
-        frame.queries.reset(rec.device, rec.cmd);
+        frame.queries.reset(rec);
         rec.begin_rendering(target, settings.clear_color);
-        frame.queries.begin(rec.device, rec.cmd);
+        frame.queries.begin(rec);
         match settings.path {
             RenderPath::Tess => {
                 let tess = self.tess.as_ref().ok_or_else(not_built)?;
@@ -628,10 +526,10 @@ impl TerrainRenderer {
                 };
                 rec.bind_graphics(
                     pipelines.select(settings.wireframe)?,
-                    self.pipeline_layout,
+                    &self.pipeline_layout,
                     frame.set,
                 );
-                rec.bind_geometry(tess.control_points.raw, tess.indices.raw);
+                rec.bind_geometry(&tess.control_points, &tess.indices);
                 // One draw, or batches where the driver needs them (see
                 // `Capabilities::max_patches_per_draw`).
                 let batch = self
@@ -656,113 +554,173 @@ impl TerrainRenderer {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
                 rec.bind_graphics(
                     brute.pipelines.select(settings.wireframe)?,
-                    self.pipeline_layout,
+                    &self.pipeline_layout,
                     frame.set,
                 );
                 rec.draw(brute.vertex_count);
             }
         }
-        frame.queries.end(rec.device, rec.cmd);
+        frame.queries.end(rec);
         rec.end_rendering();
         Ok(())
     }
 
     /// What slot `slot`'s last frame measured; call after its fence.
-    pub fn measurements(&self, device: &Device, slot: usize) -> Result<FrameMeasurements> {
+    pub fn measurements(&self, slot: usize) -> Result<FrameMeasurements> {
         let queries = &self.frames[slot].queries;
         Ok(FrameMeasurements {
-            gpu_ms: queries.gpu_ms(&device.raw)?,
-            statistics: queries.statistics(&device.raw)?,
+            gpu_ms: queries.gpu_ms()?,
+            statistics: queries.statistics()?,
         })
     }
+}
 
-    pub fn destroy(self, device: &Device) {
-        for frame in self.frames {
-            device.destroy_buffer(frame.uniforms);
-            frame.queries.destroy(&device.raw);
-            if let Some(bits) = frame.full_resolution {
-                device.destroy_buffer(bits);
-            }
-        }
-        if let Some(tess) = self.tess {
-            tess.pipelines.destroy(device);
-            tess.error_pipelines.destroy(device);
-            device.destroy_buffer(tess.control_points);
-            device.destroy_buffer(tess.indices);
-        }
-        if let Some(geomip) = self.geomip {
-            geomip.pipelines.destroy(device);
-            device.destroy_pipeline_layout(geomip.layout);
-            device.destroy_buffer(geomip.template);
-            device.destroy_buffer(geomip.indices);
-        }
-        if let Some(brute) = self.brute {
-            brute.pipelines.destroy(device);
-        }
-        if let Some(errors) = self.error_table {
-            device.destroy_buffer(errors);
-        }
-        device.destroy_pipeline_layout(self.pipeline_layout);
-        // The pool frees its sets; the layout goes after them.
-        device.destroy_descriptor_pool(self.descriptor_pool);
-        device.destroy_descriptor_set_layout(self.set_layout);
-        device.destroy_sampler(self.sampler);
-        device.destroy_image(self.heightmap);
-        self.appearance.destroy(device);
+impl Drop for TerrainRenderer {
+    fn drop(&mut self) {
+        // Submitted frames may still read the buffers, images and
+        // pipelines; an error here (device lost) leaves nothing better to
+        // do than free them anyway.
+        let _ = self.device.wait_idle();
     }
 }
 
-fn build_pipelines(
-    device: &Device,
-    renderer: &TerrainRenderer,
-    path: RenderPath,
-    wireframe: bool,
-) -> Result<PathPipelines> {
-    build_pipelines_with(
-        device,
-        renderer,
-        renderer.pipeline_layout,
-        (path, false),
-        wireframe,
-    )
+/// Refuses what this device or the draw limits cannot do, before anything
+/// is built.
+fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -> Result<()> {
+    let info = terrain.info();
+    let (cols, rows) = (info.cols() as u32, info.rows() as u32);
+    let limit = device.caps.max_image_dimension_2d;
+    if cols > limit || rows > limit {
+        return Err(VkError::Unsupported(format!(
+            "heightmap of {cols}x{rows} samples exceeds this device's largest image ({limit}x{limit})"
+        )));
+    }
+    let features = device.format_features(vk::Format::R32_SFLOAT);
+    if !features
+        .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::TRANSFER_DST)
+    {
+        return Err(VkError::Unsupported(format!(
+            "{} cannot sample R32_SFLOAT images ({features:?})",
+            device.caps.device_name
+        )));
+    }
+    if options.wireframe && !device.caps.fill_mode_non_solid {
+        return Err(VkError::Unsupported(format!(
+            "wireframe needs fillModeNonSolid, which {} lacks",
+            device.caps.device_name
+        )));
+    }
+    let wants = |path| options.paths.contains(&path);
+    if wants(RenderPath::Tess) && !device.caps.tessellation_shader {
+        return Err(VkError::Unsupported(format!(
+            "the tess path needs tessellationShader, which {} lacks",
+            device.caps.device_name
+        )));
+    }
+    let brute_vertices = brute_vertex_count(terrain);
+    if wants(RenderPath::Brute) && brute_vertices > i32::MAX as u64 {
+        return Err(VkError::Unsupported(format!(
+            "the brute path draws {brute_vertices} vertices for {cols}x{rows} samples, over the {} one draw can address",
+            i32::MAX
+        )));
+    }
+    Ok(())
 }
 
-/// `path.1`: the tess path with equal spacing (the error LOD).
-fn build_pipelines_with(
-    device: &Device,
+/// Brute draws 6 vertices per cell, counted by a signed index in GLSL.
+fn brute_vertex_count(terrain: &Terrain) -> u64 {
+    let info = terrain.info();
+    6 * (info.cols() as u64 - 1) * (info.rows() as u64 - 1)
+}
+
+/// The bindings of the renderer's one descriptor set layout, and what its
+/// pool must hold per set: only what the built paths and the scene's
+/// material use.
+struct DescriptorPlan {
+    bindings: Vec<(u32, vk::DescriptorType, vk::ShaderStageFlags)>,
+    pool_sizes: Vec<(vk::DescriptorType, u32)>,
+}
+
+impl DescriptorPlan {
+    fn new(options: &RendererOptions, appearance: &GpuAppearance) -> Self {
+        let tess = options.paths.contains(&RenderPath::Tess);
+        let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        if tess {
+            stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
+                | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
+        }
+        let mut plan = DescriptorPlan {
+            bindings: vec![
+                (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
+                (
+                    BINDING_HEIGHTMAP,
+                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                    stages,
+                ),
+            ],
+            pool_sizes: vec![
+                (vk::DescriptorType::UNIFORM_BUFFER, 1),
+                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+            ],
+        };
+        if tess {
+            for binding in [BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION] {
+                plan.bindings.push((
+                    binding,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
+                ));
+            }
+            plan.pool_sizes
+                .push((vk::DescriptorType::STORAGE_BUFFER, 2));
+        }
+        let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
+        for binding in appearance.bindings(vertex_stages) {
+            plan.pool_sizes.push((binding.1, 1));
+            plan.bindings.push(binding);
+        }
+        plan
+    }
+}
+
+/// The fill pipeline of `path` on `layout` and, when asked, the wireframe
+/// one. `path.1`: the tess path with equal spacing (the error LOD).
+fn build_pipelines(
     renderer: &TerrainRenderer,
-    layout: vk::PipelineLayout,
+    layout: &PipelineLayout,
     path: (RenderPath, bool),
     wireframe: bool,
 ) -> Result<PathPipelines> {
     let variant = &renderer.appearance.variant;
-    let color_format = renderer.color_format;
-    let create =
-        |mode, suffix| create_pipeline(device, layout, color_format, variant, path, mode, suffix);
-    let fill = create(vk::PolygonMode::FILL, "fill")?;
-    let wireframe = if wireframe {
-        match create(vk::PolygonMode::LINE, "wireframe") {
-            Ok(p) => Some(p),
-            Err(e) => {
-                device.destroy_pipeline(fill);
-                return Err(e);
-            }
-        }
-    } else {
-        None
+    let create = |mode, suffix| {
+        create_pipeline(
+            &renderer.device,
+            layout,
+            renderer.color_format,
+            variant,
+            path,
+            mode,
+            suffix,
+        )
     };
-    Ok(PathPipelines { fill, wireframe })
+    Ok(PathPipelines {
+        fill: create(vk::PolygonMode::FILL, "fill")?,
+        wireframe: match wireframe {
+            true => Some(create(vk::PolygonMode::LINE, "wireframe")?),
+            false => None,
+        },
+    })
 }
 
 fn create_pipeline(
     device: &Device,
-    layout: vk::PipelineLayout,
+    layout: &PipelineLayout,
     color_format: vk::Format,
     variant: &ShaderVariant,
     (path, equal_spacing): (RenderPath, bool),
     polygon_mode: vk::PolygonMode,
     suffix: &str,
-) -> Result<vk::Pipeline> {
+) -> Result<Pipeline> {
     let frag = shaders::spirv("terrain.frag", &variant.fragment_defines());
     let placing = |file| shaders::spirv(file, &variant.vertex_defines());
     let mut tese_defines = variant.vertex_defines();
@@ -840,85 +798,40 @@ fn create_pipeline(
     })
 }
 
-/// Uploads two buffers; if the second fails the first is freed, so the
-/// caller gets the real error and nothing is left allocated.
-fn upload_two(
-    device: &Device,
-    a: (&str, vk::BufferUsageFlags, &[u8]),
-    b: (&str, vk::BufferUsageFlags, &[u8]),
-) -> Result<(Buffer, Buffer)> {
-    let first = device.upload_buffer(a.0, a.1, a.2)?;
-    match device.upload_buffer(b.0, b.1, b.2) {
-        Ok(second) => Ok((first, second)),
-        Err(e) => {
-            device.destroy_buffer(first);
-            Err(e)
-        }
-    }
-}
-
 fn build_tess(
-    device: &Device,
     renderer: &TerrainRenderer,
     terrain: &Terrain,
     errors: ErrorTable,
     wireframe: bool,
 ) -> Result<TessGeometry> {
-    let (control_points, indices) = upload_two(
-        device,
-        (
+    let device = &renderer.device;
+    let layout = &renderer.pipeline_layout;
+    Ok(TessGeometry {
+        control_points: device.upload_buffer(
             "terrain.control_points",
             vk::BufferUsageFlags::VERTEX_BUFFER,
             bytemuck::cast_slice(terrain.control_points()),
-        ),
-        (
+        )?,
+        indices: device.upload_buffer(
             "terrain.patch_indices",
             vk::BufferUsageFlags::INDEX_BUFFER,
             bytemuck::cast_slice(terrain.indices()),
-        ),
-    )?;
-    let layout = renderer.pipeline_layout;
-    let built =
-        build_pipelines(device, renderer, RenderPath::Tess, wireframe).and_then(|pipelines| {
-            match build_pipelines_with(
-                device,
-                renderer,
-                layout,
-                (RenderPath::Tess, true),
-                wireframe,
-            ) {
-                Ok(error_pipelines) => Ok((pipelines, error_pipelines)),
-                Err(e) => {
-                    pipelines.destroy(device);
-                    Err(e)
-                }
-            }
-        });
-    match built {
-        Ok((pipelines, error_pipelines)) => Ok(TessGeometry {
-            control_points,
-            indices,
-            index_count: terrain.indices().len() as u32,
-            pipelines,
-            error_pipelines,
-            errors,
-            exact: Vec::new(),
-        }),
-        Err(e) => {
-            device.destroy_buffer(control_points);
-            device.destroy_buffer(indices);
-            Err(e)
-        }
-    }
+        )?,
+        index_count: terrain.indices().len() as u32,
+        pipelines: build_pipelines(renderer, layout, (RenderPath::Tess, false), wireframe)?,
+        error_pipelines: build_pipelines(renderer, layout, (RenderPath::Tess, true), wireframe)?,
+        errors,
+        exact: Vec::new(),
+    })
 }
 
 fn build_geomip(
-    device: &Device,
     renderer: &TerrainRenderer,
     terrain: &Terrain,
     errors: ErrorTable,
     wireframe: bool,
 ) -> Result<GeomipGeometry> {
+    let device = &renderer.device;
     let n = terrain.grid().cells_per_patch();
     let mut variants = geomip::IndexVariants::build(n);
     let grid = terrain.grid();
@@ -933,59 +846,31 @@ fn build_geomip(
             full_resolution.push((cells, range));
         }
     }
-    let (template, indices) = upload_two(
-        device,
-        (
+    let layout = device.create_pipeline_layout_with_push(
+        &[&renderer.set_layout],
+        vk::ShaderStageFlags::VERTEX,
+        size_of::<GeomipConstants>() as u32,
+        "terrain.pipeline_layout.geomip",
+    )?;
+    Ok(GeomipGeometry {
+        template: device.upload_buffer(
             "terrain.geomip_vertex_template",
             vk::BufferUsageFlags::VERTEX_BUFFER,
             bytemuck::cast_slice(&geomip::vertex_template(n)),
-        ),
-        (
+        )?,
+        indices: device.upload_buffer(
             "terrain.geomip_indices",
             vk::BufferUsageFlags::INDEX_BUFFER,
             bytemuck::cast_slice(&variants.indices),
-        ),
-    )?;
-    let layout_and_pipelines = device
-        .create_pipeline_layout_with_push(
-            &[renderer.set_layout],
-            vk::ShaderStageFlags::VERTEX,
-            size_of::<GeomipConstants>() as u32,
-            "terrain.pipeline_layout.geomip",
-        )
-        .and_then(|layout| {
-            match build_pipelines_with(
-                device,
-                renderer,
-                layout,
-                (RenderPath::Geomip, false),
-                wireframe,
-            ) {
-                Ok(pipelines) => Ok((layout, pipelines)),
-                Err(e) => {
-                    device.destroy_pipeline_layout(layout);
-                    Err(e)
-                }
-            }
-        });
-    match layout_and_pipelines {
-        Ok((layout, pipelines)) => Ok(GeomipGeometry {
-            template,
-            indices,
-            variants: variants.ranges,
-            full_resolution,
-            layout,
-            pipelines,
-            draws: Vec::new(),
-            errors,
-            given: None,
-        }),
-        Err(e) => {
-            device.destroy_buffer(template);
-            device.destroy_buffer(indices);
-            Err(e)
-        }
-    }
+        )?,
+        variants: variants.ranges,
+        full_resolution,
+        pipelines: build_pipelines(renderer, &layout, (RenderPath::Geomip, false), wireframe)?,
+        layout,
+        draws: Vec::new(),
+        errors,
+        given: None,
+    })
 }
 
 impl GeomipGeometry {
@@ -1046,14 +931,14 @@ impl GeomipGeometry {
     fn draw(
         &self,
         rec: &Recorder,
-        set: vk::DescriptorSet,
+        set: DescriptorSet,
         wireframe: bool,
         draws: &[GeomipDraw],
     ) -> Result<()> {
-        rec.bind_graphics(self.pipelines.select(wireframe)?, self.layout, set);
-        rec.bind_geometry(self.template.raw, self.indices.raw);
+        rec.bind_graphics(self.pipelines.select(wireframe)?, &self.layout, set);
+        rec.bind_geometry(&self.template, &self.indices);
         for draw in draws {
-            rec.push_vertex_constants(self.layout, bytemuck::bytes_of(&draw.constants));
+            rec.push_vertex_constants(&self.layout, bytemuck::bytes_of(&draw.constants));
             rec.draw_indexed(draw.first, draw.count);
         }
         Ok(())

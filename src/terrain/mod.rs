@@ -34,6 +34,9 @@ pub struct Terrain {
     y_bounds: Vec<[f32; 2]>,
     control_points: Vec<[f32; 4]>,
     indices: Vec<u32>,
+    /// The tess and geomip error tables, computed on first use and kept:
+    /// every renderer of this terrain shares them.
+    error_tables: std::sync::OnceLock<(ErrorTable, ErrorTable)>,
 }
 
 impl Terrain {
@@ -53,6 +56,7 @@ impl Terrain {
             y_bounds,
             control_points,
             indices,
+            error_tables: std::sync::OnceLock::new(),
         })
     }
 
@@ -86,9 +90,10 @@ impl Terrain {
     }
 
     /// The tess path's error table and the geomip path's, computed together
-    /// (see `ErrorTable::compute_pair`).
-    pub fn error_tables(&self) -> (ErrorTable, ErrorTable) {
-        ErrorTable::compute_pair(self.info.heightmap(), &self.grid)
+    /// (see `ErrorTable::compute_pair`) the first time they are asked for.
+    pub fn error_tables(&self) -> &(ErrorTable, ErrorTable) {
+        self.error_tables
+            .get_or_init(|| ErrorTable::compute_pair(self.info.heightmap(), &self.grid))
     }
 
     /// A patch's corners in local coordinates at their sample heights.

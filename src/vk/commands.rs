@@ -1,96 +1,242 @@
-//! Command pools and buffers, and a recorder whose methods wrap the few
-//! commands the renderer records.
+//! Command buffers in slots guarded by their fences, and a recorder whose
+//! methods wrap the few commands the renderer records.
 
 use ash::vk;
 
+use super::descriptors::DescriptorSet;
 use super::device::Device;
-use super::error::{Result, VkResultExt};
+use super::error::{Result, VkError, VkResultExt};
+use super::memory::{subresource_range, Buffer, Transition};
+use super::owned::{Fence, Owned, Pipeline, PipelineLayout, Semaphore};
 use super::target::TargetViews;
 
+/// Command buffers for work in flight, one per slot, each with the fence
+/// its last submission signals. Recording into a slot first waits for that
+/// submission, so a command buffer (and what its slot's frame uses) is
+/// never reused while the GPU still reads it.
+pub struct CommandSlots {
+    slots: Vec<Slot>,
+    /// Frees the slots' command buffers with itself.
+    pool: Owned<vk::CommandPool>,
+}
+
+struct Slot {
+    cmd: vk::CommandBuffer,
+    fence: Fence,
+    /// The fence will be signalled by the slot's last submission.
+    submitted: bool,
+}
+
 impl Device {
-    /// A pool whose buffers can be reset one by one (one per frame in flight).
-    pub fn create_command_pool(&self, name: &str) -> Result<vk::CommandPool> {
+    /// `count` slots whose buffers are named `name[i]`.
+    pub fn create_command_slots(&self, count: u32, name: &str) -> Result<CommandSlots> {
         let info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(self.queue_family)
             .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
         // SAFETY: valid create info.
-        let pool = unsafe { self.raw.create_command_pool(&info, None) }
+        let pool = unsafe { self.ash().create_command_pool(&info, None) }
             .context("creating a command pool")?;
-        self.set_name(pool, name);
-        Ok(pool)
-    }
-
-    pub fn allocate_command_buffers(
-        &self,
-        pool: vk::CommandPool,
-        count: u32,
-        name: &str,
-    ) -> Result<Vec<vk::CommandBuffer>> {
+        let pool = Owned::new(self, pool, &format!("{name}.pool"));
         let info = vk::CommandBufferAllocateInfo::default()
-            .command_pool(pool)
+            .command_pool(pool.raw())
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(count);
         // SAFETY: the pool belongs to this device.
-        let cmds = unsafe { self.raw.allocate_command_buffers(&info) }
+        let cmds = unsafe { self.ash().allocate_command_buffers(&info) }
             .context("allocating command buffers")?;
-        for (i, &cmd) in cmds.iter().enumerate() {
+        let mut slots = Vec::with_capacity(cmds.len());
+        for (i, cmd) in cmds.into_iter().enumerate() {
             self.set_name(cmd, &format!("{name}[{i}]"));
+            slots.push(Slot {
+                cmd,
+                fence: self.create_fence(&format!("{name}.fence[{i}]"), false)?,
+                submitted: false,
+            });
         }
-        Ok(cmds)
+        Ok(CommandSlots { slots, pool })
     }
 
-    /// Destroys the pool and the buffers allocated from it.
-    pub fn destroy_command_pool(&self, pool: vk::CommandPool) {
-        // SAFETY: none of its buffers is pending execution.
-        unsafe { self.raw.destroy_command_pool(pool, None) };
+    /// Submits `cmd`, waiting on `wait` at colour output and signalling
+    /// `signal` and `fence` when done.
+    pub(super) fn submit(
+        &self,
+        cmd: vk::CommandBuffer,
+        wait: &[vk::Semaphore],
+        signal: &[vk::Semaphore],
+        fence: &Fence,
+    ) -> Result<()> {
+        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
+        let waits: Vec<_> = wait
+            .iter()
+            .map(|&s| {
+                vk::SemaphoreSubmitInfo::default()
+                    .semaphore(s)
+                    .stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
+            })
+            .collect();
+        let signals: Vec<_> = signal
+            .iter()
+            .map(|&s| {
+                vk::SemaphoreSubmitInfo::default()
+                    .semaphore(s)
+                    .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
+            })
+            .collect();
+        let submit = vk::SubmitInfo2::default()
+            .command_buffer_infos(&cmds)
+            .wait_semaphore_infos(&waits)
+            .signal_semaphore_infos(&signals);
+        self.count_submission()?;
+        // SAFETY: `cmd` is fully recorded; the fence is unsignalled and
+        // belongs to this device, as do the semaphores.
+        unsafe { self.ash().queue_submit2(self.queue, &[submit], fence.raw()) }
+            .context("submitting commands")
     }
 
-    /// Resets `cmd` and starts recording a one-time submission.
-    pub fn begin_commands(&self, cmd: vk::CommandBuffer) -> Result<Recorder<'_>> {
+    pub(super) fn wait_fence(&self, fence: &Fence) -> Result<()> {
+        // SAFETY: a fence of this device.
+        unsafe { self.ash().wait_for_fences(&[fence.raw()], true, u64::MAX) }
+            .context("waiting for the GPU")
+    }
+}
+
+impl CommandSlots {
+    pub fn len(&self) -> usize {
+        self.slots.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.slots.is_empty()
+    }
+
+    /// Waits for slot `slot`'s last submission. True when there was one,
+    /// so what it wrote (queries, readbacks) can be read now.
+    pub fn wait(&self, slot: usize) -> Result<bool> {
+        let s = &self.slots[slot];
+        if s.submitted {
+            self.pool.device().wait_fence(&s.fence)?;
+        }
+        Ok(s.submitted)
+    }
+
+    /// Waits for slot `slot`'s last submission, then starts recording a
+    /// one-time submission into its command buffer.
+    pub fn begin(&mut self, slot: usize) -> Result<Recorder<'_>> {
+        self.wait(slot)?;
+        let device = self.pool.device();
+        let s = &mut self.slots[slot];
         let begin = vk::CommandBufferBeginInfo::default()
             .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
-        // SAFETY: the caller has waited for the last submission of `cmd`.
+        // SAFETY: the slot's last submission has completed (waited above),
+        // so its command buffer is not pending.
         unsafe {
-            self.raw
-                .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
+            device
+                .ash()
+                .reset_command_buffer(s.cmd, vk::CommandBufferResetFlags::empty())
                 .context("resetting a command buffer")?;
-            self.raw
-                .begin_command_buffer(cmd, &begin)
+            device
+                .ash()
+                .begin_command_buffer(s.cmd, &begin)
                 .context("beginning commands")?;
         }
         Ok(Recorder {
-            device: &self.raw,
-            cmd,
+            device,
+            cmd: s.cmd,
+            slot: Some((&s.fence, &mut s.submitted)),
         })
     }
+}
 
-    pub fn reset_fence(&self, fence: vk::Fence) -> Result<()> {
-        // SAFETY: the fence is not in use by a pending submission.
-        unsafe { self.raw.reset_fences(&[fence]) }.context("resetting a fence")
-    }
-
-    pub fn wait_fence(&self, fence: vk::Fence) -> Result<()> {
-        // SAFETY: a fence of this device.
-        unsafe { self.raw.wait_for_fences(&[fence], true, u64::MAX) }.context("waiting for the GPU")
-    }
-
-    pub fn destroy_fence(&self, fence: vk::Fence) {
-        // SAFETY: no pending submission signals it.
-        unsafe { self.raw.destroy_fence(fence, None) };
+impl Drop for CommandSlots {
+    fn drop(&mut self) {
+        // Submitted work may still use the buffers and signal the fences;
+        // an error (device lost) leaves nothing better to do than free them.
+        let _ = self.pool.device().wait_idle();
     }
 }
 
 /// A command buffer being recorded.
 pub struct Recorder<'a> {
-    pub device: &'a ash::Device,
-    pub cmd: vk::CommandBuffer,
+    pub(super) device: &'a Device,
+    pub(super) cmd: vk::CommandBuffer,
+    /// The slot's fence and submitted flag; None inside `one_shot`.
+    slot: Option<(&'a Fence, &'a mut bool)>,
 }
 
-impl Recorder<'_> {
-    pub fn finish(self) -> Result<vk::CommandBuffer> {
-        // SAFETY: recording was begun by `begin_commands`.
-        unsafe { self.device.end_command_buffer(self.cmd) }.context("ending commands")?;
-        Ok(self.cmd)
+impl<'a> Recorder<'a> {
+    pub(super) fn new(device: &'a Device, cmd: vk::CommandBuffer) -> Self {
+        Recorder {
+            device,
+            cmd,
+            slot: None,
+        }
+    }
+
+    /// Ends recording and submits, signalling the slot's fence.
+    pub fn submit(self) -> Result<()> {
+        self.submit_with(&[], &[])
+    }
+
+    /// Ends recording and submits, then waits for it to finish.
+    pub fn submit_and_wait(self) -> Result<()> {
+        let device = self.device;
+        let fence = self.slot.as_ref().map(|(fence, _)| *fence);
+        self.submit()?;
+        match fence {
+            Some(fence) => device.wait_fence(fence),
+            None => Ok(()),
+        }
+    }
+
+    /// Ends recording and submits one frame of a window: waits on
+    /// `image_available` at colour output and signals `render_finished`.
+    pub fn submit_frame(
+        self,
+        image_available: &Semaphore,
+        render_finished: &Semaphore,
+    ) -> Result<()> {
+        self.submit_with(&[image_available.raw()], &[render_finished.raw()])
+    }
+
+    fn submit_with(self, wait: &[vk::Semaphore], signal: &[vk::Semaphore]) -> Result<()> {
+        let Some((fence, submitted)) = self.slot else {
+            return Err(VkError::Unsupported(
+                "a one-shot recorder is submitted by its owner".into(),
+            ));
+        };
+        // SAFETY: recording was begun by `CommandSlots::begin`.
+        unsafe { self.device.ash().end_command_buffer(self.cmd) }.context("ending commands")?;
+        *submitted = false;
+        // SAFETY: the fence's last submission was waited for in `begin`.
+        unsafe { self.device.ash().reset_fences(&[fence.raw()]) }.context("resetting a fence")?;
+        self.device.submit(self.cmd, wait, signal, fence)?;
+        *submitted = true;
+        Ok(())
+    }
+
+    /// Records a batch of image transitions as one barrier.
+    pub(super) fn transition_images(&self, transitions: &[Transition]) {
+        let barriers: Vec<vk::ImageMemoryBarrier2> = transitions
+            .iter()
+            .map(|t| {
+                vk::ImageMemoryBarrier2::default()
+                    .image(t.image)
+                    .subresource_range(subresource_range(t.aspect))
+                    .old_layout(t.from.0)
+                    .src_stage_mask(t.from.1)
+                    .src_access_mask(t.from.2)
+                    .new_layout(t.to.0)
+                    .dst_stage_mask(t.to.1)
+                    .dst_access_mask(t.to.2)
+            })
+            .collect();
+        let dependency = vk::DependencyInfo::default().image_memory_barriers(&barriers);
+        // SAFETY: the images belong to this device and `cmd` is recording.
+        unsafe {
+            self.device
+                .ash()
+                .cmd_pipeline_barrier2(self.cmd, &dependency)
+        };
     }
 
     /// Starts dynamic rendering into `target`, clearing colour and depth
@@ -150,22 +296,24 @@ impl Recorder<'_> {
         // SAFETY: the target's images are in the attachment layouts named
         // above (the target's owner transitions them).
         unsafe {
-            self.device.cmd_begin_rendering(self.cmd, &info);
-            self.device.cmd_clear_attachments(self.cmd, &clears, &rect);
-            self.device.cmd_set_viewport(self.cmd, 0, &[viewport]);
-            self.device.cmd_set_scissor(self.cmd, 0, &[area]);
+            self.device.ash().cmd_begin_rendering(self.cmd, &info);
+            self.device
+                .ash()
+                .cmd_clear_attachments(self.cmd, &clears, &rect);
+            self.device.ash().cmd_set_viewport(self.cmd, 0, &[viewport]);
+            self.device.ash().cmd_set_scissor(self.cmd, 0, &[area]);
         }
     }
 
     /// Copies a whole 2D image (in TRANSFER_SRC_OPTIMAL) into `buffer`,
     /// tightly packed, then makes the copy visible to host reads after the
     /// submission's fence.
-    pub fn copy_image_to_buffer(
+    pub(super) fn copy_image_to_buffer(
         &self,
         image: vk::Image,
         aspect: vk::ImageAspectFlags,
         extent: vk::Extent2D,
-        buffer: vk::Buffer,
+        buffer: &Buffer,
     ) {
         let region = vk::BufferImageCopy::default()
             .image_subresource(
@@ -186,57 +334,56 @@ impl Recorder<'_> {
         // SAFETY: the image is in TRANSFER_SRC_OPTIMAL and the buffer holds
         // the whole image.
         unsafe {
-            self.device.cmd_copy_image_to_buffer(
+            self.device.ash().cmd_copy_image_to_buffer(
                 self.cmd,
                 image,
                 vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                buffer,
+                buffer.raw(),
                 &[region],
             );
-            self.device.cmd_pipeline_barrier2(
+            self.device.ash().cmd_pipeline_barrier2(
                 self.cmd,
                 &vk::DependencyInfo::default().memory_barriers(&barrier),
             );
         }
     }
 
-    pub fn copy_color_to_buffer(&self, image: vk::Image, extent: vk::Extent2D, buffer: vk::Buffer) {
-        self.copy_image_to_buffer(image, vk::ImageAspectFlags::COLOR, extent, buffer);
-    }
-
     pub fn end_rendering(&self) {
         // SAFETY: matches `begin_rendering`.
-        unsafe { self.device.cmd_end_rendering(self.cmd) };
+        unsafe { self.device.ash().cmd_end_rendering(self.cmd) };
     }
 
-    pub fn bind_graphics(
-        &self,
-        pipeline: vk::Pipeline,
-        layout: vk::PipelineLayout,
-        set: vk::DescriptorSet,
-    ) {
+    pub fn bind_graphics(&self, pipeline: &Pipeline, layout: &PipelineLayout, set: DescriptorSet) {
         // SAFETY: pipeline, layout and set are compatible objects of this device.
         unsafe {
-            self.device
-                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::GRAPHICS, pipeline);
-            self.device.cmd_bind_descriptor_sets(
+            self.device.ash().cmd_bind_pipeline(
                 self.cmd,
                 vk::PipelineBindPoint::GRAPHICS,
-                layout,
+                pipeline.raw(),
+            );
+            self.device.ash().cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::GRAPHICS,
+                layout.raw(),
                 0,
-                &[set],
+                &[set.0],
                 &[],
             );
         }
     }
 
-    pub fn bind_geometry(&self, vertices: vk::Buffer, indices: vk::Buffer) {
+    pub fn bind_geometry(&self, vertices: &Buffer, indices: &Buffer) {
         // SAFETY: buffers with VERTEX_BUFFER / INDEX_BUFFER usage.
         unsafe {
             self.device
-                .cmd_bind_vertex_buffers(self.cmd, 0, &[vertices], &[0]);
-            self.device
-                .cmd_bind_index_buffer(self.cmd, indices, 0, vk::IndexType::UINT32);
+                .ash()
+                .cmd_bind_vertex_buffers(self.cmd, 0, &[vertices.raw()], &[0]);
+            self.device.ash().cmd_bind_index_buffer(
+                self.cmd,
+                indices.raw(),
+                0,
+                vk::IndexType::UINT32,
+            );
         }
     }
 
@@ -244,9 +391,9 @@ impl Recorder<'_> {
     /// storage writes visible to host reads after the fence.
     pub fn dispatch_for_host(
         &self,
-        pipeline: vk::Pipeline,
-        layout: vk::PipelineLayout,
-        set: vk::DescriptorSet,
+        pipeline: &Pipeline,
+        layout: &PipelineLayout,
+        set: DescriptorSet,
         groups: u32,
     ) {
         let barrier = [vk::MemoryBarrier2::default()
@@ -257,18 +404,21 @@ impl Recorder<'_> {
         // SAFETY: pipeline, layout and set are compatible objects of this
         // device; `cmd` is recording outside rendering.
         unsafe {
-            self.device
-                .cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, pipeline);
-            self.device.cmd_bind_descriptor_sets(
+            self.device.ash().cmd_bind_pipeline(
                 self.cmd,
                 vk::PipelineBindPoint::COMPUTE,
-                layout,
+                pipeline.raw(),
+            );
+            self.device.ash().cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                layout.raw(),
                 0,
-                &[set],
+                &[set.0],
                 &[],
             );
-            self.device.cmd_dispatch(self.cmd, groups, 1, 1);
-            self.device.cmd_pipeline_barrier2(
+            self.device.ash().cmd_dispatch(self.cmd, groups, 1, 1);
+            self.device.ash().cmd_pipeline_barrier2(
                 self.cmd,
                 &vk::DependencyInfo::default().memory_barriers(&barrier),
             );
@@ -276,11 +426,16 @@ impl Recorder<'_> {
     }
 
     /// Sets vertex-stage push constants from offset 0.
-    pub fn push_vertex_constants(&self, layout: vk::PipelineLayout, bytes: &[u8]) {
+    pub fn push_vertex_constants(&self, layout: &PipelineLayout, bytes: &[u8]) {
         // SAFETY: `layout` has a vertex push-constant range covering `bytes`.
         unsafe {
-            self.device
-                .cmd_push_constants(self.cmd, layout, vk::ShaderStageFlags::VERTEX, 0, bytes)
+            self.device.ash().cmd_push_constants(
+                self.cmd,
+                layout.raw(),
+                vk::ShaderStageFlags::VERTEX,
+                0,
+                bytes,
+            )
         };
     }
 
@@ -288,7 +443,7 @@ impl Recorder<'_> {
     /// gl_VertexIndex).
     pub fn draw(&self, vertex_count: u32) {
         // SAFETY: a pipeline is bound, inside rendering.
-        unsafe { self.device.cmd_draw(self.cmd, vertex_count, 1, 0, 0) };
+        unsafe { self.device.ash().cmd_draw(self.cmd, vertex_count, 1, 0, 0) };
     }
 
     pub fn draw_indexed(&self, first_index: u32, index_count: u32) {
@@ -296,6 +451,7 @@ impl Recorder<'_> {
         // caller keeps the range inside the index buffer.
         unsafe {
             self.device
+                .ash()
                 .cmd_draw_indexed(self.cmd, index_count, 1, first_index, 0, 0)
         };
     }

@@ -10,8 +10,8 @@ use ash::vk;
 /// How many messages to keep verbatim for reports; the count goes on.
 const KEPT_MESSAGES: usize = 32;
 
-/// Counts validation warnings and errors. Lives in a `Box` whose address the
-/// messenger holds, so it must outlive the messenger (the instance owns
+/// Counts validation warnings and errors. Lives in an `Arc` whose address
+/// the messenger holds, so it must outlive the messenger (the instance owns
 /// both and destroys the messenger first).
 #[derive(Default, Debug)]
 pub struct ValidationLog {

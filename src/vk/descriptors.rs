@@ -4,6 +4,28 @@ use ash::vk;
 
 use super::device::Device;
 use super::error::{Result, VkResultExt};
+use super::memory::{Buffer, Image};
+use super::owned::{DescriptorSetLayout, Owned, Sampler};
+
+/// One descriptor set of a `DescriptorSets`; valid while they are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DescriptorSet(pub(super) vk::DescriptorSet);
+
+/// Sets of one layout and the pool they came from, which frees them.
+pub struct DescriptorSets {
+    sets: Vec<DescriptorSet>,
+    _pool: Owned<vk::DescriptorPool>,
+}
+
+impl DescriptorSets {
+    pub fn get(&self, i: usize) -> DescriptorSet {
+        self.sets[i]
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = DescriptorSet> + '_ {
+        self.sets.iter().copied()
+    }
+}
 
 impl Device {
     /// (binding, type, stages) per binding, one descriptor each.
@@ -11,7 +33,7 @@ impl Device {
         &self,
         bindings: &[(u32, vk::DescriptorType, vk::ShaderStageFlags)],
         name: &str,
-    ) -> Result<vk::DescriptorSetLayout> {
+    ) -> Result<DescriptorSetLayout> {
         let bindings: Vec<vk::DescriptorSetLayoutBinding> = bindings
             .iter()
             .map(|&(binding, kind, stages)| {
@@ -24,25 +46,19 @@ impl Device {
             .collect();
         let info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info.
-        let layout = unsafe { self.raw.create_descriptor_set_layout(&info, None) }
+        let layout = unsafe { self.ash().create_descriptor_set_layout(&info, None) }
             .context("creating a descriptor set layout")?;
-        self.set_name(layout, name);
-        Ok(layout)
-    }
-
-    pub fn destroy_descriptor_set_layout(&self, layout: vk::DescriptorSetLayout) {
-        // SAFETY: no pipeline layout or set is still being created from it.
-        unsafe { self.raw.destroy_descriptor_set_layout(layout, None) };
+        Ok(Owned::new(self, layout, name))
     }
 
     /// A pool for `count` sets of `layout`, whose bindings are `sizes`.
     pub fn allocate_descriptor_sets(
         &self,
-        layout: vk::DescriptorSetLayout,
+        layout: &DescriptorSetLayout,
         sizes: &[(vk::DescriptorType, u32)],
         count: u32,
         name: &str,
-    ) -> Result<(vk::DescriptorPool, Vec<vk::DescriptorSet>)> {
+    ) -> Result<DescriptorSets> {
         let sizes: Vec<vk::DescriptorPoolSize> = sizes
             .iter()
             .map(|&(ty, n)| {
@@ -55,78 +71,70 @@ impl Device {
             .max_sets(count)
             .pool_sizes(&sizes);
         // SAFETY: valid create info.
-        let pool = unsafe { self.raw.create_descriptor_pool(&info, None) }
+        let pool = unsafe { self.ash().create_descriptor_pool(&info, None) }
             .context("creating a descriptor pool")?;
-        self.set_name(pool, &format!("{name}.pool"));
-        let layouts = vec![layout; count as usize];
+        let pool = Owned::new(self, pool, &format!("{name}.pool"));
+        let layouts = vec![layout.raw(); count as usize];
         let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(pool)
+            .descriptor_pool(pool.raw())
             .set_layouts(&layouts);
         // SAFETY: the pool was sized for exactly these sets.
-        let sets = match unsafe { self.raw.allocate_descriptor_sets(&alloc) } {
-            Ok(sets) => sets,
-            Err(r) => {
-                // SAFETY: the pool has no sets in use.
-                unsafe { self.raw.destroy_descriptor_pool(pool, None) };
-                return Err(r).context("allocating descriptor sets");
-            }
-        };
+        let sets = unsafe { self.ash().allocate_descriptor_sets(&alloc) }
+            .context("allocating descriptor sets")?;
         for (i, &set) in sets.iter().enumerate() {
             self.set_name(set, &format!("{name}[{i}]"));
         }
-        Ok((pool, sets))
-    }
-
-    pub fn destroy_descriptor_pool(&self, pool: vk::DescriptorPool) {
-        // SAFETY: none of its sets is used by pending work.
-        unsafe { self.raw.destroy_descriptor_pool(pool, None) };
+        Ok(DescriptorSets {
+            sets: sets.into_iter().map(DescriptorSet).collect(),
+            _pool: pool,
+        })
     }
 
     /// Points a uniform- or storage-buffer binding of `set` at `range`
     /// bytes of `buffer`.
     pub fn write_buffer(
         &self,
-        set: vk::DescriptorSet,
+        set: DescriptorSet,
         binding: u32,
         kind: vk::DescriptorType,
-        buffer: vk::Buffer,
+        buffer: &Buffer,
         range: u64,
     ) {
         let info = [vk::DescriptorBufferInfo::default()
-            .buffer(buffer)
+            .buffer(buffer.raw())
             .range(range)];
         let write = vk::WriteDescriptorSet::default()
-            .dst_set(set)
+            .dst_set(set.0)
             .dst_binding(binding)
             .descriptor_type(kind)
             .buffer_info(&info);
         // SAFETY: set and buffer belong to this device; the set is not in use.
-        unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
+        unsafe { self.ash().update_descriptor_sets(&[write], &[]) };
     }
 
     pub fn write_sampled_image(
         &self,
-        set: vk::DescriptorSet,
+        set: DescriptorSet,
         binding: u32,
-        view: vk::ImageView,
-        sampler: vk::Sampler,
+        image: &Image,
+        sampler: &Sampler,
     ) {
         let info = [vk::DescriptorImageInfo::default()
-            .image_view(view)
-            .sampler(sampler)
+            .image_view(image.view())
+            .sampler(sampler.raw())
             .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
         let write = vk::WriteDescriptorSet::default()
-            .dst_set(set)
+            .dst_set(set.0)
             .dst_binding(binding)
             .descriptor_type(vk::DescriptorType::COMBINED_IMAGE_SAMPLER)
             .image_info(&info);
         // SAFETY: as above.
-        unsafe { self.raw.update_descriptor_sets(&[write], &[]) };
+        unsafe { self.ash().update_descriptor_sets(&[write], &[]) };
     }
 
     /// Nearest filtering, clamped: for images read with texelFetch, which
     /// ignores the sampler but still needs one bound.
-    pub fn create_nearest_sampler(&self, name: &str) -> Result<vk::Sampler> {
+    pub fn create_nearest_sampler(&self, name: &str) -> Result<Sampler> {
         let info = vk::SamplerCreateInfo::default()
             .mag_filter(vk::Filter::NEAREST)
             .min_filter(vk::Filter::NEAREST)
@@ -136,9 +144,8 @@ impl Device {
             .address_mode_w(vk::SamplerAddressMode::CLAMP_TO_EDGE);
         // SAFETY: valid create info.
         let sampler =
-            unsafe { self.raw.create_sampler(&info, None) }.context("creating a sampler")?;
-        self.set_name(sampler, name);
-        Ok(sampler)
+            unsafe { self.ash().create_sampler(&info, None) }.context("creating a sampler")?;
+        Ok(Owned::new(self, sampler, name))
     }
 
     /// Linear filtering across levels for textures: `repeat` tiles them
@@ -150,7 +157,7 @@ impl Device {
         name: &str,
         repeat: bool,
         anisotropy: Option<f32>,
-    ) -> Result<vk::Sampler> {
+    ) -> Result<Sampler> {
         let address = if repeat {
             vk::SamplerAddressMode::REPEAT
         } else {
@@ -169,13 +176,7 @@ impl Device {
         // SAFETY: valid create info; anisotropy only when the caller has
         // checked the feature.
         let sampler =
-            unsafe { self.raw.create_sampler(&info, None) }.context("creating a sampler")?;
-        self.set_name(sampler, name);
-        Ok(sampler)
-    }
-
-    pub fn destroy_sampler(&self, sampler: vk::Sampler) {
-        // SAFETY: no descriptor set using it is in use.
-        unsafe { self.raw.destroy_sampler(sampler, None) };
+            unsafe { self.ash().create_sampler(&info, None) }.context("creating a sampler")?;
+        Ok(Owned::new(self, sampler, name))
     }
 }

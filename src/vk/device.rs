@@ -3,7 +3,8 @@
 use std::collections::BTreeMap;
 use std::ffi::{c_char, CStr, CString};
 use std::mem::ManuallyDrop;
-use std::sync::Mutex;
+use std::sync::atomic::AtomicU64;
+use std::sync::{Arc, Mutex};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
@@ -61,7 +62,7 @@ pub(super) struct FaultState {
     allocations: u32,
 }
 
-impl Device {
+impl DeviceShared {
     /// Arms (or with None, disarms) an injected failure.
     pub fn set_fault(&self, fault: Option<Fault>) {
         *self.fault.lock().expect("fault lock") = FaultState {
@@ -99,23 +100,42 @@ impl Device {
     }
 }
 
-pub struct Device {
-    pub physical: vk::PhysicalDevice,
-    pub raw: ash::Device,
-    pub queue: vk::Queue,
-    pub queue_family: u32,
+/// The logical device, shared by every object made from it: cloning is
+/// cheap, and the device (with its instance) is destroyed when the last
+/// clone goes, after waiting for it to go idle. Objects hold a clone, so
+/// the device cannot go before them.
+#[derive(Clone)]
+pub struct Device(Arc<DeviceShared>);
+
+impl std::ops::Deref for Device {
+    type Target = DeviceShared;
+    fn deref(&self) -> &DeviceShared {
+        &self.0
+    }
+}
+
+/// What a `Device` shares. Fields drop after `Drop::drop` runs, so the
+/// instance goes after the device.
+pub struct DeviceShared {
     pub caps: Capabilities,
+    pub(super) physical: vk::PhysicalDevice,
+    pub(super) queue: vk::Queue,
+    pub(super) queue_family: u32,
     debug_utils: Option<ash::ext::debug_utils::Device>,
     /// Dropped explicitly before the device (see Drop).
-    pub(super) allocator: ManuallyDrop<Mutex<Allocator>>,
-    /// Bytes allocated per resource name, for memory reports.
-    pub(super) memory: Mutex<BTreeMap<String, u64>>,
-    pub(super) transient_pool: vk::CommandPool,
+    allocator: ManuallyDrop<Mutex<Allocator>>,
+    /// For one-shot uploads; used under its lock.
+    transient_pool: Mutex<vk::CommandPool>,
     /// Largest bytes in use allowed; u64::MAX: no limit.
-    pub(super) memory_budget: std::sync::atomic::AtomicU64,
+    memory_budget: AtomicU64,
     /// A failure to inject (`set_fault`), and how many submissions and
     /// allocations have been counted towards it.
-    pub(super) fault: std::sync::Mutex<FaultState>,
+    fault: Mutex<FaultState>,
+    /// Objects alive now, by (type, handle): their names, for the leak
+    /// report at shutdown.
+    live: Mutex<BTreeMap<(i32, u64), String>>,
+    raw: ash::Device,
+    instance: Instance,
 }
 
 /// Features to treat as missing even where the device has them, to test
@@ -225,13 +245,28 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
     }
 }
 
+/// Destroys a freshly created device unless defused: what `Device::new`
+/// holds until the device has an owner.
+struct DeviceGuard(Option<ash::Device>);
+
+impl Drop for DeviceGuard {
+    fn drop(&mut self) {
+        if let Some(raw) = self.0.take() {
+            // SAFETY: nothing else was made from the device yet, or what was
+            // (the allocator, a pool) is dropped before this guard.
+            unsafe { raw.destroy_device(None) };
+        }
+    }
+}
+
 impl Device {
-    /// Picks the best device: one with tessellation shaders first, then
-    /// discrete, integrated, virtual, CPU. Optional features it has are
-    /// enabled, except those `disabled` asks to behave as missing.
-    /// `extensions`: device extensions to enable (the swapchain's).
-    pub fn new(
-        instance: &Instance,
+    /// Picks the best device of `instance`: one with tessellation shaders
+    /// first, then discrete, integrated, virtual, CPU. Optional features it
+    /// has are enabled, except those `disabled` asks to behave as missing.
+    /// `extensions`: device extensions to enable (the swapchain's). The
+    /// device owns the instance from here on.
+    pub(super) fn new(
+        instance: Instance,
         extensions: &[&CStr],
         disabled: &DisabledFeatures,
     ) -> Result<Self> {
@@ -269,8 +304,11 @@ impl Device {
             .enabled_extension_names(&extension_names)
             .push_next(&mut v13);
         // SAFETY: the create info points at locals alive for the call.
-        let raw = unsafe { instance.raw.create_device(best.physical, &info, None) }
-            .context("creating the Vulkan device")?;
+        let guard = DeviceGuard(Some(
+            unsafe { instance.raw.create_device(best.physical, &info, None) }
+                .context("creating the Vulkan device")?,
+        ));
+        let raw = guard.0.clone().expect("set just above");
         // SAFETY: family and index 0 exist: we created the device with them.
         let queue = unsafe { raw.get_device_queue(best.queue_family, 0) };
 
@@ -281,18 +319,11 @@ impl Device {
             debug_settings: Default::default(),
             buffer_device_address: false,
             allocation_sizes: Default::default(),
-        });
-        let allocator = match allocator {
-            Ok(a) => a,
-            Err(source) => {
-                // SAFETY: nothing was created from the device yet.
-                unsafe { raw.destroy_device(None) };
-                return Err(VkError::Allocation {
-                    name: "allocator".into(),
-                    source,
-                });
-            }
-        };
+        })
+        .map_err(|source| VkError::Allocation {
+            name: "allocator".into(),
+            source,
+        })?;
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(best.queue_family)
             .flags(
@@ -306,7 +337,10 @@ impl Device {
             .debug_utils
             .as_ref()
             .map(|_| ash::ext::debug_utils::Device::new(&instance.raw, &raw));
-        let device = Device {
+        // From here the shared state's Drop destroys the device.
+        let mut guard = guard;
+        guard.0 = None;
+        let device = Device(Arc::new(DeviceShared {
             physical: best.physical,
             raw,
             queue,
@@ -314,20 +348,57 @@ impl Device {
             caps,
             debug_utils,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
-            memory: Mutex::new(BTreeMap::new()),
-            transient_pool,
-            memory_budget: std::sync::atomic::AtomicU64::new(u64::MAX),
-            fault: std::sync::Mutex::new(FaultState::default()),
-        };
+            transient_pool: Mutex::new(transient_pool),
+            memory_budget: AtomicU64::new(u64::MAX),
+            fault: Mutex::new(FaultState::default()),
+            live: Mutex::new(BTreeMap::new()),
+            instance,
+        }));
         device.set_name(device.raw.handle(), "vkterrain.device");
         device.set_name(device.queue, "vkterrain.queue");
         device.set_name(transient_pool, "vkterrain.transient_command_pool");
         Ok(device)
     }
 
+    /// Clones of this device alive now, this one included: one per object
+    /// made from it, plus its owners.
+    pub(super) fn holders(&self) -> usize {
+        Arc::strong_count(&self.0)
+    }
+}
+
+impl DeviceShared {
+    pub(super) fn ash(&self) -> &ash::Device {
+        &self.raw
+    }
+
+    pub(super) fn instance(&self) -> &Instance {
+        &self.instance
+    }
+
+    pub(super) fn allocator(&self) -> std::sync::MutexGuard<'_, Allocator> {
+        self.allocator.lock().expect("allocator lock")
+    }
+
+    pub(super) fn transient_pool(&self) -> std::sync::MutexGuard<'_, vk::CommandPool> {
+        self.transient_pool.lock().expect("command pool lock")
+    }
+
+    pub(super) fn memory_budget_bytes(&self) -> &AtomicU64 {
+        &self.memory_budget
+    }
+
+    /// Records an owned object as alive until `forget_object`.
+    pub(super) fn register_object<H: vk::Handle>(&self, handle: H, name: &str) {
+        self.live
+            .lock()
+            .expect("object registry lock")
+            .insert((H::TYPE.as_raw(), handle.as_raw()), name.to_string());
+    }
+
     /// Gives a Vulkan object a debug name (shown by validation messages and
     /// graphics debuggers). A no-op without VK_EXT_debug_utils.
-    pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
+    pub(super) fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
         let Some(utils) = &self.debug_utils else {
             return;
         };
@@ -342,15 +413,30 @@ impl Device {
         let _ = unsafe { utils.set_debug_utils_object_name(&info) };
     }
 
+    /// Records that an object from `register_object` was destroyed.
+    pub(super) fn forget_object<H: vk::Handle>(&self, handle: H) {
+        self.live
+            .lock()
+            .expect("object registry lock")
+            .remove(&(H::TYPE.as_raw(), handle.as_raw()));
+    }
+
+    /// Owned objects made from this device and not destroyed yet, as
+    /// `BUFFER "name"`.
+    pub fn live_objects(&self) -> Vec<String> {
+        self.live
+            .lock()
+            .expect("object registry lock")
+            .iter()
+            .map(|(&(kind, _), name)| format!("{:?} \"{name}\"", vk::ObjectType::from_raw(kind)))
+            .collect()
+    }
+
     /// Format features for optimal tiling.
-    pub fn format_features(
-        &self,
-        instance: &Instance,
-        format: vk::Format,
-    ) -> vk::FormatFeatureFlags {
+    pub fn format_features(&self, format: vk::Format) -> vk::FormatFeatureFlags {
         // SAFETY: plain query.
         unsafe {
-            instance
+            self.instance
                 .raw
                 .get_physical_device_format_properties(self.physical, format)
                 .optimal_tiling_features
@@ -364,13 +450,18 @@ impl Device {
     }
 }
 
-impl Drop for Device {
+impl Drop for DeviceShared {
     fn drop(&mut self) {
-        // SAFETY: the owner has destroyed every object made from this device
-        // and waited for it to go idle. The allocator frees its memory blocks
-        // through the device, so it goes before the device.
+        // Nothing may be in flight when the device goes; an error here
+        // (device lost) leaves nothing better to do than tear down anyway.
+        let _ = self.wait_idle();
+        // SAFETY: every object made from the device holds a clone of it, so
+        // none is left when this runs; it is idle. The allocator frees its
+        // memory blocks through the device, so it goes before the device.
+        // The instance is a field, dropped after this.
         unsafe {
-            self.raw.destroy_command_pool(self.transient_pool, None);
+            self.raw
+                .destroy_command_pool(*self.transient_pool.get_mut().expect("pool lock"), None);
             ManuallyDrop::drop(&mut self.allocator);
             self.raw.destroy_device(None);
         }

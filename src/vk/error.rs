@@ -23,6 +23,9 @@ pub enum VkError {
     #[error("{0}")]
     Unsupported(String),
 
+    #[error("the validation layer reported {count} messages; the first: {first}")]
+    Validation { count: u32, first: String },
+
     #[error(
         "GPU memory for {name}: {requested} bytes would bring the {in_use} in use past the \
          budget of {budget} bytes (--gpu-memory-budget)"

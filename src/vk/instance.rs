@@ -2,6 +2,7 @@
 //! validation included) when asked for.
 
 use std::ffi::{c_char, CStr};
+use std::sync::Arc;
 
 use ash::vk;
 
@@ -10,13 +11,17 @@ use super::error::{Result, VkError, VkResultExt};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
+/// The instance; owned by the `Device` made from it, which destroys it
+/// after itself.
 pub struct Instance {
-    pub entry: ash::Entry,
-    pub raw: ash::Instance,
+    pub(super) entry: ash::Entry,
+    pub(super) raw: ash::Instance,
     /// Present when VK_EXT_debug_utils is (object names, messenger).
-    pub debug_utils: Option<ash::ext::debug_utils::Instance>,
+    pub(super) debug_utils: Option<ash::ext::debug_utils::Instance>,
     messenger: vk::DebugUtilsMessengerEXT,
-    validation: Box<ValidationLog>,
+    /// Shared so that its count can be read after the instance is gone
+    /// (messages from destroying the device and instance included).
+    validation: Arc<ValidationLog>,
     validation_enabled: bool,
 }
 
@@ -24,7 +29,7 @@ impl Instance {
     /// `validate`: enable VK_LAYER_KHRONOS_validation with synchronization
     /// validation, and fail if the layer is missing. `extensions`: extra
     /// instance extensions (a window surface's, say).
-    pub fn new(validate: bool, extensions: &[*const c_char]) -> Result<Self> {
+    pub(super) fn new(validate: bool, extensions: &[*const c_char]) -> Result<Self> {
         // SAFETY: loading the Vulkan loader runs its initialisers; that is
         // the only way to reach Vulkan.
         let entry = unsafe { ash::Entry::load()? };
@@ -68,7 +73,7 @@ impl Instance {
             Vec::new()
         };
 
-        let validation = Box::<ValidationLog>::default();
+        let validation = Arc::<ValidationLog>::default();
         let app = vk::ApplicationInfo::default()
             .application_name(c"vkterrain")
             .engine_name(c"vkterrain")
@@ -103,8 +108,9 @@ impl Instance {
             has_debug_utils.then(|| ash::ext::debug_utils::Instance::new(&entry, &raw));
         let messenger = match (&debug_utils, validate) {
             (Some(utils), true) => {
-                // SAFETY: the log is boxed, so its address is stable for as
-                // long as the messenger exists (see Drop).
+                // SAFETY: the log is behind an Arc the instance holds, so
+                // its address is stable for as long as the messenger exists
+                // (see Drop).
                 let created = unsafe {
                     utils.create_debug_utils_messenger(&messenger_info(&validation), None)
                 };
@@ -132,9 +138,10 @@ impl Instance {
         })
     }
 
-    /// Warnings and errors the validation layer reported.
-    pub fn validation_log(&self) -> &ValidationLog {
-        &self.validation
+    /// Warnings and errors the validation layer reported; readable after
+    /// the instance is destroyed.
+    pub(super) fn validation_log(&self) -> Arc<ValidationLog> {
+        Arc::clone(&self.validation)
     }
 
     pub fn validation_enabled(&self) -> bool {
@@ -144,7 +151,7 @@ impl Instance {
 
 impl Drop for Instance {
     fn drop(&mut self) {
-        // SAFETY: the owner (`Gpu`) destroys the device first; the messenger
+        // SAFETY: the device that owns this instance is destroyed first; the messenger
         // goes before the instance it belongs to, and before the log it
         // points at is freed.
         unsafe {

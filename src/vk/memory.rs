@@ -1,13 +1,17 @@
 //! Buffers and images with memory from gpu-allocator, and uploads through a
-//! staging buffer. Destroying takes the resource by value, so it cannot be
-//! used or freed twice.
+//! staging buffer. Each frees its handles and memory when dropped.
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
-use super::device::Device;
+use std::mem::ManuallyDrop;
+use std::sync::atomic::Ordering;
+
+use super::commands::Recorder;
+use super::device::{Device, DeviceShared};
 use super::error::{Result, VkError, VkResultExt};
+use super::owned::{Fence, Owned};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct BufferDesc {
@@ -16,28 +20,71 @@ pub struct BufferDesc {
     pub location: MemoryLocation,
 }
 
+/// Memory from the device's allocator, given back when dropped.
+struct Memory {
+    allocation: ManuallyDrop<Allocation>,
+    device: Device,
+}
+
+impl Drop for Memory {
+    fn drop(&mut self) {
+        // SAFETY: taken once, here; the field is never used again.
+        let allocation = unsafe { ManuallyDrop::take(&mut self.allocation) };
+        // A failure here means the allocation wasn't from this allocator,
+        // which by construction cannot happen; there is nothing to recover.
+        let _ = self.device.allocator().free(allocation);
+    }
+}
+
+/// A buffer and its memory. Fields drop in order: the buffer, then the
+/// memory it was bound to.
 pub struct Buffer {
-    pub raw: vk::Buffer,
+    raw: Owned<vk::Buffer>,
+    memory: Memory,
     pub desc: BufferDesc,
-    allocation: Allocation,
     name: String,
 }
 
 impl Buffer {
     /// The mapped bytes of a host-visible buffer.
     pub fn mapped(&self) -> Option<&[u8]> {
-        self.allocation
+        self.memory
+            .allocation
             .mapped_slice()
             .map(|s| &s[..self.desc.size as usize])
     }
 
     pub fn mapped_mut(&mut self) -> Option<&mut [u8]> {
         let size = self.desc.size as usize;
-        self.allocation.mapped_slice_mut().map(|s| &mut s[..size])
+        self.memory
+            .allocation
+            .mapped_slice_mut()
+            .map(|s| &mut s[..size])
+    }
+
+    /// Copies `bytes` to the start of a host-visible buffer.
+    pub fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        let name = self.name.clone();
+        let mapped = self.mapped_mut().ok_or_else(|| {
+            VkError::Unsupported(format!("{name}: host-visible memory is not mapped"))
+        })?;
+        let Some(start) = mapped.get_mut(..bytes.len()) else {
+            return Err(VkError::Unsupported(format!(
+                "{name}: {} bytes do not fit in {}",
+                bytes.len(),
+                mapped.len()
+            )));
+        };
+        start.copy_from_slice(bytes);
+        Ok(())
     }
 
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    pub(super) fn raw(&self) -> vk::Buffer {
+        self.raw.raw()
     }
 }
 
@@ -49,22 +96,63 @@ pub struct ImageDesc {
     pub aspect: vk::ImageAspectFlags,
 }
 
+/// An image, its whole view and its memory. Fields drop in order: the
+/// view, the image, then the memory.
 pub struct Image {
-    pub raw: vk::Image,
-    pub view: vk::ImageView,
+    view: Owned<vk::ImageView>,
+    raw: Owned<vk::Image>,
+    _memory: Memory,
     pub desc: ImageDesc,
-    allocation: Allocation,
-    name: String,
+}
+
+impl Image {
+    pub(super) fn raw(&self) -> vk::Image {
+        self.raw.raw()
+    }
+
+    pub(super) fn view(&self) -> vk::ImageView {
+        self.view.raw()
+    }
+}
+
+impl DeviceShared {
+    /// Bytes currently allocated, per resource name (from the allocator's
+    /// own report).
+    pub fn memory_report(&self) -> Vec<(String, u64)> {
+        let mut bytes = std::collections::BTreeMap::<String, u64>::new();
+        for a in self.allocator().generate_report().allocations {
+            *bytes.entry(a.name).or_default() += a.size;
+        }
+        bytes.into_iter().collect()
+    }
+
+    /// Bytes currently allocated in all.
+    pub fn memory_in_use(&self) -> u64 {
+        self.allocator().generate_report().total_allocated_bytes
+    }
+
+    /// Refuses allocations that would bring the bytes in use past `budget`
+    /// (None: no limit), with an error naming the resource.
+    pub fn set_memory_budget(&self, budget: Option<u64>) {
+        self.memory_budget_bytes()
+            .store(budget.unwrap_or(u64::MAX), Ordering::Relaxed);
+    }
+
+    pub fn memory_budget(&self) -> Option<u64> {
+        let b = self.memory_budget_bytes().load(Ordering::Relaxed);
+        (b != u64::MAX).then_some(b)
+    }
 }
 
 impl Device {
+    /// Memory for `requirements`, within the budget.
     fn allocate(
         &self,
         name: &str,
         requirements: vk::MemoryRequirements,
         location: MemoryLocation,
         linear: bool,
-    ) -> Result<Allocation> {
+    ) -> Result<Memory> {
         if let Some(budget) = self.memory_budget() {
             let in_use = self.memory_in_use();
             if in_use.saturating_add(requirements.size) > budget {
@@ -78,9 +166,7 @@ impl Device {
         }
         self.count_allocation(name)?;
         let allocation = self
-            .allocator
-            .lock()
-            .expect("allocator lock")
+            .allocator()
             .allocate(&AllocationCreateDesc {
                 name,
                 requirements,
@@ -92,89 +178,10 @@ impl Device {
                 name: name.to_string(),
                 source,
             })?;
-        *self
-            .memory
-            .lock()
-            .expect("memory lock")
-            .entry(name.to_string())
-            .or_default() += allocation.size();
-        Ok(allocation)
-    }
-
-    fn release(&self, name: &str, allocation: Allocation) {
-        let size = allocation.size();
-        if let Some(bytes) = self.memory.lock().expect("memory lock").get_mut(name) {
-            *bytes = bytes.saturating_sub(size);
-        }
-        // A failure here means the allocation wasn't from this allocator,
-        // which by construction cannot happen; there is nothing to recover.
-        let _ = self
-            .allocator
-            .lock()
-            .expect("allocator lock")
-            .free(allocation);
-    }
-
-    /// Allocates memory for a new buffer or image and binds it. On failure
-    /// the memory is freed and `destroy` disposes of the resource, so nothing
-    /// leaks half-made.
-    fn allocate_bound(
-        &self,
-        name: &str,
-        requirements: vk::MemoryRequirements,
-        location: MemoryLocation,
-        linear: bool,
-        bind: impl FnOnce(&Allocation) -> std::result::Result<(), vk::Result>,
-        destroy: impl FnOnce(),
-    ) -> Result<Allocation> {
-        let allocation = match self.allocate(name, requirements, location, linear) {
-            Ok(a) => a,
-            Err(e) => {
-                destroy();
-                return Err(e);
-            }
-        };
-        if let Err(result) = bind(&allocation) {
-            self.release(name, allocation);
-            destroy();
-            return Err(VkError::Call {
-                context: "binding memory",
-                result,
-            });
-        }
-        Ok(allocation)
-    }
-
-    /// Bytes currently allocated, per resource name (zero entries dropped).
-    pub fn memory_report(&self) -> Vec<(String, u64)> {
-        self.memory
-            .lock()
-            .expect("memory lock")
-            .iter()
-            .filter(|(_, &b)| b > 0)
-            .map(|(n, &b)| (n.clone(), b))
-            .collect()
-    }
-
-    /// Refuses allocations that would bring the bytes in use past `budget`
-    /// (None: no limit), with an error naming the resource.
-    pub fn set_memory_budget(&self, budget: Option<u64>) {
-        self.memory_budget.store(
-            budget.unwrap_or(u64::MAX),
-            std::sync::atomic::Ordering::Relaxed,
-        );
-    }
-
-    pub fn memory_budget(&self) -> Option<u64> {
-        let b = self
-            .memory_budget
-            .load(std::sync::atomic::Ordering::Relaxed);
-        (b != u64::MAX).then_some(b)
-    }
-
-    /// Bytes currently allocated in all.
-    pub fn memory_in_use(&self) -> u64 {
-        self.memory.lock().expect("memory lock").values().sum()
+        Ok(Memory {
+            allocation: ManuallyDrop::new(allocation),
+            device: self.clone(),
+        })
     }
 
     pub fn create_buffer(&self, desc: BufferDesc, name: &str) -> Result<Buffer> {
@@ -183,32 +190,25 @@ impl Device {
             .usage(desc.usage)
             .sharing_mode(vk::SharingMode::EXCLUSIVE);
         // SAFETY: valid create info on a live device.
-        let raw = unsafe { self.raw.create_buffer(&info, None) }.context("creating a buffer")?;
+        let raw = unsafe { self.ash().create_buffer(&info, None) }.context("creating a buffer")?;
+        let raw = Owned::new(self, raw, name);
         // SAFETY: `raw` was just created from this device.
-        let requirements = unsafe { self.raw.get_buffer_memory_requirements(raw) };
-        let allocation = self.allocate_bound(
-            name,
-            requirements,
-            desc.location,
-            true,
-            // SAFETY: memory and offset come from the allocator for these requirements.
-            |a| unsafe { self.raw.bind_buffer_memory(raw, a.memory(), a.offset()) },
-            // SAFETY: an unused buffer of this device.
-            || unsafe { self.raw.destroy_buffer(raw, None) },
-        )?;
-        self.set_name(raw, name);
+        let requirements = unsafe { self.ash().get_buffer_memory_requirements(raw.raw()) };
+        let memory = self.allocate(name, requirements, desc.location, true)?;
+        let a = &memory.allocation;
+        // SAFETY: memory and offset come from the allocator for these
+        // requirements; the buffer has no memory yet.
+        unsafe {
+            self.ash()
+                .bind_buffer_memory(raw.raw(), a.memory(), a.offset())
+        }
+        .context("binding buffer memory")?;
         Ok(Buffer {
             raw,
+            memory,
             desc,
-            allocation,
             name: name.to_string(),
         })
-    }
-
-    pub fn destroy_buffer(&self, buffer: Buffer) {
-        // SAFETY: the caller guarantees the GPU no longer uses the buffer.
-        unsafe { self.raw.destroy_buffer(buffer.raw, None) };
-        self.release(&buffer.name, buffer.allocation);
     }
 
     /// A host-visible buffer filled with `bytes`.
@@ -226,12 +226,7 @@ impl Device {
             },
             name,
         )?;
-        buffer
-            .mapped_mut()
-            .ok_or_else(|| {
-                VkError::Unsupported(format!("{name}: host-visible memory is not mapped"))
-            })?
-            .copy_from_slice(bytes);
+        buffer.write(bytes)?;
         Ok(buffer)
     }
 
@@ -247,36 +242,23 @@ impl Device {
             vk::BufferUsageFlags::TRANSFER_SRC,
             bytes,
         )?;
-        let buffer = match self.create_buffer(
+        let buffer = self.create_buffer(
             BufferDesc {
                 size: bytes.len() as u64,
                 usage: usage | vk::BufferUsageFlags::TRANSFER_DST,
                 location: MemoryLocation::GpuOnly,
             },
             name,
-        ) {
-            Ok(b) => b,
-            Err(e) => {
-                self.destroy_buffer(staging);
-                return Err(e);
-            }
-        };
-        let copied = self.one_shot(&format!("{name}.upload"), |cmd| {
+        )?;
+        self.one_shot(&format!("{name}.upload"), |rec| {
             let region = vk::BufferCopy::default().size(bytes.len() as u64);
             // SAFETY: both buffers are large enough and not in use elsewhere.
             unsafe {
-                self.raw
-                    .cmd_copy_buffer(cmd, staging.raw, buffer.raw, &[region])
+                self.ash()
+                    .cmd_copy_buffer(rec.cmd, staging.raw(), buffer.raw(), &[region])
             };
-        });
-        self.destroy_buffer(staging);
-        match copied {
-            Ok(()) => Ok(buffer),
-            Err(e) => {
-                self.destroy_buffer(buffer);
-                Err(e)
-            }
-        }
+        })?;
+        Ok(buffer)
     }
 
     pub fn create_image(&self, desc: ImageDesc, name: &str) -> Result<Image> {
@@ -309,83 +291,71 @@ impl Device {
             .sharing_mode(vk::SharingMode::EXCLUSIVE)
             .initial_layout(vk::ImageLayout::UNDEFINED);
         // SAFETY: valid create info.
-        let raw = unsafe { self.raw.create_image(&info, None) }.context("creating an image")?;
+        let raw = unsafe { self.ash().create_image(&info, None) }.context("creating an image")?;
+        let raw = Owned::new(self, raw, name);
         // SAFETY: `raw` was just created from this device.
-        let requirements = unsafe { self.raw.get_image_memory_requirements(raw) };
-        let allocation = self.allocate_bound(
-            name,
-            requirements,
-            MemoryLocation::GpuOnly,
-            false,
-            // SAFETY: memory and offset come from the allocator for these requirements.
-            |a| unsafe { self.raw.bind_image_memory(raw, a.memory(), a.offset()) },
-            // SAFETY: an unused image of this device.
-            || unsafe { self.raw.destroy_image(raw, None) },
-        )?;
+        let requirements = unsafe { self.ash().get_image_memory_requirements(raw.raw()) };
+        let memory = self.allocate(name, requirements, MemoryLocation::GpuOnly, false)?;
+        let a = &memory.allocation;
+        // SAFETY: memory and offset come from the allocator for these
+        // requirements; the image has no memory yet.
+        unsafe {
+            self.ash()
+                .bind_image_memory(raw.raw(), a.memory(), a.offset())
+        }
+        .context("binding image memory")?;
         let view_info = vk::ImageViewCreateInfo::default()
-            .image(raw)
+            .image(raw.raw())
             .view_type(view_type)
             .format(desc.format)
             .subresource_range(subresource_range(desc.aspect));
         // SAFETY: the view matches the image's format and aspect.
-        let view = unsafe { self.raw.create_image_view(&view_info, None) }
+        let view = unsafe { self.ash().create_image_view(&view_info, None) }
             .context("creating an image view")?;
-        self.set_name(raw, name);
-        self.set_name(view, &format!("{name}.view"));
         Ok(Image {
+            view: Owned::new(self, view, &format!("{name}.view")),
             raw,
-            view,
+            _memory: memory,
             desc,
-            allocation,
-            name: name.to_string(),
         })
     }
 
-    pub fn destroy_image(&self, image: Image) {
-        // SAFETY: the caller guarantees the GPU no longer uses the image.
-        unsafe {
-            self.raw.destroy_image_view(image.view, None);
-            self.raw.destroy_image(image.raw, None);
-        }
-        self.release(&image.name, image.allocation);
-    }
-
-    /// Records `record` into a fresh command buffer, submits it and waits.
-    pub fn one_shot(&self, name: &str, record: impl FnOnce(vk::CommandBuffer)) -> Result<()> {
+    /// Records `record` into a fresh command buffer of the transient pool,
+    /// submits it and waits for it to finish.
+    pub fn one_shot(&self, name: &str, record: impl FnOnce(&Recorder)) -> Result<()> {
+        let pool = self.transient_pool();
         let info = vk::CommandBufferAllocateInfo::default()
-            .command_pool(self.transient_pool)
+            .command_pool(*pool)
             .level(vk::CommandBufferLevel::PRIMARY)
             .command_buffer_count(1);
-        // SAFETY: the pool belongs to this device and is used from one thread.
-        let cmd = unsafe { self.raw.allocate_command_buffers(&info) }
+        // SAFETY: the pool belongs to this device and is held locked.
+        let cmd = unsafe { self.ash().allocate_command_buffers(&info) }
             .context("allocating a command buffer")?[0];
         self.set_name(cmd, name);
-        let fence = self.create_fence(&format!("{name}.fence"), false)?;
         let result = (|| {
+            let fence = self.create_fence(&format!("{name}.fence"), false)?;
             let begin = vk::CommandBufferBeginInfo::default()
                 .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
             // SAFETY: a freshly allocated command buffer.
-            unsafe { self.raw.begin_command_buffer(cmd, &begin) }.context("beginning commands")?;
-            record(cmd);
+            unsafe { self.ash().begin_command_buffer(cmd, &begin) }
+                .context("beginning commands")?;
+            record(&Recorder::new(self, cmd));
             // SAFETY: recording was begun above.
-            unsafe { self.raw.end_command_buffer(cmd) }.context("ending commands")?;
-            self.submit_and_wait(cmd, fence)
+            unsafe { self.ash().end_command_buffer(cmd) }.context("ending commands")?;
+            self.submit(cmd, &[], &[], &fence)?;
+            self.wait_fence(&fence)
         })();
-        // SAFETY: the submission finished (or never started), so both are idle.
-        unsafe {
-            self.raw.destroy_fence(fence, None);
-            self.raw.free_command_buffers(self.transient_pool, &[cmd]);
+        if result.is_err() {
+            // A failed submission may still have started: let it finish
+            // before the command buffer and what it used are freed.
+            let _ = self.wait_idle();
         }
+        // SAFETY: the submission finished (or never started).
+        unsafe { self.ash().free_command_buffers(*pool, &[cmd]) };
         result
     }
 
-    /// Submits one command buffer and blocks until it completes.
-    pub fn submit_and_wait(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
-        self.submit(cmd, fence)?;
-        self.wait_fence(fence)
-    }
-
-    pub fn create_fence(&self, name: &str, signalled: bool) -> Result<vk::Fence> {
+    pub fn create_fence(&self, name: &str, signalled: bool) -> Result<Fence> {
         let flags = if signalled {
             vk::FenceCreateFlags::SIGNALED
         } else {
@@ -393,12 +363,11 @@ impl Device {
         };
         // SAFETY: valid create info.
         let fence = unsafe {
-            self.raw
+            self.ash()
                 .create_fence(&vk::FenceCreateInfo::default().flags(flags), None)
         }
         .context("creating a fence")?;
-        self.set_name(fence, name);
-        Ok(fence)
+        Ok(Owned::new(self, fence, name))
     }
 }
 
@@ -422,7 +391,7 @@ pub struct TexelUpload {
 
 /// One image layout transition with synchronization2 scopes.
 #[derive(Clone, Copy, Debug)]
-pub struct Transition {
+pub(super) struct Transition {
     pub image: vk::Image,
     pub aspect: vk::ImageAspectFlags,
     pub from: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2),
@@ -444,27 +413,6 @@ impl Transition {
             to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
         }
     }
-}
-
-/// Records a batch of image transitions as one barrier.
-pub fn transition_images(device: &ash::Device, cmd: vk::CommandBuffer, transitions: &[Transition]) {
-    let barriers: Vec<vk::ImageMemoryBarrier2> = transitions
-        .iter()
-        .map(|t| {
-            vk::ImageMemoryBarrier2::default()
-                .image(t.image)
-                .subresource_range(subresource_range(t.aspect))
-                .old_layout(t.from.0)
-                .src_stage_mask(t.from.1)
-                .src_access_mask(t.from.2)
-                .new_layout(t.to.0)
-                .dst_stage_mask(t.to.1)
-                .dst_access_mask(t.to.2)
-        })
-        .collect();
-    let dependency = vk::DependencyInfo::default().image_memory_barriers(&barriers);
-    // SAFETY: the images belong to `device` and `cmd` is recording.
-    unsafe { device.cmd_pipeline_barrier2(cmd, &dependency) };
 }
 
 impl Device {
@@ -511,17 +459,11 @@ impl Device {
             up.view_type,
             name,
         )?;
-        let staging = match self.create_host_buffer(
+        let staging = self.create_host_buffer(
             &format!("{name}.staging"),
             vk::BufferUsageFlags::TRANSFER_SRC,
             &levels.concat(),
-        ) {
-            Ok(b) => b,
-            Err(e) => {
-                self.destroy_image(image);
-                return Err(e);
-            }
-        };
+        )?;
         let mut offset = 0u64;
         let regions: Vec<vk::BufferImageCopy> = levels
             .iter()
@@ -545,60 +487,35 @@ impl Device {
             })
             .collect();
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        let uploaded = self.one_shot(&format!("{name}.upload"), |cmd| {
-            transition_images(
-                &self.raw,
-                cmd,
-                &[Transition {
-                    image: image.raw,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                    from: (L::UNDEFINED, S::NONE, A::NONE),
-                    to: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
-                }],
-            );
+        self.one_shot(&format!("{name}.upload"), |rec| {
+            rec.transition_images(&[Transition {
+                image: image.raw(),
+                aspect: vk::ImageAspectFlags::COLOR,
+                from: (L::UNDEFINED, S::NONE, A::NONE),
+                to: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
+            }]);
             // SAFETY: the staging buffer holds every level at the offsets
             // of `regions`, each level's extent of texels per layer.
             unsafe {
-                self.raw.cmd_copy_buffer_to_image(
-                    cmd,
-                    staging.raw,
-                    image.raw,
+                self.ash().cmd_copy_buffer_to_image(
+                    rec.cmd,
+                    staging.raw(),
+                    image.raw(),
                     L::TRANSFER_DST_OPTIMAL,
                     &regions,
                 )
             };
-            transition_images(
-                &self.raw,
-                cmd,
-                &[Transition {
-                    image: image.raw,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                    from: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
-                    to: (
-                        L::SHADER_READ_ONLY_OPTIMAL,
-                        S::ALL_GRAPHICS,
-                        A::SHADER_SAMPLED_READ,
-                    ),
-                }],
-            );
-        });
-        self.destroy_buffer(staging);
-        match uploaded {
-            Ok(()) => Ok(image),
-            Err(e) => {
-                self.destroy_image(image);
-                Err(e)
-            }
-        }
-    }
-
-    /// Submits one recorded command buffer; `fence` signals when it is done.
-    pub fn submit(&self, cmd: vk::CommandBuffer, fence: vk::Fence) -> Result<()> {
-        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
-        let submit = vk::SubmitInfo2::default().command_buffer_infos(&cmds);
-        self.count_submission()?;
-        // SAFETY: `cmd` is fully recorded and `fence` unsignalled.
-        unsafe { self.raw.queue_submit2(self.queue, &[submit], fence) }
-            .context("submitting commands")
+            rec.transition_images(&[Transition {
+                image: image.raw(),
+                aspect: vk::ImageAspectFlags::COLOR,
+                from: (L::TRANSFER_DST_OPTIMAL, S::COPY, A::TRANSFER_WRITE),
+                to: (
+                    L::SHADER_READ_ONLY_OPTIMAL,
+                    S::ALL_GRAPHICS,
+                    A::SHADER_SAMPLED_READ,
+                ),
+            }]);
+        })?;
+        Ok(image)
     }
 }

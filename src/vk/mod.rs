@@ -1,6 +1,8 @@
 //! Vulkan plumbing over ash: instance, device, memory, shaders, queries,
 //! render targets. Nothing here knows about terrains. All `unsafe` of the
-//! crate lives in this module.
+//! crate lives in this module, and only this module touches raw Vulkan
+//! handles: everything it hands out owns its objects and frees them when
+//! dropped (see `owned`).
 
 pub mod commands;
 pub mod debug;
@@ -9,11 +11,14 @@ pub mod device;
 pub mod error;
 pub mod instance;
 pub mod memory;
+pub mod owned;
 pub mod pipeline;
 pub mod queries;
 pub mod shader;
 pub mod swapchain;
 pub mod target;
+
+use std::ffi::{c_char, CStr};
 
 pub use device::{Capabilities, Device, DisabledFeatures, Fault};
 pub use error::{Result, VkError};
@@ -22,57 +27,123 @@ pub use instance::Instance;
 /// Environment variable that turns validation on for any command.
 pub const VALIDATE_ENV: &str = "VKTERRAIN_VALIDATE";
 
-/// The instance and device, torn down in the right order: wait for the GPU,
-/// then the device (which frees its allocator), then the instance (whose
-/// messenger goes last). Fields drop in declaration order.
+/// How to open the GPU: every command and the window go through
+/// `Gpu::open` with one of these.
+#[derive(Clone, Debug, Default)]
+pub struct GpuOptions {
+    /// VK_LAYER_KHRONOS_validation with synchronization validation (also
+    /// on when VKTERRAIN_VALIDATE=1).
+    pub validate: bool,
+    /// Features to treat as missing, to exercise the fallbacks.
+    pub disabled: DisabledFeatures,
+    /// Refuse allocations past this many bytes in use.
+    pub memory_budget: Option<u64>,
+    /// A failure to inject, to see how it is reported.
+    pub fault: Option<Fault>,
+    /// Instance extensions a window surface needs.
+    pub instance_extensions: Vec<*const c_char>,
+    /// Device extensions (the swapchain's, for a window).
+    pub device_extensions: Vec<&'static CStr>,
+}
+
+impl GpuOptions {
+    /// Whether validation is on: asked for, or by VKTERRAIN_VALIDATE=1.
+    pub fn validation(&self) -> bool {
+        self.validate || std::env::var(VALIDATE_ENV).is_ok_and(|v| v == "1")
+    }
+}
+
+/// The GPU a command works with: the device, which owns its instance.
+/// Everything made from it holds the device, so the device and instance
+/// are destroyed when the last of them goes; `shutdown` reports what
+/// validation said by then, leaks included.
 pub struct Gpu {
     pub device: Device,
-    pub instance: Instance,
+}
+
+/// What validation reported by the time the GPU was torn down.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ValidationReport {
+    /// Whether the validation layer was on.
+    pub enabled: bool,
+    /// Warnings and errors, leaks reported at device destruction included,
+    /// plus one per object still alive at shutdown.
+    pub count: u32,
+    /// The first messages, verbatim.
+    pub messages: Vec<String>,
+}
+
+impl ValidationReport {
+    /// An error naming the count and the first message, unless clean.
+    pub fn check(&self) -> Result<()> {
+        if self.count == 0 {
+            return Ok(());
+        }
+        Err(VkError::Validation {
+            count: self.count,
+            first: self.messages.first().cloned().unwrap_or_default(),
+        })
+    }
 }
 
 impl Gpu {
-    /// `validate`: VK_LAYER_KHRONOS_validation with synchronization
-    /// validation (also on when VKTERRAIN_VALIDATE=1).
-    pub fn new(validate: bool) -> Result<Self> {
-        Gpu::with_disabled(validate, &DisabledFeatures::default())
+    /// Opens the best device with `options`.
+    pub fn open(options: &GpuOptions) -> Result<Self> {
+        let instance = Instance::new(options.validation(), &options.instance_extensions)?;
+        let device = Device::new(instance, &options.device_extensions, &options.disabled)?;
+        device.set_memory_budget(options.memory_budget);
+        device.set_fault(options.fault);
+        Ok(Gpu { device })
     }
 
-    /// As `new`, treating the `disabled` features as missing.
-    pub fn with_disabled(validate: bool, disabled: &DisabledFeatures) -> Result<Self> {
-        let validate = validate || std::env::var(VALIDATE_ENV).is_ok_and(|v| v == "1");
-        let instance = Instance::new(validate, &[])?;
-        let device = Device::new(&instance, &[], disabled)?;
-        Ok(Gpu { device, instance })
+    /// A device with validation as asked, and nothing else set.
+    pub fn new(validate: bool) -> Result<Self> {
+        Gpu::open(&GpuOptions {
+            validate,
+            ..GpuOptions::default()
+        })
     }
 
     /// Validation warnings and errors so far.
     pub fn validation_messages(&self) -> u32 {
-        self.instance.validation_log().count()
+        self.device.instance().validation_log().count()
     }
 
-    /// Tears everything down and returns how many validation messages were
-    /// reported by the end, the device's destruction included (objects
-    /// still alive then are reported as leaks), with the first ones' text.
-    pub fn shutdown(self) -> (u32, Vec<String>) {
-        let _ = self.device.wait_idle();
-        let this = std::mem::ManuallyDrop::new(self);
-        // SAFETY: `this` is wrapped in ManuallyDrop and never touched again,
-        // so each field is moved out exactly once and dropped exactly once,
-        // in the order `Drop` would use (device, then instance).
-        let (device, instance) =
-            unsafe { (std::ptr::read(&this.device), std::ptr::read(&this.instance)) };
-        drop(device);
-        let log = instance.validation_log();
-        let reported = (log.count(), log.messages());
-        drop(instance);
-        reported
+    pub fn validation_enabled(&self) -> bool {
+        self.device.instance().validation_enabled()
     }
-}
 
-impl Drop for Gpu {
-    fn drop(&mut self) {
-        // Nothing may be in flight when the device goes; an error here
-        // (device lost) leaves nothing better to do than tear down anyway.
+    /// Tears the device and instance down and reports what validation said
+    /// by the end, their destruction included. An object still alive here
+    /// (held elsewhere, or leaked) keeps the device alive: each one counts
+    /// as a message naming it, and the device is not destroyed.
+    pub fn shutdown(self) -> ValidationReport {
+        let log = self.device.instance().validation_log();
+        let enabled = self.validation_enabled();
         let _ = self.device.wait_idle();
+        let live = self.device.live_objects();
+        let others = self.device.holders() - 1;
+        drop(self);
+        let mut count = log.count();
+        let mut messages = log.messages();
+        if others > 0 {
+            let extra = live.len().max(1);
+            count += extra as u32;
+            messages.extend(live.iter().map(|object| {
+                format!(
+                    "leak: {object} is still alive at shutdown, so the device was not destroyed"
+                )
+            }));
+            if live.is_empty() {
+                messages.push(format!(
+                    "leak: {others} holders of the device are still alive at shutdown"
+                ));
+            }
+        }
+        ValidationReport {
+            enabled,
+            count,
+            messages,
+        }
     }
 }

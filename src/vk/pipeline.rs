@@ -4,6 +4,7 @@ use ash::vk;
 
 use super::device::Device;
 use super::error::{Result, VkResultExt};
+use super::owned::{DescriptorSetLayout, Owned, Pipeline, PipelineLayout};
 
 /// Everything that varies between our graphics pipelines.
 #[derive(Clone, Debug)]
@@ -21,7 +22,7 @@ pub struct GraphicsPipelineDesc<'a> {
     pub color_format: vk::Format,
     pub depth_format: vk::Format,
     pub depth_compare: vk::CompareOp,
-    pub layout: vk::PipelineLayout,
+    pub layout: &'a PipelineLayout,
     /// Values of specialisation constants 0, 1, ... (u32 each), given to
     /// every stage; a stage ignores the ids it doesn't declare.
     pub specialization: &'a [u32],
@@ -30,55 +31,41 @@ pub struct GraphicsPipelineDesc<'a> {
 impl Device {
     pub fn create_pipeline_layout(
         &self,
-        set_layouts: &[vk::DescriptorSetLayout],
+        set_layouts: &[&DescriptorSetLayout],
         name: &str,
-    ) -> Result<vk::PipelineLayout> {
-        let info = vk::PipelineLayoutCreateInfo::default().set_layouts(set_layouts);
-        // SAFETY: the set layouts belong to this device.
-        let layout = unsafe { self.raw.create_pipeline_layout(&info, None) }
-            .context("creating a pipeline layout")?;
-        self.set_name(layout, name);
-        Ok(layout)
+    ) -> Result<PipelineLayout> {
+        self.create_pipeline_layout_with_push(set_layouts, vk::ShaderStageFlags::empty(), 0, name)
     }
 
     /// A pipeline layout with one push-constant range at offset 0.
+    /// With `push_size` > 0, one push-constant range at offset 0.
     pub fn create_pipeline_layout_with_push(
         &self,
-        set_layouts: &[vk::DescriptorSetLayout],
+        set_layouts: &[&DescriptorSetLayout],
         stages: vk::ShaderStageFlags,
         push_size: u32,
         name: &str,
-    ) -> Result<vk::PipelineLayout> {
+    ) -> Result<PipelineLayout> {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(stages)
             .size(push_size)];
+        let set_layouts: Vec<_> = set_layouts.iter().map(|l| l.raw()).collect();
         let info = vk::PipelineLayoutCreateInfo::default()
-            .set_layouts(set_layouts)
-            .push_constant_ranges(&ranges);
+            .set_layouts(&set_layouts)
+            .push_constant_ranges(if push_size > 0 { &ranges } else { &[] });
         // SAFETY: the set layouts belong to this device.
-        let layout = unsafe { self.raw.create_pipeline_layout(&info, None) }
+        let layout = unsafe { self.ash().create_pipeline_layout(&info, None) }
             .context("creating a pipeline layout")?;
-        self.set_name(layout, name);
-        Ok(layout)
-    }
-
-    pub fn destroy_pipeline_layout(&self, layout: vk::PipelineLayout) {
-        // SAFETY: no pipeline built on it is in use.
-        unsafe { self.raw.destroy_pipeline_layout(layout, None) };
+        Ok(Owned::new(self, layout, name))
     }
 
     /// A graphics pipeline with dynamic viewport and scissor, no blending,
     /// depth test and write, and no face culling.
-    pub fn create_graphics_pipeline(&self, desc: &GraphicsPipelineDesc) -> Result<vk::Pipeline> {
+    pub fn create_graphics_pipeline(&self, desc: &GraphicsPipelineDesc) -> Result<Pipeline> {
         let mut modules = Vec::with_capacity(desc.stages.len());
         for (stage, spirv) in desc.stages {
-            match self.create_shader_module(spirv, &format!("{}.{stage:?}", desc.name)) {
-                Ok(m) => modules.push((*stage, m)),
-                Err(e) => {
-                    self.destroy_modules(&modules);
-                    return Err(e);
-                }
-            }
+            let module = self.create_shader_module(spirv, &format!("{}.{stage:?}", desc.name))?;
+            modules.push((*stage, module));
         }
         let entries: Vec<vk::SpecializationMapEntry> = (0..desc.specialization.len())
             .map(|i| {
@@ -93,10 +80,10 @@ impl Device {
             .data(bytemuck::cast_slice(desc.specialization));
         let stages: Vec<vk::PipelineShaderStageCreateInfo> = modules
             .iter()
-            .map(|&(stage, module)| {
+            .map(|(stage, module)| {
                 vk::PipelineShaderStageCreateInfo::default()
-                    .stage(stage)
-                    .module(module)
+                    .stage(*stage)
+                    .module(module.raw())
                     .name(c"main")
                     .specialization_info(&specialization)
             })
@@ -162,7 +149,7 @@ impl Device {
             .depth_stencil_state(&depth)
             .color_blend_state(&blend)
             .dynamic_state(&dynamic)
-            .layout(desc.layout)
+            .layout(desc.layout.raw())
             .push_next(&mut rendering);
         if desc.patch_control_points > 0 {
             info = info.tessellation_state(&tessellation);
@@ -170,54 +157,39 @@ impl Device {
         // SAFETY: all state structs are locals alive for the call; modules
         // and layout belong to this device.
         let created = unsafe {
-            self.raw
+            self.ash()
                 .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
         };
-        self.destroy_modules(&modules);
+        // The modules are only needed during creation; they drop on return.
         let pipeline = created
             .map_err(|(_, r)| r)
             .context("creating a graphics pipeline")?[0];
-        self.set_name(pipeline, desc.name);
-        Ok(pipeline)
-    }
-
-    fn destroy_modules(&self, modules: &[(vk::ShaderStageFlags, vk::ShaderModule)]) {
-        for &(_, module) in modules {
-            // SAFETY: modules are only needed during pipeline creation.
-            unsafe { self.raw.destroy_shader_module(module, None) };
-        }
+        Ok(Owned::new(self, pipeline, desc.name))
     }
 
     /// A compute pipeline from one shader.
     pub fn create_compute_pipeline(
         &self,
         spirv: &[u8],
-        layout: vk::PipelineLayout,
+        layout: &PipelineLayout,
         name: &str,
-    ) -> Result<vk::Pipeline> {
+    ) -> Result<Pipeline> {
         let module = self.create_shader_module(spirv, &format!("{name}.module"))?;
         let stage = vk::PipelineShaderStageCreateInfo::default()
             .stage(vk::ShaderStageFlags::COMPUTE)
-            .module(module)
+            .module(module.raw())
             .name(c"main");
         let info = vk::ComputePipelineCreateInfo::default()
             .stage(stage)
-            .layout(layout);
+            .layout(layout.raw());
         // SAFETY: module and layout belong to this device.
         let created = unsafe {
-            self.raw
+            self.ash()
                 .create_compute_pipelines(vk::PipelineCache::null(), &[info], None)
         };
-        self.destroy_modules(&[(vk::ShaderStageFlags::COMPUTE, module)]);
         let pipeline = created
             .map_err(|(_, r)| r)
             .context("creating a compute pipeline")?[0];
-        self.set_name(pipeline, name);
-        Ok(pipeline)
-    }
-
-    pub fn destroy_pipeline(&self, pipeline: vk::Pipeline) {
-        // SAFETY: the caller guarantees it is no longer in use.
-        unsafe { self.raw.destroy_pipeline(pipeline, None) };
+        Ok(Owned::new(self, pipeline, name))
     }
 }

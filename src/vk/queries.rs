@@ -3,8 +3,10 @@
 
 use ash::vk;
 
+use super::commands::Recorder;
 use super::device::Device;
 use super::error::{Result, VkResultExt};
+use super::owned::Owned;
 
 /// Counters of one draw, from a pipeline-statistics query.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -29,8 +31,8 @@ const STATISTICS: [vk::QueryPipelineStatisticFlags; 5] = [
 
 /// Query pools for one frame in flight.
 pub struct FrameQueries {
-    timestamps: Option<vk::QueryPool>,
-    statistics: Option<vk::QueryPool>,
+    timestamps: Option<Owned<vk::QueryPool>>,
+    statistics: Option<Owned<vk::QueryPool>>,
     period_ns: f64,
     valid_mask: u64,
 }
@@ -43,10 +45,9 @@ impl FrameQueries {
                     .query_type(vk::QueryType::TIMESTAMP)
                     .query_count(2);
                 // SAFETY: valid create info.
-                let pool = unsafe { device.raw.create_query_pool(&info, None) }
+                let pool = unsafe { device.ash().create_query_pool(&info, None) }
                     .context("creating a timestamp query pool")?;
-                device.set_name(pool, &format!("{name}.timestamps"));
-                Some(pool)
+                Some(Owned::new(device, pool, &format!("{name}.timestamps")))
             }
             None => None,
         };
@@ -59,10 +60,9 @@ impl FrameQueries {
                 .query_count(1)
                 .pipeline_statistics(flags);
             // SAFETY: the feature is enabled on the device.
-            let pool = unsafe { device.raw.create_query_pool(&info, None) }
+            let pool = unsafe { device.ash().create_query_pool(&info, None) }
                 .context("creating a statistics query pool")?;
-            device.set_name(pool, &format!("{name}.statistics"));
-            Some(pool)
+            Some(Owned::new(device, pool, &format!("{name}.statistics")))
         } else {
             None
         };
@@ -80,55 +80,68 @@ impl FrameQueries {
     }
 
     /// Resets the pools; recorded outside any rendering.
-    pub fn reset(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+    pub fn reset(&self, rec: &Recorder) {
+        let (device, cmd) = (rec.device.ash(), rec.cmd);
         // SAFETY: pools of this device, `cmd` recording outside rendering.
         unsafe {
-            if let Some(pool) = self.timestamps {
-                device.cmd_reset_query_pool(cmd, pool, 0, 2);
+            if let Some(pool) = &self.timestamps {
+                device.cmd_reset_query_pool(cmd, pool.raw(), 0, 2);
             }
-            if let Some(pool) = self.statistics {
-                device.cmd_reset_query_pool(cmd, pool, 0, 1);
+            if let Some(pool) = &self.statistics {
+                device.cmd_reset_query_pool(cmd, pool.raw(), 0, 1);
             }
         }
     }
 
     /// Starts timing and counting.
-    pub fn begin(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+    pub fn begin(&self, rec: &Recorder) {
+        let (device, cmd) = (rec.device.ash(), rec.cmd);
         // SAFETY: the pools were reset earlier in this command buffer.
         unsafe {
-            if let Some(pool) = self.timestamps {
-                device.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::TOP_OF_PIPE, pool, 0);
+            if let Some(pool) = &self.timestamps {
+                device.cmd_write_timestamp2(
+                    cmd,
+                    vk::PipelineStageFlags2::TOP_OF_PIPE,
+                    pool.raw(),
+                    0,
+                );
             }
-            if let Some(pool) = self.statistics {
-                device.cmd_begin_query(cmd, pool, 0, vk::QueryControlFlags::empty());
+            if let Some(pool) = &self.statistics {
+                device.cmd_begin_query(cmd, pool.raw(), 0, vk::QueryControlFlags::empty());
             }
         }
     }
 
     /// Stops counting and timing.
-    pub fn end(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+    pub fn end(&self, rec: &Recorder) {
+        let (device, cmd) = (rec.device.ash(), rec.cmd);
         // SAFETY: matches `begin` in the same command buffer.
         unsafe {
-            if let Some(pool) = self.statistics {
-                device.cmd_end_query(cmd, pool, 0);
+            if let Some(pool) = &self.statistics {
+                device.cmd_end_query(cmd, pool.raw(), 0);
             }
-            if let Some(pool) = self.timestamps {
-                device.cmd_write_timestamp2(cmd, vk::PipelineStageFlags2::ALL_COMMANDS, pool, 1);
+            if let Some(pool) = &self.timestamps {
+                device.cmd_write_timestamp2(
+                    cmd,
+                    vk::PipelineStageFlags2::ALL_COMMANDS,
+                    pool.raw(),
+                    1,
+                );
             }
         }
     }
 
     /// GPU milliseconds between `begin` and `end`, when timestamps exist.
     /// Call after the frame's fence has signalled.
-    pub fn gpu_ms(&self, device: &ash::Device) -> Result<Option<f64>> {
-        let Some(pool) = self.timestamps else {
+    pub fn gpu_ms(&self) -> Result<Option<f64>> {
+        let Some(pool) = &self.timestamps else {
             return Ok(None);
         };
         let mut ticks = [0u64; 2];
         // SAFETY: both queries were written by a completed submission.
         unsafe {
-            device.get_query_pool_results(
-                pool,
+            pool.device().ash().get_query_pool_results(
+                pool.raw(),
                 0,
                 &mut ticks,
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
@@ -141,15 +154,15 @@ impl FrameQueries {
     }
 
     /// The draw's counters, when pipeline statistics exist.
-    pub fn statistics(&self, device: &ash::Device) -> Result<Option<PipelineStatistics>> {
-        let Some(pool) = self.statistics else {
+    pub fn statistics(&self) -> Result<Option<PipelineStatistics>> {
+        let Some(pool) = &self.statistics else {
             return Ok(None);
         };
         let mut values = [[0u64; STATISTICS.len()]; 1];
         // SAFETY: the query was ended in a completed submission.
         unsafe {
-            device.get_query_pool_results(
-                pool,
+            pool.device().ash().get_query_pool_results(
+                pool.raw(),
                 0,
                 &mut values,
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
@@ -164,14 +177,5 @@ impl FrameQueries {
             clipping_invocations: clip_in,
             clipping_primitives: clip_out,
         }))
-    }
-
-    pub fn destroy(self, device: &ash::Device) {
-        // SAFETY: no submission using the pools is pending.
-        unsafe {
-            for pool in [self.timestamps, self.statistics].into_iter().flatten() {
-                device.destroy_query_pool(pool, None);
-            }
-        }
     }
 }

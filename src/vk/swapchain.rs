@@ -6,10 +6,11 @@ use std::ffi::c_char;
 use ash::vk;
 use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
 
+use super::commands::Recorder;
 use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
-use super::instance::Instance;
-use super::memory::{Image, ImageDesc};
+use super::memory::{Buffer, Image, ImageDesc, Transition};
+use super::owned::{Owned, Semaphore};
 use super::target::{TargetViews, DEPTH_FORMAT};
 
 /// Instance extensions a surface for this display needs.
@@ -18,53 +19,60 @@ pub fn surface_extensions(display: RawDisplayHandle) -> Result<&'static [*const 
         .context("listing the window system's Vulkan extensions")
 }
 
+/// A window's surface. It holds the device, whose instance it was made
+/// from, so the instance outlives it; swapchains hold the surface's
+/// handle only while the caller keeps the surface (the window's owner
+/// drops its swapchain first).
 pub struct Surface {
     loader: ash::khr::surface::Instance,
-    pub raw: vk::SurfaceKHR,
+    raw: vk::SurfaceKHR,
+    device: Device,
 }
 
 impl Surface {
+    /// A surface for the window, checked to be one `device` can present to.
+    /// The window must outlive the surface.
     pub fn new(
-        instance: &Instance,
+        device: &Device,
         display: RawDisplayHandle,
         window: RawWindowHandle,
     ) -> Result<Self> {
+        let instance = device.instance();
         // SAFETY: the handles come from a live window that the caller keeps
         // alive for longer than the surface.
         let raw = unsafe {
             ash_window::create_surface(&instance.entry, &instance.raw, display, window, None)
         }
         .context("creating a window surface")?;
-        Ok(Surface {
+        let surface = Surface {
             loader: ash::khr::surface::Instance::new(&instance.entry, &instance.raw),
             raw,
-        })
-    }
-
-    /// Fails unless the device's queue can present to this surface.
-    pub fn check_support(&self, device: &Device) -> Result<()> {
+            device: device.clone(),
+        };
         // SAFETY: plain query.
         let supported = unsafe {
-            self.loader.get_physical_device_surface_support(
+            surface.loader.get_physical_device_surface_support(
                 device.physical,
                 device.queue_family,
-                self.raw,
+                surface.raw,
             )
         }
         .context("checking presentation support")?;
-        if supported {
-            Ok(())
-        } else {
-            Err(VkError::Unsupported(format!(
+        if !supported {
+            return Err(VkError::Unsupported(format!(
                 "{} cannot present to this window",
                 device.caps.device_name
-            )))
+            )));
         }
+        Ok(surface)
     }
+}
 
-    /// Destroyed before the instance, after every swapchain made from it.
-    pub fn destroy(self) {
-        // SAFETY: no swapchain of this surface remains.
+impl Drop for Surface {
+    fn drop(&mut self) {
+        let _ = self.device.wait_idle();
+        // SAFETY: every swapchain of this surface has been dropped (their
+        // owner drops them first); the instance is alive while `device` is.
         unsafe { self.loader.destroy_surface(self.raw, None) };
     }
 }
@@ -77,6 +85,8 @@ pub enum Acquired {
     OutOfDate,
 }
 
+/// A swapchain with a view and a semaphore per image and one depth
+/// image. Dropping it waits for the device to go idle first.
 pub struct Swapchain {
     loader: ash::khr::swapchain::Device,
     raw: vk::SwapchainKHR,
@@ -84,12 +94,13 @@ pub struct Swapchain {
     pub extent: vk::Extent2D,
     pub present_mode: vk::PresentModeKHR,
     images: Vec<vk::Image>,
-    views: Vec<vk::ImageView>,
+    views: Vec<Owned<vk::ImageView>>,
     /// One per image: a semaphore is only reused once its image comes back.
-    render_finished: Vec<vk::Semaphore>,
+    render_finished: Vec<Semaphore>,
     depth: Image,
     /// Whether images can be copied out (for screenshots).
     pub readable: bool,
+    device: Device,
 }
 
 impl Swapchain {
@@ -97,7 +108,6 @@ impl Swapchain {
     /// its own), in `present_mode` when supported and FIFO otherwise. sRGB
     /// formats are preferred. `old` is retired by the new one.
     pub fn new(
-        instance: &Instance,
         device: &Device,
         surface: &Surface,
         size: vk::Extent2D,
@@ -161,7 +171,7 @@ impl Swapchain {
         if readable {
             usage |= vk::ImageUsageFlags::TRANSFER_SRC;
         }
-        let loader = ash::khr::swapchain::Device::new(&instance.raw, &device.raw);
+        let loader = ash::khr::swapchain::Device::new(&device.instance().raw, device.ash());
         let info = vk::SwapchainCreateInfoKHR::default()
             .surface(surface.raw)
             .min_image_count(image_count)
@@ -177,18 +187,36 @@ impl Swapchain {
             .clipped(true)
             .old_swapchain(old.as_ref().map_or(vk::SwapchainKHR::null(), |o| o.raw));
         // SAFETY: the surface outlives the swapchain; the old swapchain is
-        // retired here and destroyed below once the device is idle.
+        // retired here and dropped below (its Drop waits for idle).
         let created = unsafe { loader.create_swapchain(&info, None) };
-        if let Some(old) = old {
-            old.destroy(device);
-        }
+        drop(old);
         let raw = created.context("creating the swapchain")?;
         device.set_name(raw, "swapchain");
+        let mut swapchain = Swapchain {
+            loader,
+            raw,
+            format,
+            extent,
+            present_mode,
+            images: Vec::new(),
+            views: Vec::new(),
+            render_finished: Vec::new(),
+            depth: device.create_image(
+                ImageDesc {
+                    extent,
+                    format: DEPTH_FORMAT,
+                    usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                    aspect: vk::ImageAspectFlags::DEPTH,
+                },
+                "swapchain.depth",
+            )?,
+            readable,
+            device: device.clone(),
+        };
         // SAFETY: the swapchain was just created.
-        let images =
-            unsafe { loader.get_swapchain_images(raw) }.context("listing swapchain images")?;
-        let mut views = Vec::with_capacity(images.len());
-        let mut render_finished = Vec::with_capacity(images.len());
+        let images = unsafe { swapchain.loader.get_swapchain_images(raw) }
+            .context("listing swapchain images")?;
+        swapchain.images = images.clone();
         for (i, &image) in images.iter().enumerate() {
             device.set_name(image, &format!("swapchain.image[{i}]"));
             let view_info = vk::ImageViewCreateInfo::default()
@@ -199,41 +227,27 @@ impl Swapchain {
                     vk::ImageAspectFlags::COLOR,
                 ));
             // SAFETY: the view matches the image's format.
-            let view = unsafe { device.raw.create_image_view(&view_info, None) }
+            let view = unsafe { device.ash().create_image_view(&view_info, None) }
                 .context("creating a swapchain view")?;
-            device.set_name(view, &format!("swapchain.image[{i}].view"));
-            views.push(view);
-            render_finished
+            swapchain.views.push(Owned::new(
+                device,
+                view,
+                &format!("swapchain.image[{i}].view"),
+            ));
+            swapchain
+                .render_finished
                 .push(device.create_semaphore(&format!("swapchain.render_finished[{i}]"))?);
         }
-        let depth = device.create_image(
-            ImageDesc {
-                extent,
-                format: DEPTH_FORMAT,
-                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-                aspect: vk::ImageAspectFlags::DEPTH,
-            },
-            "swapchain.depth",
-        )?;
-        Ok(Swapchain {
-            loader,
-            raw,
-            format,
-            extent,
-            present_mode,
-            images,
-            views,
-            render_finished,
-            depth,
-            readable,
-        })
+        Ok(swapchain)
     }
 
-    pub fn acquire(&self, signal: vk::Semaphore) -> Result<Acquired> {
-        // SAFETY: `signal` is unsignalled and not waited on by anything pending.
+    /// The next image; `signal` is signalled when it may be drawn into.
+    pub fn acquire(&self, signal: &Semaphore) -> Result<Acquired> {
+        // SAFETY: `signal` is unsignalled: the frame slot that owns it waited
+        // for the submission that last waited on it.
         match unsafe {
             self.loader
-                .acquire_next_image(self.raw, u64::MAX, signal, vk::Fence::null())
+                .acquire_next_image(self.raw, u64::MAX, signal.raw(), vk::Fence::null())
         } {
             Ok((index, suboptimal)) => Ok(Acquired::Image { index, suboptimal }),
             Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(Acquired::OutOfDate),
@@ -246,8 +260,8 @@ impl Swapchain {
 
     /// Presents image `index` once its `render_finished` semaphore signals.
     /// Returns true when the swapchain should be rebuilt.
-    pub fn present(&self, device: &Device, index: u32) -> Result<bool> {
-        let wait = [self.render_finished[index as usize]];
+    pub fn present(&self, index: u32) -> Result<bool> {
+        let wait = [self.render_finished[index as usize].raw()];
         let swapchains = [self.raw];
         let indices = [index];
         let info = vk::PresentInfoKHR::default()
@@ -256,7 +270,7 @@ impl Swapchain {
             .image_indices(&indices);
         // SAFETY: the image was acquired and rendered to by a submission that
         // signals `wait`.
-        match unsafe { self.loader.queue_present(device.queue, &info) } {
+        match unsafe { self.loader.queue_present(self.device.queue, &info) } {
             Ok(suboptimal) => Ok(suboptimal),
             Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(true),
             Err(result) => Err(VkError::Call {
@@ -266,78 +280,101 @@ impl Swapchain {
         }
     }
 
-    pub fn render_finished(&self, index: u32) -> vk::Semaphore {
-        self.render_finished[index as usize]
+    pub fn render_finished(&self, index: u32) -> &Semaphore {
+        &self.render_finished[index as usize]
     }
 
     pub fn views(&self, index: u32) -> TargetViews {
         TargetViews {
             extent: self.extent,
-            color_image: self.images[index as usize],
-            color_view: self.views[index as usize],
+            color_view: self.views[index as usize].raw(),
             color_format: self.format.format,
-            depth_image: self.depth.raw,
-            depth_view: self.depth.view,
-            depth_format: DEPTH_FORMAT,
+            depth_view: self.depth.view(),
         }
     }
 
-    /// The caller has waited for the device to go idle.
-    pub fn destroy(self, device: &Device) {
-        // SAFETY: nothing pending uses these objects.
-        unsafe {
-            for view in &self.views {
-                device.raw.destroy_image_view(*view, None);
+    /// Makes image `index` and the depth image attachments; earlier
+    /// contents are discarded.
+    pub fn record_begin(&self, rec: &Recorder, index: u32) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        rec.transition_images(&[
+            Transition {
+                image: self.images[index as usize],
+                aspect: vk::ImageAspectFlags::COLOR,
+                // Ordered after the acquire semaphore's wait stage.
+                from: (L::UNDEFINED, S::COLOR_ATTACHMENT_OUTPUT, A::NONE),
+                to: (
+                    L::COLOR_ATTACHMENT_OPTIMAL,
+                    S::COLOR_ATTACHMENT_OUTPUT,
+                    A::COLOR_ATTACHMENT_WRITE,
+                ),
+            },
+            Transition {
+                image: self.depth.raw(),
+                aspect: vk::ImageAspectFlags::DEPTH,
+                // The depth image is shared by the frames in flight: the
+                // previous frame's depth writes must finish first.
+                from: (
+                    L::UNDEFINED,
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+                to: (
+                    L::DEPTH_ATTACHMENT_OPTIMAL,
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+            },
+        ]);
+    }
+
+    /// Makes image `index` ready to present after drawing, copying it into
+    /// `capture` first when given (which must hold width x height x 4
+    /// bytes; `readable` swapchains only).
+    pub fn record_present(&self, rec: &Recorder, index: u32, capture: Option<&Buffer>) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        let image = self.images[index as usize];
+        let to_present = |from| Transition {
+            image,
+            aspect: vk::ImageAspectFlags::COLOR,
+            from,
+            // Presentation waits on the semaphore, which covers all commands.
+            to: (L::PRESENT_SRC_KHR, S::NONE, A::NONE),
+        };
+        match capture {
+            Some(buffer) => {
+                rec.transition_images(&[Transition::color_output_to_copy(image)]);
+                rec.copy_image_to_buffer(image, vk::ImageAspectFlags::COLOR, self.extent, buffer);
+                rec.transition_images(&[to_present((L::TRANSFER_SRC_OPTIMAL, S::COPY, A::NONE))]);
             }
-            for semaphore in &self.render_finished {
-                device.raw.destroy_semaphore(*semaphore, None);
-            }
-            self.loader.destroy_swapchain(self.raw, None);
+            None => rec.transition_images(&[to_present((
+                L::COLOR_ATTACHMENT_OPTIMAL,
+                S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_WRITE,
+            ))]),
         }
-        device.destroy_image(self.depth);
+    }
+}
+
+impl Drop for Swapchain {
+    fn drop(&mut self) {
+        // Presentation and the last frames may still use the images.
+        let _ = self.device.wait_idle();
+        // The views of its images go before the swapchain.
+        self.views.clear();
+        // SAFETY: the device is idle and nothing refers to the images now.
+        unsafe { self.loader.destroy_swapchain(self.raw, None) };
     }
 }
 
 impl Device {
-    pub fn create_semaphore(&self, name: &str) -> Result<vk::Semaphore> {
+    pub fn create_semaphore(&self, name: &str) -> Result<Semaphore> {
         // SAFETY: valid create info.
         let semaphore = unsafe {
-            self.raw
+            self.ash()
                 .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
         }
         .context("creating a semaphore")?;
-        self.set_name(semaphore, name);
-        Ok(semaphore)
-    }
-
-    pub fn destroy_semaphore(&self, semaphore: vk::Semaphore) {
-        // SAFETY: no pending work waits on or signals it.
-        unsafe { self.raw.destroy_semaphore(semaphore, None) };
-    }
-
-    /// Submits `cmd` waiting on `wait` at colour output and signalling
-    /// `signal` and `fence` when done: one frame of a window.
-    pub fn submit_frame(
-        &self,
-        cmd: vk::CommandBuffer,
-        wait: vk::Semaphore,
-        signal: vk::Semaphore,
-        fence: vk::Fence,
-    ) -> Result<()> {
-        let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
-        let waits = [vk::SemaphoreSubmitInfo::default()
-            .semaphore(wait)
-            .stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)];
-        let signals = [vk::SemaphoreSubmitInfo::default()
-            .semaphore(signal)
-            .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)];
-        let submit = vk::SubmitInfo2::default()
-            .command_buffer_infos(&cmds)
-            .wait_semaphore_infos(&waits)
-            .signal_semaphore_infos(&signals);
-        self.count_submission()?;
-        // SAFETY: `cmd` is recorded; `fence` is unsignalled.
-        unsafe { self.raw.queue_submit2(self.queue, &[submit], fence) }
-            .context("submitting a frame")
+        Ok(Owned::new(self, semaphore, name))
     }
 }

@@ -7,8 +7,7 @@ use gpu_allocator::MemoryLocation;
 use super::commands::Recorder;
 use super::device::Device;
 use super::error::{Result, VkError};
-use super::instance::Instance;
-use super::memory::{transition_images, Buffer, BufferDesc, Image, ImageDesc, Transition};
+use super::memory::{Buffer, BufferDesc, Image, ImageDesc, Transition};
 
 /// Colour format of offscreen targets: sRGB, like a swapchain, so shaders
 /// write linear values and the PNG holds encoded ones.
@@ -21,12 +20,9 @@ pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 #[derive(Clone, Copy, Debug)]
 pub struct TargetViews {
     pub extent: vk::Extent2D,
-    pub color_image: vk::Image,
-    pub color_view: vk::ImageView,
     pub color_format: vk::Format,
-    pub depth_image: vk::Image,
-    pub depth_view: vk::ImageView,
-    pub depth_format: vk::Format,
+    pub(super) color_view: vk::ImageView,
+    pub(super) depth_view: vk::ImageView,
 }
 
 /// What a target read back: sRGB RGBA8 pixels and depth, row-major, top row
@@ -40,12 +36,11 @@ pub struct Readback {
 
 fn require(
     device: &Device,
-    instance: &Instance,
     format: vk::Format,
     needed: vk::FormatFeatureFlags,
     what: &str,
 ) -> Result<()> {
-    let has = device.format_features(instance, format);
+    let has = device.format_features(format);
     if has.contains(needed) {
         Ok(())
     } else {
@@ -57,10 +52,9 @@ fn require(
 }
 
 /// Checks the depth format once for every kind of target.
-pub fn check_depth_format(device: &Device, instance: &Instance) -> Result<()> {
+pub fn check_depth_format(device: &Device) -> Result<()> {
     require(
         device,
-        instance,
         DEPTH_FORMAT,
         vk::FormatFeatureFlags::DEPTH_STENCIL_ATTACHMENT,
         "a depth attachment",
@@ -75,7 +69,7 @@ pub struct OffscreenTarget {
 }
 
 impl OffscreenTarget {
-    pub fn new(device: &Device, instance: &Instance, width: u32, height: u32) -> Result<Self> {
+    pub fn new(device: &Device, width: u32, height: u32) -> Result<Self> {
         if width == 0 || height == 0 {
             return Err(VkError::Unsupported(format!(
                 "target size {width}x{height} has no pixels"
@@ -83,15 +77,13 @@ impl OffscreenTarget {
         }
         require(
             device,
-            instance,
             OFFSCREEN_COLOR_FORMAT,
             vk::FormatFeatureFlags::COLOR_ATTACHMENT | vk::FormatFeatureFlags::TRANSFER_SRC,
             "a colour attachment read back by copy",
         )?;
-        check_depth_format(device, instance)?;
+        check_depth_format(device)?;
         require(
             device,
-            instance,
             DEPTH_FORMAT,
             vk::FormatFeatureFlags::TRANSFER_SRC,
             "a copy source",
@@ -106,7 +98,7 @@ impl OffscreenTarget {
             },
             "offscreen.color",
         )?;
-        let depth = match device.create_image(
+        let depth = device.create_image(
             ImageDesc {
                 extent,
                 format: DEPTH_FORMAT,
@@ -115,13 +107,7 @@ impl OffscreenTarget {
                 aspect: vk::ImageAspectFlags::DEPTH,
             },
             "offscreen.depth",
-        ) {
-            Ok(d) => d,
-            Err(e) => {
-                device.destroy_image(color);
-                return Err(e);
-            }
-        };
+        )?;
         let pixels = u64::from(width) * u64::from(height);
         let readback = |name: &str| {
             device.create_buffer(
@@ -133,101 +119,79 @@ impl OffscreenTarget {
                 name,
             )
         };
-        let buffers = readback("offscreen.color_readback").and_then(|c| {
-            match readback("offscreen.depth_readback") {
-                Ok(d) => Ok((c, d)),
-                Err(e) => {
-                    device.destroy_buffer(c);
-                    Err(e)
-                }
-            }
-        });
-        match buffers {
-            Ok((color_readback, depth_readback)) => Ok(OffscreenTarget {
-                color,
-                depth,
-                color_readback,
-                depth_readback,
-            }),
-            Err(e) => {
-                device.destroy_image(color);
-                device.destroy_image(depth);
-                Err(e)
-            }
-        }
+        Ok(OffscreenTarget {
+            color,
+            depth,
+            color_readback: readback("offscreen.color_readback")?,
+            depth_readback: readback("offscreen.depth_readback")?,
+        })
     }
 
     pub fn views(&self) -> TargetViews {
         TargetViews {
             extent: self.color.desc.extent,
-            color_image: self.color.raw,
-            color_view: self.color.view,
+            color_view: self.color.view(),
             color_format: self.color.desc.format,
-            depth_image: self.depth.raw,
-            depth_view: self.depth.view,
-            depth_format: self.depth.desc.format,
+            depth_view: self.depth.view(),
         }
     }
 
     /// Makes both images attachments; earlier contents are discarded.
-    pub fn record_begin(&self, device: &ash::Device, cmd: vk::CommandBuffer) {
+    pub fn record_begin(&self, rec: &Recorder) {
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        transition_images(
-            device,
-            cmd,
-            &[
-                Transition {
-                    image: self.color.raw,
-                    aspect: vk::ImageAspectFlags::COLOR,
-                    // A previous frame's copy must finish before we overwrite.
-                    from: (L::UNDEFINED, S::COPY, A::NONE),
-                    to: (
-                        L::COLOR_ATTACHMENT_OPTIMAL,
-                        S::COLOR_ATTACHMENT_OUTPUT,
-                        A::COLOR_ATTACHMENT_WRITE,
-                    ),
-                },
-                Transition {
-                    image: self.depth.raw,
-                    aspect: vk::ImageAspectFlags::DEPTH,
-                    from: (L::UNDEFINED, S::COPY, A::NONE),
-                    to: (
-                        L::DEPTH_ATTACHMENT_OPTIMAL,
-                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                        A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                    ),
-                },
-            ],
-        );
+        rec.transition_images(&[
+            Transition {
+                image: self.color.raw(),
+                aspect: vk::ImageAspectFlags::COLOR,
+                // A previous frame's copy must finish before we overwrite.
+                from: (L::UNDEFINED, S::COPY, A::NONE),
+                to: (
+                    L::COLOR_ATTACHMENT_OPTIMAL,
+                    S::COLOR_ATTACHMENT_OUTPUT,
+                    A::COLOR_ATTACHMENT_WRITE,
+                ),
+            },
+            Transition {
+                image: self.depth.raw(),
+                aspect: vk::ImageAspectFlags::DEPTH,
+                from: (L::UNDEFINED, S::COPY, A::NONE),
+                to: (
+                    L::DEPTH_ATTACHMENT_OPTIMAL,
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+            },
+        ]);
     }
 
     /// Copies both images into host-visible buffers after drawing.
     pub fn record_readback(&self, rec: &Recorder) {
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        transition_images(
-            rec.device,
-            rec.cmd,
-            &[
-                Transition::color_output_to_copy(self.color.raw),
-                Transition {
-                    image: self.depth.raw,
-                    aspect: vk::ImageAspectFlags::DEPTH,
-                    from: (
-                        L::DEPTH_ATTACHMENT_OPTIMAL,
-                        S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                        A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                    ),
-                    to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
-                },
-            ],
-        );
+        rec.transition_images(&[
+            Transition::color_output_to_copy(self.color.raw()),
+            Transition {
+                image: self.depth.raw(),
+                aspect: vk::ImageAspectFlags::DEPTH,
+                from: (
+                    L::DEPTH_ATTACHMENT_OPTIMAL,
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+                to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
+            },
+        ]);
         let extent = self.color.desc.extent;
-        rec.copy_color_to_buffer(self.color.raw, extent, self.color_readback.raw);
         rec.copy_image_to_buffer(
-            self.depth.raw,
+            self.color.raw(),
+            vk::ImageAspectFlags::COLOR,
+            extent,
+            &self.color_readback,
+        );
+        rec.copy_image_to_buffer(
+            self.depth.raw(),
             vk::ImageAspectFlags::DEPTH,
             extent,
-            self.depth_readback.raw,
+            &self.depth_readback,
         );
     }
 
@@ -244,12 +208,5 @@ impl OffscreenTarget {
             rgba,
             depth,
         })
-    }
-
-    pub fn destroy(self, device: &Device) {
-        device.destroy_image(self.color);
-        device.destroy_image(self.depth);
-        device.destroy_buffer(self.color_readback);
-        device.destroy_buffer(self.depth_readback);
     }
 }

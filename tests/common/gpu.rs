@@ -79,7 +79,6 @@ impl GpuScene {
             .as_mut()
             .unwrap()
             .render(
-                &self.gpu,
                 self.renderer.as_mut().unwrap(),
                 &self.terrain,
                 camera,
@@ -91,25 +90,31 @@ impl GpuScene {
     }
 
     pub fn assert_clean(&self, when: &str) {
-        let log = self.gpu.instance.validation_log();
         assert_eq!(
-            log.count(),
+            self.gpu.validation_messages(),
             0,
-            "validation messages while {when}: {:#?}",
-            log.messages()
+            "validation messages while {when}"
         );
     }
 
-    /// Tears down in order and checks that teardown was clean too.
+    /// Tears down and checks that teardown was clean too: no memory left
+    /// allocated, and no validation message by the time the device is
+    /// destroyed (objects left alive are reported then).
     pub fn finish(mut self) {
-        self.headless.take().unwrap().destroy(&self.gpu);
-        self.renderer.take().unwrap().destroy(&self.gpu.device);
+        drop(self.headless.take());
+        drop(self.renderer.take());
         assert_eq!(
             self.gpu.device.memory_in_use(),
             0,
-            "GPU memory left allocated"
+            "GPU memory left allocated: {:?}",
+            self.gpu.device.memory_report()
         );
-        self.assert_clean("tearing down");
+        let report = self.gpu.shutdown();
+        assert_eq!(
+            report.count, 0,
+            "validation messages by device destruction: {:#?}",
+            report.messages
+        );
     }
 }
 
