@@ -98,7 +98,12 @@ pub fn run(options: DemoOptions) -> Result<DemoSummary> {
     };
     event_loop.run_app(&mut app).context("running the window")?;
     if let Some(e) = app.error {
-        return Err(e);
+        // Validation was counted when the device went; name it beside the
+        // error.
+        return Err(match app.summary.map(|s| s.validation.check()) {
+            Some(Err(validation)) => e.context(validation.to_string()),
+            _ => e,
+        });
     }
     app.summary
         .ok_or_else(|| anyhow!("the window closed before it was shown"))
@@ -262,9 +267,25 @@ impl Graphics {
             ..options.gpu.clone()
         })
         .context("starting Vulkan")?;
+        match Self::build(&gpu, display, handle, window.inner_size(), options) {
+            Ok(graphics) => Ok(Graphics { gpu, ..graphics }),
+            // What was built is gone by now; validation is counted after the
+            // device goes, so a leak on this path is reported too.
+            Err(e) => Err(gpu.fail(e)),
+        }
+    }
+
+    /// Everything but the device; `gpu` in the result is a second handle
+    /// to the same device, replaced by the caller.
+    fn build(
+        gpu: &Gpu,
+        display: raw_window_handle::RawDisplayHandle,
+        handle: raw_window_handle::RawWindowHandle,
+        size: PhysicalSize<u32>,
+        options: &DemoOptions,
+    ) -> Result<Graphics> {
         let device = &gpu.device;
         let surface = Surface::new(device, display, handle)?;
-        let size = window.inner_size();
         let swapchain = Swapchain::new(
             device,
             &surface,
@@ -277,7 +298,7 @@ impl Graphics {
         )
         .context("building the swapchain")?;
         let renderer = TerrainRenderer::with_appearance(
-            &gpu,
+            gpu,
             &options.terrain,
             &options.appearance,
             swapchain.format.format,
@@ -299,7 +320,9 @@ impl Graphics {
             renderer,
             swapchain: Some(swapchain),
             surface,
-            gpu,
+            gpu: Gpu {
+                device: device.clone(),
+            },
         })
     }
 }

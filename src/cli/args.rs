@@ -416,11 +416,5 @@ pub fn with_gpu<T>(
     use anyhow::Context;
     let gpu = crate::vk::Gpu::open(options).context("starting Vulkan")?;
     let result = work(&gpu);
-    let report = gpu.shutdown();
-    match (result, report.check()) {
-        (Ok(value), Ok(())) => Ok((value, report)),
-        (Ok(_), Err(validation)) => Err(validation.into()),
-        (Err(e), Ok(())) => Err(e),
-        (Err(e), Err(validation)) => Err(e.context(validation.to_string())),
-    }
+    gpu.finish(result)
 }

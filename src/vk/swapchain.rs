@@ -186,12 +186,22 @@ impl Swapchain {
             .present_mode(present_mode)
             .clipped(true)
             .old_swapchain(old.as_ref().map_or(vk::SwapchainKHR::null(), |o| o.raw));
+        let depth = device.create_image(
+            ImageDesc {
+                extent,
+                format: DEPTH_FORMAT,
+                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                aspect: vk::ImageAspectFlags::DEPTH,
+            },
+            "swapchain.depth",
+        )?;
         // SAFETY: the surface outlives the swapchain; the old swapchain is
         // retired here and dropped below (its Drop waits for idle).
         let created = unsafe { loader.create_swapchain(&info, None) };
         drop(old);
         let raw = created.context("creating the swapchain")?;
         device.set_name(raw, "swapchain");
+        // Owned from here: a failure below destroys it.
         let mut swapchain = Swapchain {
             loader,
             raw,
@@ -201,15 +211,7 @@ impl Swapchain {
             images: Vec::new(),
             views: Vec::new(),
             render_finished: Vec::new(),
-            depth: device.create_image(
-                ImageDesc {
-                    extent,
-                    format: DEPTH_FORMAT,
-                    usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-                    aspect: vk::ImageAspectFlags::DEPTH,
-                },
-                "swapchain.depth",
-            )?,
+            depth,
             readable,
             device: device.clone(),
         };
