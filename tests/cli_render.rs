@@ -328,6 +328,22 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
+    // A scene that asks for anisotropic filtering.
+    let scenes = tempfile::tempdir().unwrap();
+    let anisotropic = temp_file(
+        &scenes,
+        "anisotropic.toml",
+        format!(
+            "[heightmap]\npath = \"{}\"\nheight_scale = 65535.0\ncell_spacing = [74.48, 92.15]\n\
+             [material]\nanisotropy = 4.0\n[[material.layer]]\ndiffuse = \"{}/rock.png\"\n",
+            data_path("jacksboro_fault_dem.png").display(),
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("assets/textures")
+                .display()
+        )
+        .as_bytes(),
+    );
+    let anisotropic = anisotropic.to_str().unwrap();
     let cases: [(&str, &[&str], &str); 5] = [
         ("tessellation", &[], "falling back to the geomip path"),
         (
@@ -340,7 +356,11 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
             &[],
             "triangle counts are not measured",
         ),
-        ("sampler-anisotropy", &[], ""),
+        (
+            "sampler-anisotropy",
+            &["--scene", anisotropic],
+            "textures are filtered without anisotropy",
+        ),
         ("timestamps", &[], "GPU time is not measured"),
     ];
     for (feature, extra, note) in cases {

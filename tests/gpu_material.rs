@@ -12,11 +12,12 @@ use common::*;
 use glam::DVec2;
 use vkterrain::material::generate::blend_maps_from_rules;
 use vkterrain::material::Appearance;
-use vkterrain::render::{RenderPath, RenderSettings};
+use vkterrain::render::{LodMetric, RenderPath, RenderSettings};
 use vkterrain::scene::{Asset, AssetSource, Scene, WeightSource};
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::shading::Rules;
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
+use vkterrain::vk::Capabilities;
 
 const W: u32 = 320;
 const H: u32 = 180;
@@ -36,11 +37,11 @@ fn prepare(scene: &Scene) -> (Terrain, Appearance, RenderSettings) {
 }
 
 /// Renders `scene` from its camera (or overview) with each path in
-/// `paths`; checks validation.
+/// `paths`, on the device the goldens were made on; checks validation.
 fn render(scene: &Scene, paths: &[RenderPath]) -> Vec<image::RgbaImage> {
     let (terrain, appearance, settings) = prepare(scene);
     let camera = scene.camera_for(terrain.info());
-    let mut gpu = GpuScene::with_appearance(terrain, &appearance, W, H, false);
+    let mut gpu = GpuScene::for_golden(terrain, &appearance, W, H);
     let images = paths
         .iter()
         .map(|&path| {
@@ -339,23 +340,64 @@ fn a_textured_scene_draws_on_a_terrain_that_is_not_2n_plus_1() {
     let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
     let camera: Camera = scene.camera_for(terrain.info());
     let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 64, false);
-    for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
-        let frame = gpu.render(
-            &camera,
-            &RenderSettings {
+    let images: Vec<_> = [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute]
+        .into_iter()
+        .map(|path| {
+            // Near full resolution everywhere, so the paths draw the same
+            // surface of this sawtooth map.
+            let settings = RenderSettings {
                 path,
+                lod_metric: LodMetric::Error(0.25),
                 ..RenderSettings::default()
-            },
-        );
-        let drawn = frame
-            .readback
-            .rgba
-            .chunks_exact(4)
-            .filter(|p| p[..3] != frame.readback.rgba[..3])
-            .count();
-        assert!(drawn > 0, "{path:?} drew nothing");
-    }
+            };
+            gpu.render(&camera, &settings).rgba_image()
+        })
+        .collect();
     gpu.finish();
+    // The terrain fills most of the view, and every path draws the same
+    // displaced, lit surface up to its triangulation.
+    let background = *images[2].get_pixel(0, 0);
+    let drawn = images[2].pixels().filter(|&&p| p != background).count();
+    assert!(drawn * 2 > 64 * 64, "brute drew {drawn} pixels of 4096");
+    assert_images_match("uneven-textured-tess", &images[0], &images[2], 24, 0.05);
+    assert_images_match("uneven-textured-geomip", &images[1], &images[2], 24, 0.05);
+}
+
+#[test]
+fn anisotropy_follows_the_scene_within_the_device() {
+    let caps = |kind: &str, has: bool| Capabilities {
+        device_name: "test".into(),
+        device_type: kind.into(),
+        driver_name: String::new(),
+        driver_info: String::new(),
+        api_version: "1.3.0".into(),
+        tessellation_shader: true,
+        fill_mode_non_solid: true,
+        pipeline_statistics_query: true,
+        sampler_anisotropy: has,
+        timestamp_period_ns: None,
+        timestamp_valid_bits: 0,
+        max_tessellation_level: 64,
+        max_image_dimension_2d: 4096,
+        max_image_array_layers: 256,
+        max_sampler_anisotropy: 16.0,
+        max_patches_per_draw: None,
+    };
+    use vkterrain::render::material::anisotropy_for;
+    let gpu = caps("discrete GPU", true);
+    assert_eq!(anisotropy_for(None, &gpu), Some(16.0));
+    assert_eq!(anisotropy_for(Some(4.0), &gpu), Some(4.0));
+    assert_eq!(anisotropy_for(Some(64.0), &gpu), Some(16.0));
+    assert_eq!(anisotropy_for(Some(1.0), &gpu), None);
+    // CPU rasterisers leave it off unless the scene asks.
+    let cpu = caps("CPU", true);
+    assert_eq!(anisotropy_for(None, &cpu), None);
+    assert_eq!(anisotropy_for(Some(4.0), &cpu), Some(4.0));
+    // Without the feature it is always off.
+    assert_eq!(
+        anisotropy_for(Some(4.0), &caps("discrete GPU", false)),
+        None
+    );
 }
 
 #[test]
@@ -363,34 +405,42 @@ fn anisotropic_filtering_when_the_scene_asks_for_it() {
     if skip_gpu() {
         return;
     }
-    // CPU rasterisers leave it off by default (it costs them over 1000x);
-    // a scene can still ask. Tiny, because on lavapipe it is that slow.
+    // Tiny, because on lavapipe it costs over 1000x. The same grazing view
+    // with 4 samples and with 1 differs where the texture is seen at a
+    // slant, when the device filters anisotropically at all.
     let dir = tempfile::tempdir().unwrap();
-    let scene = dem_scene(
-        &dir,
-        "[material]\nanisotropy = 4.0\n[[material.layer]]\ndiffuse = \"TEX/rock.png\"\ntile_size = 400.0\n",
-    );
-    let (terrain, appearance, settings) = prepare(&scene);
-    assert_eq!(appearance.material.as_ref().unwrap().anisotropy, Some(4.0));
-    let camera = scene.camera_for(terrain.info());
-    let mut gpu = GpuScene::with_appearance(terrain, &appearance, 32, 18, false);
-    let caps = &gpu.gpu.device.caps;
-    let expected = caps
-        .sampler_anisotropy
-        .then(|| caps.max_sampler_anisotropy.min(4.0));
-    assert_eq!(
-        vkterrain::render::material::anisotropy_for(Some(4.0), caps),
-        expected
-    );
-    if caps.device_type == "CPU" {
-        assert_eq!(
-            vkterrain::render::material::anisotropy_for(None, caps),
-            None
+    let render = |anisotropy: f32| {
+        let scene = dem_scene(
+            &dir,
+            &format!(
+                "[material]\nanisotropy = {anisotropy:.1}\n[[material.layer]]\n\
+                 diffuse = \"TEX/rock.png\"\ntile_size = 400.0\n"
+            ),
         );
+        let (terrain, appearance, settings) = prepare(&scene);
+        assert_eq!(
+            appearance.material.as_ref().unwrap().anisotropy,
+            Some(anisotropy)
+        );
+        let camera = scene.camera_for(terrain.info());
+        let mut gpu = GpuScene::with_appearance(terrain, &appearance, 48, 27, false);
+        let has = gpu.gpu.device.caps.sampler_anisotropy;
+        let image = gpu.render(&camera, &settings).rgba_image();
+        gpu.finish();
+        (image, has)
+    };
+    let (four, has) = render(4.0);
+    let (one, _) = render(1.0);
+    let differing = four
+        .pixels()
+        .zip(one.pixels())
+        .filter(|(a, b)| a != b)
+        .count();
+    if has {
+        assert!(differing > 0, "anisotropic filtering changed nothing");
+    } else {
+        assert_eq!(differing, 0);
     }
-    let frame = gpu.render(&camera, &settings);
-    assert!(frame.patches_in_frustum > 0);
-    gpu.finish();
 }
 
 #[test]
@@ -440,8 +490,36 @@ fn odd_sized_and_odd_format_textures_load_and_draw() {
     );
     let camera = scene.camera_for(terrain.info());
     let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 36, false);
-    for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
-        gpu.render(&camera, &RenderSettings { path, ..settings });
-    }
+    let images: Vec<_> = [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute]
+        .into_iter()
+        .map(|path| {
+            // Near full resolution, so the paths draw the same surface.
+            let lod_metric = LodMetric::Error(0.25);
+            let settings = RenderSettings {
+                path,
+                lod_metric,
+                ..settings
+            };
+            gpu.render(&camera, &settings).rgba_image()
+        })
+        .collect();
     gpu.finish();
+    // The wide 16-bit texture shows: more blue than green throughout (its
+    // blue channel is constant, green under it in most rows), with its red
+    // gradient across each tile.
+    let background = *images[2].get_pixel(0, 0);
+    let drawn: Vec<_> = images[2].pixels().filter(|&&p| p != background).collect();
+    let bluish = drawn
+        .iter()
+        .filter(|p| p[2] > p[1].saturating_add(20))
+        .count();
+    let reds = drawn.iter().map(|p| p[0]);
+    let red_range = reds.clone().max().unwrap_or(0) - reds.min().unwrap_or(0);
+    assert!(
+        drawn.len() * 3 > 64 * 36 && bluish * 2 > drawn.len() && red_range >= 40,
+        "{} drawn, {bluish} blue, red range {red_range}",
+        drawn.len()
+    );
+    assert_images_match("odd-format-tess", &images[0], &images[2], 24, 0.05);
+    assert_images_match("odd-format-geomip", &images[1], &images[2], 24, 0.05);
 }

@@ -10,6 +10,7 @@ use common::gpu::*;
 use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use vkterrain::bench::error::{measure, DepthView};
+use vkterrain::material::Appearance;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
@@ -177,7 +178,7 @@ fn default_scene_matches_its_golden_image() {
         return;
     }
     let scene_def = Scene::default_scene();
-    let mut scene = GpuScene::new(default_terrain(32), 320, 180, false);
+    let mut scene = GpuScene::for_golden(default_terrain(32), &Appearance::default(), 320, 180);
     let settings = RenderSettings {
         lod: scene_def
             .lod
@@ -513,9 +514,15 @@ fn straight_down_onto_a_patch_corner() {
     let positions = world_positions(&frame, &cam);
     let centre = positions[64 * 128 + 64].unwrap();
     assert!((centre.y - f64::from(info.height_at(centre.x, centre.z).unwrap())).abs() < 0.5);
-    // Eye exactly on the surface, looking along it: still renders cleanly.
+    // Eye exactly on the surface, looking along it: still renders cleanly,
+    // and the ground just below the view is where `height_at` puts it.
     let on = camera([p.x, h, p.y], [p.x + 1000.0, h, p.y], 60.0);
-    scene.render(&on, &RenderSettings::default());
+    let frame = scene.render(&on, &RenderSettings::default());
+    let positions = world_positions(&frame, &on);
+    let below = positions[127 * 128 + 64].expect("the ground under the eye is drawn");
+    let ground = f64::from(info.height_at(below.x, below.z).unwrap());
+    assert!((below.y - ground).abs() < 0.5, "{below} against {ground}");
+    assert!(below.x > p.x, "the visible ground is ahead of the eye");
     scene.finish();
 }
 

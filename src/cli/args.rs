@@ -291,6 +291,11 @@ pub struct FeatureArgs {
     /// all after it lost; `out-of-memory[@N]` fails the Nth allocation.
     #[arg(long, value_name = "FAULT", value_parser = parse_fault)]
     pub inject_fault: Option<crate::vk::Fault>,
+
+    /// Use the device whose name contains NAME (any case), such as
+    /// llvmpipe; also VKTERRAIN_DEVICE. Default: the best device.
+    #[arg(long, value_name = "NAME")]
+    pub device: Option<String>,
 }
 
 fn parse_fault(s: &str) -> Result<crate::vk::Fault, String> {
@@ -333,6 +338,7 @@ impl FeatureArgs {
             disabled: self.disabled(),
             memory_budget: self.gpu_memory_budget,
             fault: self.inject_fault,
+            device: self.device.clone(),
             ..Default::default()
         }
     }

@@ -14,6 +14,7 @@ use super::args::{
 };
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
+use crate::render::material::anisotropy_for;
 use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
     Shading, TerrainRenderer,
@@ -404,6 +405,19 @@ pub fn render_scene(
                 "{}: timestamp queries are unavailable, so GPU time is not measured",
                 caps.device_name
             ));
+        }
+        let asked = appearance.material.as_ref().map(|m| m.anisotropy);
+        let with_feature = Capabilities {
+            sampler_anisotropy: true,
+            ..caps.clone()
+        };
+        if let Some(asked) = asked {
+            if !caps.sampler_anisotropy && anisotropy_for(asked, &with_feature).is_some() {
+                notes.push(format!(
+                    "{}: samplerAnisotropy is unavailable, so textures are filtered without anisotropy",
+                    caps.device_name
+                ));
+            }
         }
         let started = std::time::Instant::now();
         let mut renderer = TerrainRenderer::with_appearance(

@@ -265,10 +265,12 @@ impl Device {
     /// has are enabled, except those `disabled` asks to behave as missing.
     /// `extensions`: device extensions to enable (the swapchain's). The
     /// device owns the instance from here on.
+    /// `named`: only devices whose name contains this (any case).
     pub(super) fn new(
         instance: Instance,
         extensions: &[&CStr],
         disabled: &DisabledFeatures,
+        named: Option<&str>,
     ) -> Result<Self> {
         // SAFETY: enumerating devices of a live instance.
         let physicals = unsafe { instance.raw.enumerate_physical_devices() }
@@ -279,6 +281,24 @@ impl Device {
             .collect();
         for c in &mut candidates {
             disabled.apply(&mut c.caps);
+        }
+        if let Some(name) = named {
+            let found: Vec<String> = candidates
+                .iter()
+                .map(|c| c.caps.device_name.clone())
+                .collect();
+            let wanted = name.to_lowercase();
+            candidates.retain(|c| c.caps.device_name.to_lowercase().contains(&wanted));
+            if candidates.is_empty() {
+                return Err(VkError::Unsupported(format!(
+                    "no Vulkan device is named like {name:?} (VKTERRAIN_DEVICE or --device); found: {}",
+                    if found.is_empty() {
+                        "none".to_string()
+                    } else {
+                        found.join(", ")
+                    }
+                )));
+            }
         }
         let best = candidates
             .into_iter()

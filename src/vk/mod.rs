@@ -26,6 +26,8 @@ pub use instance::Instance;
 
 /// Environment variable that turns validation on for any command.
 pub const VALIDATE_ENV: &str = "VKTERRAIN_VALIDATE";
+/// Environment variable that picks the device by name for any command.
+pub const DEVICE_ENV: &str = "VKTERRAIN_DEVICE";
 
 /// How to open the GPU: every command and the window go through
 /// `Gpu::open` with one of these.
@@ -44,12 +46,22 @@ pub struct GpuOptions {
     pub instance_extensions: Vec<*const c_char>,
     /// Device extensions (the swapchain's, for a window).
     pub device_extensions: Vec<&'static CStr>,
+    /// Only a device whose name contains this (any case); otherwise
+    /// VKTERRAIN_DEVICE's, otherwise the best device.
+    pub device: Option<String>,
 }
 
 impl GpuOptions {
     /// Whether validation is on: asked for, or by VKTERRAIN_VALIDATE=1.
     pub fn validation(&self) -> bool {
         self.validate || std::env::var(VALIDATE_ENV).is_ok_and(|v| v == "1")
+    }
+
+    /// The device name asked for, by option or by VKTERRAIN_DEVICE.
+    pub fn device_name(&self) -> Option<String> {
+        self.device
+            .clone()
+            .or_else(|| std::env::var(DEVICE_ENV).ok().filter(|v| !v.is_empty()))
     }
 }
 
@@ -90,7 +102,12 @@ impl Gpu {
     /// Opens the best device with `options`.
     pub fn open(options: &GpuOptions) -> Result<Self> {
         let instance = Instance::new(options.validation(), &options.instance_extensions)?;
-        let device = Device::new(instance, &options.device_extensions, &options.disabled)?;
+        let device = Device::new(
+            instance,
+            &options.device_extensions,
+            &options.disabled,
+            options.device_name().as_deref(),
+        )?;
         device.set_memory_budget(options.memory_budget);
         device.set_fault(options.fault);
         Ok(Gpu { device })

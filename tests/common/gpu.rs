@@ -11,7 +11,7 @@ use vkterrain::render::{
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::Terrain;
 use vkterrain::vk::target::OFFSCREEN_COLOR_FORMAT;
-use vkterrain::vk::Gpu;
+use vkterrain::vk::{Gpu, GpuOptions};
 
 /// True when the environment explicitly asks to skip GPU tests. The test
 /// then returns early and says so; without the variable a missing device
@@ -19,9 +19,40 @@ use vkterrain::vk::Gpu;
 pub fn skip_gpu() -> bool {
     let skip = std::env::var("VKTERRAIN_SKIP_GPU").as_deref() == Ok("1");
     if skip {
-        eprintln!("VKTERRAIN_SKIP_GPU=1: skipping a GPU test");
+        // Straight to the process's stderr, past the harness's capture, so
+        // the skip shows beside the test's "ok".
+        use std::io::Write;
+        let name = std::thread::current()
+            .name()
+            .unwrap_or("a GPU test")
+            .to_string();
+        let _ = writeln!(
+            std::io::stderr(),
+            "SKIPPED {name}: VKTERRAIN_SKIP_GPU=1 (no GPU check ran)"
+        );
     }
     skip
+}
+
+/// The device golden images were made on, picked by name for every test
+/// that compares against one: lavapipe's rasteriser, not whichever device
+/// ranks best here.
+pub const GOLDEN_DEVICE: &str = "llvmpipe";
+
+/// Opens the GPU for a test: validation on, the device named by
+/// `device` or VKTERRAIN_DEVICE (otherwise the best one).
+pub fn open_gpu(device: Option<&str>) -> Gpu {
+    Gpu::open(&GpuOptions {
+        validate: true,
+        device: device.map(str::to_string),
+        ..GpuOptions::default()
+    })
+    .unwrap_or_else(|e| {
+        panic!(
+            "GPU tests need a Vulkan device with tessellation and the validation layer: {e} \
+             (set VKTERRAIN_SKIP_GPU=1 to skip them)"
+        )
+    })
 }
 
 /// A terrain on the GPU with an offscreen target.
@@ -46,12 +77,30 @@ impl GpuScene {
         height: u32,
         wireframe: bool,
     ) -> Self {
-        let gpu = Gpu::new(true).unwrap_or_else(|e| {
-            panic!(
-                "GPU tests need a Vulkan device with tessellation and the validation layer: {e} \
-                 (set VKTERRAIN_SKIP_GPU=1 to skip them)"
-            )
-        });
+        Self::on_device(None, terrain, appearance, width, height, wireframe)
+    }
+
+    /// As `with_appearance`, on the device golden images were made on.
+    pub fn for_golden(terrain: Terrain, appearance: &Appearance, width: u32, height: u32) -> Self {
+        Self::on_device(
+            Some(GOLDEN_DEVICE),
+            terrain,
+            appearance,
+            width,
+            height,
+            false,
+        )
+    }
+
+    fn on_device(
+        device: Option<&str>,
+        terrain: Terrain,
+        appearance: &Appearance,
+        width: u32,
+        height: u32,
+        wireframe: bool,
+    ) -> Self {
+        let gpu = open_gpu(device);
         let renderer = TerrainRenderer::with_appearance(
             &gpu,
             &terrain,
