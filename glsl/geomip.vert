@@ -46,7 +46,7 @@ void main() {
     ivec2 sample_cr = clamp_sample(offset);
     float h = displaced(sample_cr);
 
-    int n = int(frame.modes.z);
+    int n = int(frame.cells_per_patch);
     int s = 1 << pc.level;
     ivec2 k = offset / s;
     bool odd_x = (k.x & 1) == 1;

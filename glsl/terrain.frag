@@ -106,7 +106,7 @@ void layered(vec2 gradient, vec3 n, out vec3 albedo, out vec3 normal) {
 #endif
 
 void main() {
-    uint mode = frame.modes.y;
+    uint mode = frame.shading;
     if (mode == SHADE_FLAT) {
         out_color = vec4(1.0);
         return;

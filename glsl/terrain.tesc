@@ -50,7 +50,7 @@ void main() {
     vec3 box_max = vec3(in_rel[1].x, in_bounds_y[0].y - frame.eye_local.y, in_rel[1].z);
     vec3 center = 0.5 * (box_min + box_max);
     vec3 extents = 0.5 * (box_max - box_min);
-    if (frame.height_range.z != 0.0 && aabb_outside_frustum(center, extents)) {
+    if (frame.cull != 0u && aabb_outside_frustum(center, extents)) {
         cull_patch();
         out_inside_factor = 0.0;
         return;
@@ -70,7 +70,7 @@ void main() {
     ivec2 ends[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
     float inside;
     vec2 inner = vec2(-1.0);
-    if (frame.modes.w == LOD_METRIC_ERROR) {
+    if (frame.lod_metric == LOD_METRIC_ERROR) {
         // This patch and its neighbours across the left, top, right and
         // bottom edges; an edge uses the larger error of the two patches,
         // so both compute the same factor for it, and gets a vertex on
@@ -80,7 +80,7 @@ void main() {
         // highest heights (what both patches know alike); for the inside,
         // the patch's box. Mirror: terrain::lod::patch_error_factors.
         ivec2 grid_size = ivec2(frame.error_lod.zw);
-        ivec2 here = ivec2(in_grid[0]) / int(frame.modes.z);
+        ivec2 here = ivec2(in_grid[0]) / int(frame.cells_per_patch);
         int p = here.y * grid_size.x + here.x;
         if (is_full_resolution(p)) {
             cull_patch();
@@ -92,8 +92,8 @@ void main() {
             own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
         }
         ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(1, 0), ivec2(0, 1));
-        float y_lo = frame.height_range.x - frame.eye_local.y;
-        float y_hi = frame.height_range.y - frame.eye_local.y;
+        float y_lo = frame.height_min - frame.eye_local.y;
+        float y_hi = frame.height_max - frame.eye_local.y;
         for (int e = 0; e < 4; ++e) {
             ivec2 there = here + across[e];
             float shared_errors[ERROR_LEVEL_COUNT] = own;
@@ -111,7 +111,7 @@ void main() {
             gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d, edge_cells[e]);
         }
         inside = error_tess_factor(own, box_distance(box_min, box_max), min(cells.x, cells.y));
-    } else if (frame.modes.w == LOD_METRIC_SPHERE || frame.modes.w == LOD_METRIC_EDGE_LENGTH) {
+    } else if (frame.lod_metric == LOD_METRIC_SPHERE || frame.lod_metric == LOD_METRIC_EDGE_LENGTH) {
         // The screen-space peers, per edge from its ends; the inside
         // factors are the means of the edges along them (inner 0 runs
         // along u: the top and bottom edges). Mirror:
@@ -119,14 +119,14 @@ void main() {
         for (int e = 0; e < 4; ++e) {
             vec3 a = in_rel[ends[e].x];
             vec3 b = in_rel[ends[e].y];
-            gl_TessLevelOuter[e] = frame.modes.w == LOD_METRIC_SPHERE
+            gl_TessLevelOuter[e] = frame.lod_metric == LOD_METRIC_SPHERE
                 ? sphere_tess_factor(a, b)
                 : edge_length_tess_factor(a, b);
         }
         inner = vec2(0.5 * (gl_TessLevelOuter[1] + gl_TessLevelOuter[3]),
                      0.5 * (gl_TessLevelOuter[0] + gl_TessLevelOuter[2]));
         inside = max(inner.x, inner.y);
-    } else if (frame.modes.w == LOD_METRIC_CDLOD) {
+    } else if (frame.lod_metric == LOD_METRIC_CDLOD) {
         // CDLOD's ranges at edge midpoints and the centre.
         // Mirror: terrain::lod::patch_peer_factors.
         for (int e = 0; e < 4; ++e) {

@@ -23,12 +23,17 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     vec4 spacing_size;
     // rgb: ambient light; w: number of directional lights (1..MAX_LIGHTS).
     vec4 ambient;
-    // x, y: lowest and highest height (colour ramp); z: 1 when frustum
-    // culling is on.
-    vec4 height_range;
-    // x: LOD mode, y: shading mode, z: cells per patch, w: LOD metric
-    // (LOD_METRIC_*).
-    uvec4 modes;
+    // Lowest and highest height (colour ramp and the edges' strips).
+    float height_min;
+    float height_max;
+    // 1 when frustum culling is on.
+    uint cull;
+    uint pad0;
+    // LOD_MODE_*, SHADE_*, cells per patch, LOD_METRIC_*.
+    uint lod_mode;
+    uint shading;
+    uint cells_per_patch;
+    uint lod_metric;
     // x: largest projected error in pixels (error LOD), y: viewport height
     // over 2 tan(fov / 2), z, w: patch columns and rows.
     vec4 error_lod;
@@ -108,7 +113,7 @@ vec3 gradient_normal(vec2 gradient) {
 
 // Height normalised to the terrain's range (0 lowest, 1 highest).
 float normalised_height(float h) {
-    return (h - frame.height_range.x) / max(frame.height_range.y - frame.height_range.x, 1e-6);
+    return (h - frame.height_min) / max(frame.height_max - frame.height_min, 1e-6);
 }
 
 // True when the box lies entirely behind one of the frustum planes; the
@@ -141,7 +146,7 @@ float clamp_tess_factor(float f) {
 // floor(x + 0.5) (round() may go either way at .5).
 // Mirror: terrain::lod::tess_factor.
 float tess_factor(vec3 rel) {
-    bool debug_mode = frame.modes.x == LOD_MODE_DEBUG;
+    bool debug_mode = frame.lod_mode == LOD_MODE_DEBUG;
     float d = debug_mode ? max(abs(rel.x), abs(rel.z)) : length(rel);
     float range = max(frame.lod.y - frame.lod.x, 1.17549435e-38);
     float s = lod_saturate((d - frame.lod.x) / range);

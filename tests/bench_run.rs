@@ -205,7 +205,14 @@ fn bench_command_writes_every_output_and_merges_runs() {
     assert!(plot.width() >= 1000);
 
     // A second scene joins the first in one report.
-    let out = run(&["--name", "second", "--scene", scene, "--no-tessellation"]);
+    let out = run(&[
+        "--name",
+        "second",
+        "--scene",
+        scene,
+        "--without",
+        "tessellation",
+    ]);
     assert!(
         out.status.success(),
         "{}",

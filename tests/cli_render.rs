@@ -286,7 +286,8 @@ fn without_tessellation_render_falls_back_to_geomip_and_says_so() {
         &[
             "render",
             "--validate",
-            "--no-tessellation",
+            "--without",
+            "tessellation",
             "--width",
             "160",
             "--height",
@@ -317,8 +318,11 @@ fn without_tessellation_render_falls_back_to_geomip_and_says_so() {
     );
     assert!(s["gpu_memory"]["terrain.geomip_indices"].as_u64().unwrap() > 0);
     assert!(s["gpu_memory"].get("terrain.control_points").is_none());
-    let info: serde_json::Value =
-        serde_json::from_str(&ok(&vkterrain(dir.path(), &["info", "--no-tessellation"]))).unwrap();
+    let info: serde_json::Value = serde_json::from_str(&ok(&vkterrain(
+        dir.path(),
+        &["info", "--without", "tessellation"],
+    )))
+    .unwrap();
     assert_eq!(info["device"]["tessellation_shader"], false);
 }
 

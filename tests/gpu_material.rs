@@ -381,7 +381,6 @@ fn anisotropy_follows_the_scene_within_the_device() {
         max_image_dimension_2d: 4096,
         max_image_array_layers: 256,
         max_sampler_anisotropy: 16.0,
-        max_patches_per_draw: None,
     };
     use vkterrain::render::material::anisotropy_for;
     let gpu = caps("discrete GPU", true);

@@ -136,7 +136,7 @@ pub fn parse_pixels(s: &str) -> Result<u32, String> {
 /// Which terrain to use: the built-in default scene, or a heightmap file.
 /// Options left out keep the scene's values (for a file: scale 1, offset 0,
 /// spacing 1, origin 0).
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Args, Clone, Debug)]
 pub struct TerrainArgs {
     /// Scene file (TOML); without it and without --heightmap, the built-in
     /// default scene (assets/scenes/default.toml).
@@ -245,15 +245,6 @@ pub struct SizeArgs {
     pub height: u32,
 }
 
-impl Default for SizeArgs {
-    fn default() -> Self {
-        SizeArgs {
-            width: 1280,
-            height: 720,
-        }
-    }
-}
-
 /// An optional device feature `--without` can take away.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Feature {
@@ -270,16 +261,13 @@ pub enum Feature {
 }
 
 /// Features to treat as missing, to run the fallbacks on any device.
-#[derive(Args, Clone, Debug, Default)]
+#[derive(Args, Clone, Debug)]
 pub struct FeatureArgs {
-    /// Behave as if the device lacked FEATURE (repeat for more).
+    /// Behave as if the device lacked FEATURE (repeat for more);
+    /// `--without tessellation` draws with the geomip path, as on a device
+    /// without tessellation shaders.
     #[arg(long = "without", value_enum, value_name = "FEATURE")]
     pub without: Vec<Feature>,
-
-    /// The same as --without tessellation: the tess path falls back to
-    /// geomip, as on a device without tessellation shaders.
-    #[arg(long)]
-    pub no_tessellation: bool,
 
     /// Refuse to allocate more than this much GPU memory, with an error
     /// naming the resource that would exceed it.
@@ -357,7 +345,7 @@ impl FeatureArgs {
     pub fn disabled(&self) -> crate::vk::DisabledFeatures {
         let off = |f| self.without.contains(&f);
         crate::vk::DisabledFeatures {
-            tessellation_shader: self.no_tessellation || off(Feature::Tessellation),
+            tessellation_shader: off(Feature::Tessellation),
             fill_mode_non_solid: off(Feature::FillModeNonSolid),
             pipeline_statistics_query: off(Feature::PipelineStatistics),
             sampler_anisotropy: off(Feature::SamplerAnisotropy),
@@ -423,4 +411,12 @@ pub fn with_gpu<T>(
     let gpu = crate::vk::Gpu::open(options).context("starting Vulkan")?;
     let result = work(&gpu);
     gpu.finish(result)
+}
+
+/// A command's arguments as clap parses `args`: with none given, its
+/// defaults, which are written once, in the `#[arg]` attributes.
+pub fn parse_args<T: clap::Args + clap::FromArgMatches>(args: &[&str]) -> anyhow::Result<T> {
+    let command = T::augment_args(clap::Command::new("vkterrain").no_binary_name(true));
+    let matches = command.try_get_matches_from(args)?;
+    Ok(T::from_arg_matches(&matches)?)
 }

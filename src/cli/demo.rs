@@ -8,7 +8,7 @@ use anyhow::{bail, Result};
 use ash::vk;
 use clap::ValueEnum;
 
-use super::args::{SizeArgs, TerrainArgs};
+use super::args::{parse_args, SizeArgs, TerrainArgs};
 use super::render::{render, RenderCmd, ViewArgs, DEFAULT_OUTPUT};
 use crate::app::{self, DemoOptions};
 use crate::material::Appearance;
@@ -25,7 +25,7 @@ pub enum PresentModeArg {
     Immediate,
 }
 
-#[derive(clap::Args, Debug, Default)]
+#[derive(clap::Args, Debug)]
 pub struct DemoCmd {
     #[command(flatten)]
     pub terrain: TerrainArgs,
@@ -153,27 +153,11 @@ pub fn display_available() -> bool {
 /// headless to vkterrain-default.png.
 pub fn run_default(out: &mut dyn Write) -> Result<()> {
     if display_available() {
-        return demo(
-            DemoCmd {
-                walk_height: 1.8,
-                ..DemoCmd::default()
-            },
-            out,
-        );
+        return demo(parse_args::<DemoCmd>(&[])?, out);
     }
     writeln!(
         out,
         "no display (DISPLAY and WAYLAND_DISPLAY are unset): rendering the default scene headless instead"
     )?;
-    render(
-        RenderCmd {
-            terrain: TerrainArgs::default(),
-            view: ViewArgs::default(),
-            size: SizeArgs::default(),
-            out: PathBuf::from(DEFAULT_OUTPUT),
-            stats: None,
-            validate: false,
-        },
-        out,
-    )
+    render(parse_args::<RenderCmd>(&["--out", DEFAULT_OUTPUT])?, out)
 }

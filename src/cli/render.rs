@@ -14,7 +14,7 @@ use super::args::{
 };
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
-use crate::render::material::anisotropy_for;
+use crate::render::settings::measurement_notes;
 use crate::render::{
     with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
     Shading, TerrainRenderer,
@@ -88,7 +88,7 @@ pub enum LodModeArg {
 }
 
 /// Camera, LOD and look: what the window demo and `render` share.
-#[derive(clap::Args, Clone, Debug, Default)]
+#[derive(clap::Args, Clone, Debug)]
 pub struct ViewArgs {
     /// Cells per patch side: a power of two from 2 to 64.
     #[arg(long, value_name = "N")]
@@ -394,31 +394,7 @@ pub fn render_scene(
         let mut notes = Vec::new();
         let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
         let caps = &gpu.device.caps;
-        if !caps.pipeline_statistics_query {
-            notes.push(format!(
-                "{}: pipelineStatisticsQuery is unavailable, so triangle counts are not measured",
-                caps.device_name
-            ));
-        }
-        if caps.timestamp_period_ns.is_none() {
-            notes.push(format!(
-                "{}: timestamp queries are unavailable, so GPU time is not measured",
-                caps.device_name
-            ));
-        }
-        let asked = appearance.material.as_ref().map(|m| m.anisotropy);
-        let with_feature = Capabilities {
-            sampler_anisotropy: true,
-            ..caps.clone()
-        };
-        if let Some(asked) = asked {
-            if !caps.sampler_anisotropy && anisotropy_for(asked, &with_feature).is_some() {
-                notes.push(format!(
-                    "{}: samplerAnisotropy is unavailable, so textures are filtered without anisotropy",
-                    caps.device_name
-                ));
-            }
-        }
+        notes.extend(measurement_notes(caps, &appearance));
         let started = std::time::Instant::now();
         let mut renderer = TerrainRenderer::with_appearance(
             gpu,

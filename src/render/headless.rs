@@ -4,7 +4,8 @@
 use std::time::Instant;
 
 use super::renderer::{FrameMeasurements, TerrainRenderer};
-use super::uniforms::{FrameView, RenderSettings};
+use super::settings::RenderSettings;
+use super::view::FrameView;
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
 use crate::vk::commands::CommandSlots;

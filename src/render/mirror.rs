@@ -8,11 +8,14 @@ use ash::vk;
 use glam::{Vec2, Vec3};
 use gpu_allocator::MemoryLocation;
 
+use super::settings::RenderSettings;
 use super::shaders;
-use super::uniforms::{FrameUniforms, FrameView, RenderSettings};
+use super::uniforms::FrameUniforms;
+use super::view::FrameView;
 use crate::shader_constants::{
     BINDING_FRAME, BINDING_HEIGHTMAP, BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS,
 };
+use crate::terrain::error_table::PatchErrors;
 use crate::terrain::Terrain;
 use crate::vk::memory::BufferDesc;
 use crate::vk::{Gpu, Result, VkError};
@@ -26,7 +29,7 @@ pub struct MirrorCase {
     /// Continuous sample coordinates (column, row) for height sampling.
     pub grid: Vec2,
     /// Per-level errors for the error-bounded factor at `position`'s distance.
-    pub errors: [f32; 7],
+    pub errors: PatchErrors,
     /// Cells the error-bounded factor spans.
     pub cells: u32,
 }
@@ -51,6 +54,8 @@ pub struct MirrorResult {
 }
 
 const LOCAL_SIZE: u32 = 64;
+// Each case's errors travel in two vec4s (glsl/mirror_check.comp).
+const _: () = assert!(crate::terrain::error_table::LEVEL_COUNT == 7);
 
 /// Evaluates every case on the GPU with the uniforms a frame of `view` and
 /// `settings` would use.

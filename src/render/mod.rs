@@ -5,11 +5,13 @@ pub mod headless;
 pub mod material;
 pub mod mirror;
 pub mod renderer;
+pub mod settings;
 pub mod shaders;
 pub mod uniforms;
+pub mod view;
 
 pub use headless::{Headless, HeadlessFrame};
-pub use renderer::{
-    with_fallback, FrameMeasurements, RenderPath, RendererOptions, TerrainRenderer,
-};
-pub use uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings, Shading};
+pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
+pub use settings::{with_fallback, LodMetric, RenderPath, RenderSettings, Shading};
+pub use uniforms::FrameUniforms;
+pub use view::FrameView;

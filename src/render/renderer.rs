@@ -22,8 +22,10 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::material::{GpuAppearance, ShaderVariant};
+use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
-use super::uniforms::{FrameUniforms, FrameView, LodMetric, RenderSettings};
+use super::uniforms::FrameUniforms;
+use super::view::FrameView;
 use crate::material::Appearance;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP,
@@ -47,48 +49,6 @@ struct FrameSlot {
     queries: FrameQueries,
     /// The tess path's full-resolution patches, one bit each (error LOD).
     full_resolution: Option<Buffer>,
-}
-
-/// Which way the terrain is drawn.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RenderPath {
-    /// Hardware tessellation.
-    #[default]
-    Tess,
-    /// Geomipmapping with stitched edges and geomorphing.
-    Geomip,
-    /// The full-resolution mesh.
-    Brute,
-}
-
-/// What the device lacks changes what is drawn: without tessellation
-/// shaders geomip draws the same terrain, without fillModeNonSolid it is
-/// drawn filled. Says so in `notes`.
-pub fn with_fallback(
-    settings: RenderSettings,
-    caps: &crate::vk::Capabilities,
-    notes: &mut Vec<String>,
-) -> RenderSettings {
-    let mut settings = settings;
-    if settings.wireframe && !caps.fill_mode_non_solid {
-        notes.push(format!(
-            "{}: fillModeNonSolid is unavailable, drawing filled instead of wireframe",
-            caps.device_name
-        ));
-        settings.wireframe = false;
-    }
-    if settings.path == RenderPath::Tess && !caps.tessellation_shader {
-        notes.push(format!(
-            "{}: tessellationShader is unavailable, falling back to the geomip path",
-            caps.device_name
-        ));
-        return RenderSettings {
-            path: RenderPath::Geomip,
-            ..settings
-        };
-    }
-    settings
 }
 
 /// What a renderer builds.
@@ -268,7 +228,7 @@ impl TerrainRenderer {
             "terrain.frame_set",
         )?;
         // The tess path's error-bounded factors read the per-patch error
-        // table (7 floats a patch); the geomip path's error LOD has its own,
+        // table (ERROR_LEVEL_COUNT floats a patch); the geomip path's error LOD has its own,
         // for its fixed diagonal. Both come from one pass, kept by the
         // terrain.
         let table_start = std::time::Instant::now();
@@ -297,7 +257,7 @@ impl TerrainRenderer {
             appearance,
             device: device.clone(),
             color_format,
-            max_patches_per_draw: device.caps.max_patches_per_draw,
+            max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms,
             predicted_max_px: None,
         };
@@ -531,7 +491,7 @@ impl TerrainRenderer {
                 );
                 rec.bind_geometry(&tess.control_points, &tess.indices);
                 // One draw, or batches where the driver needs them (see
-                // `Capabilities::max_patches_per_draw`).
+                // `Workarounds::max_patches_per_draw`).
                 let batch = self
                     .max_patches_per_draw
                     .map_or(tess.index_count, |n| n * 4);

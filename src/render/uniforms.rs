@@ -3,17 +3,17 @@
 
 use std::mem::{offset_of, size_of};
 
-use glam::{DVec3, Mat4, Vec3, Vec4};
+use glam::{Vec3, Vec4};
 
-use super::renderer::RenderPath;
-use crate::scene::{Fog, Lighting, Scene, MAX_LIGHTS};
+use super::settings::{LodMetric, RenderSettings, Shading};
+use super::view::FrameView;
+use crate::scene::MAX_LIGHTS;
 use crate::shader_constants::{
     LOD_METRIC_CDLOD, LOD_METRIC_DISTANCE, LOD_METRIC_EDGE_LENGTH, LOD_METRIC_ERROR,
     LOD_METRIC_SPHERE, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
 };
-use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
-use crate::terrain::lod::{PeerLod, PeerPolicy, ScreenParams};
-use crate::terrain::{DistanceLod, DistanceMode, Terrain};
+use crate::terrain::lod::PeerPolicy;
+use crate::terrain::{DistanceMode, Terrain};
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -26,8 +26,17 @@ pub struct FrameUniforms {
     pub spacing_size: [f32; 4],
     /// rgb ambient, w: directional light count.
     pub ambient: [f32; 4],
-    pub height_range: [f32; 4],
-    pub modes: [u32; 4],
+    /// Lowest and highest height.
+    pub height_min: f32,
+    pub height_max: f32,
+    /// 1 when frustum culling is on.
+    pub cull: u32,
+    pub pad0: u32,
+    /// LOD_MODE_*, SHADE_*, cells per patch, LOD_METRIC_*.
+    pub lod_mode: u32,
+    pub shading: u32,
+    pub cells_per_patch: u32,
+    pub lod_metric: u32,
     pub error_lod: [f32; 4],
     pub light_dir: [[f32; 4]; MAX_LIGHTS],
     pub light_color: [[f32; 4]; MAX_LIGHTS],
@@ -51,8 +60,10 @@ const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
 const _: () = assert!(offset_of!(FrameUniforms, grid) == 192);
 const _: () = assert!(offset_of!(FrameUniforms, spacing_size) == 208);
 const _: () = assert!(offset_of!(FrameUniforms, ambient) == 224);
-const _: () = assert!(offset_of!(FrameUniforms, height_range) == 240);
-const _: () = assert!(offset_of!(FrameUniforms, modes) == 256);
+const _: () = assert!(offset_of!(FrameUniforms, height_min) == 240);
+const _: () = assert!(offset_of!(FrameUniforms, cull) == 248);
+const _: () = assert!(offset_of!(FrameUniforms, lod_mode) == 256);
+const _: () = assert!(offset_of!(FrameUniforms, lod_metric) == 268);
 const _: () = assert!(offset_of!(FrameUniforms, light_dir) == 288);
 const _: () = assert!(offset_of!(FrameUniforms, light_color) == 336);
 const _: () = assert!(offset_of!(FrameUniforms, fog) == 384);
@@ -61,206 +72,6 @@ const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
 const _: () = assert!(offset_of!(FrameUniforms, peer) == 416);
 const _: () = assert!(offset_of!(FrameUniforms, viewport) == 432);
 const _: () = assert!(offset_of!(FrameUniforms, camera_right) == 448);
-
-/// How the fragment shader colours the terrain.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Shading {
-    /// Height colours, one directional light plus ambient.
-    #[default]
-    Lit,
-    /// Colour by tessellation factor.
-    LodColors,
-    /// Constant white, unlit.
-    Flat,
-}
-
-/// How levels are chosen.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LodMetric {
-    /// By distance from the eye (`lod.min_dist` is the first level's range).
-    #[default]
-    Distance,
-    /// By the projected error of each level, at most this many pixels.
-    Error(f32),
-    /// A peer's policy with its published parameters
-    /// (`RenderSettings::peer`): SaschaWillems's screen-space edge spheres,
-    /// Dupuy's target edge length, or CDLOD's doubling distance ranges from
-    /// `lod.min_dist`. Tess path; geomip draws them by distance.
-    Peer(PeerPolicy),
-}
-
-/// What a frame looks like, apart from the camera.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RenderSettings {
-    pub path: RenderPath,
-    /// How the geomip path picks levels.
-    pub lod_metric: LodMetric,
-    /// Geomip path: glide vertices between levels instead of popping.
-    pub geomorph: bool,
-    pub lod: DistanceLod,
-    pub lod_mode: DistanceMode,
-    pub shading: Shading,
-    pub wireframe: bool,
-    pub clear_color: [f32; 3],
-    /// GPU frustum culling of patches.
-    pub cull: bool,
-    pub lighting: Lighting,
-    pub fog: Option<Fog>,
-    /// The peers' published parameters.
-    pub peer: PeerLod,
-}
-
-impl Default for RenderSettings {
-    fn default() -> Self {
-        RenderSettings {
-            path: RenderPath::Tess,
-            lod_metric: LodMetric::Distance,
-            geomorph: true,
-            lod: DistanceLod::default(),
-            lod_mode: DistanceMode::Smooth,
-            shading: Shading::Lit,
-            wireframe: false,
-            clear_color: [0.52, 0.68, 0.86],
-            cull: true,
-            lighting: Lighting::default(),
-            fog: None,
-            peer: PeerLod::default(),
-        }
-    }
-}
-
-impl RenderSettings {
-    /// The defaults with a scene's LOD (for its terrain), lights and fog; with fog, the sky
-    /// behind the terrain takes the fog's colour, so distant ground fades
-    /// into it.
-    pub fn for_scene(scene: &Scene, info: &crate::terrain::TerrainInfo) -> Self {
-        let defaults = RenderSettings::default();
-        RenderSettings {
-            lod: scene.distance_lod(info),
-            lod_metric: scene
-                .pixel_error
-                .map_or(LodMetric::Distance, LodMetric::Error),
-            lighting: scene.lighting,
-            fog: scene.fog,
-            clear_color: scene
-                .fog
-                .map_or(defaults.clear_color, |f| f.color.to_array()),
-            ..defaults
-        }
-    }
-}
-
-/// The matrices and planes of one frame, camera-relative.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct FrameView {
-    pub view_proj: Mat4,
-    pub frustum: Frustum,
-    /// The eye relative to the terrain's centre.
-    pub eye_local: Vec3,
-    /// Viewport height over 2 tan(fov / 2): a length L at distance d seen
-    /// face-on covers L * pixels_per_radian / d pixels.
-    pub pixels_per_radian: f32,
-    pub near: f32,
-    pub far: f32,
-    /// The camera's right vector.
-    pub right: Vec3,
-    /// Width and height in pixels.
-    pub viewport: glam::Vec2,
-}
-
-impl FrameView {
-    /// Near and far enclose the whole terrain, from its Y bounds.
-    /// For a viewport of `width` x `height` pixels.
-    pub fn new(terrain: &Terrain, camera: &Camera, width: u32, height: u32) -> Self {
-        let aspect = width.max(1) as f32 / height.max(1) as f32;
-        let info = terrain.info();
-        let origin = info.origin();
-        let (lo, hi) = terrain
-            .y_bounds()
-            .iter()
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), b| {
-                (lo.min(b[0]), hi.max(b[1]))
-            });
-        let centre = DVec3::new(origin.x, 0.5 * f64::from(lo + hi), origin.y);
-        let half = DVec3::new(
-            0.5 * info.world_width(),
-            0.5 * f64::from(hi - lo),
-            0.5 * info.world_depth(),
-        );
-        let (near, far) = clip_planes_for_box(camera.eye, centre, half);
-        let view_proj = camera.relative_view_proj(aspect, near, far);
-        // f64 subtraction first: the eye and the origin may both be far out.
-        let eye_local = DVec3::new(
-            camera.eye.x - origin.x,
-            camera.eye.y,
-            camera.eye.z - origin.y,
-        )
-        .as_vec3();
-        // Projection y scale is 1 / tan(fov / 2); the view is a pure
-        // rotation, so it is the length of the matrix's second row.
-        let row1 = Vec3::new(view_proj.x_axis.y, view_proj.y_axis.y, view_proj.z_axis.y);
-        let view = camera.relative_view();
-        let right = Vec3::new(view.x_axis.x, view.y_axis.x, view.z_axis.x);
-        FrameView {
-            right,
-            viewport: glam::Vec2::new(width.max(1) as f32, height.max(1) as f32),
-            pixels_per_radian: 0.5 * height.max(1) as f32 * row1.length(),
-            view_proj,
-            frustum: Frustum::from_view_proj(view_proj),
-            eye_local,
-            near,
-            far,
-        }
-    }
-
-    /// This view with another view's frustum, re-expressed relative to this
-    /// view's eye: culling stays where it was while the camera moves on.
-    pub fn with_frustum_of(&self, frozen: &FrameView) -> FrameView {
-        let shift = self.eye_local - frozen.eye_local;
-        let planes = frozen
-            .frustum
-            .planes
-            .map(|p| Vec4::new(p.x, p.y, p.z, p.w + p.truncate().dot(shift)));
-        FrameView {
-            frustum: Frustum { planes },
-            ..*self
-        }
-    }
-
-    /// Whether patch `p`'s box is not outside the frustum: the CPU's
-    /// version of the test the control shader makes.
-    pub fn patch_in_frustum(&self, terrain: &Terrain, p: usize) -> bool {
-        let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
-        !self.frustum.aabb_outside(centre - self.eye_local, extents)
-    }
-
-    /// Patches whose box is not outside the frustum.
-    pub fn patches_in_frustum(&self, terrain: &Terrain) -> usize {
-        (0..terrain.grid().patch_count())
-            .filter(|&p| self.patch_in_frustum(terrain, p))
-            .count()
-    }
-
-    /// Per patch, whether it is drawn this frame: culling off, or
-    /// `patch_in_frustum`.
-    pub fn patches_drawn(&self, terrain: &Terrain, cull: bool) -> Vec<bool> {
-        (0..terrain.grid().patch_count())
-            .map(|p| !cull || self.patch_in_frustum(terrain, p))
-            .collect()
-    }
-
-    /// What the screen-space peers need of the camera.
-    pub fn screen(&self) -> ScreenParams {
-        ScreenParams {
-            view_proj: self.view_proj,
-            right: self.right,
-            viewport: self.viewport,
-            pixels_per_radian: self.pixels_per_radian,
-        }
-    }
-}
 
 impl FrameUniforms {
     pub fn new(terrain: &Terrain, view: &FrameView, settings: &RenderSettings) -> Self {
@@ -288,26 +99,27 @@ impl FrameUniforms {
                 info.rows() as f32,
             ],
             ambient: lighting.ambient.extend(lights.len() as f32).to_array(),
-            height_range: [lo, hi, if settings.cull { 1.0 } else { 0.0 }, 0.0],
-            modes: [
-                match settings.lod_mode {
-                    DistanceMode::Smooth => LOD_MODE_SMOOTH,
-                    DistanceMode::Debug => LOD_MODE_DEBUG,
-                },
-                match settings.shading {
-                    Shading::Lit => SHADE_LIT,
-                    Shading::LodColors => SHADE_LOD_COLORS,
-                    Shading::Flat => SHADE_FLAT,
-                },
-                info.cells_per_patch(),
-                match settings.lod_metric {
-                    LodMetric::Distance => LOD_METRIC_DISTANCE,
-                    LodMetric::Error(_) => LOD_METRIC_ERROR,
-                    LodMetric::Peer(PeerPolicy::Sphere) => LOD_METRIC_SPHERE,
-                    LodMetric::Peer(PeerPolicy::EdgeLength) => LOD_METRIC_EDGE_LENGTH,
-                    LodMetric::Peer(PeerPolicy::Cdlod) => LOD_METRIC_CDLOD,
-                },
-            ],
+            height_min: lo,
+            height_max: hi,
+            cull: u32::from(settings.cull),
+            pad0: 0,
+            lod_mode: match settings.lod_mode {
+                DistanceMode::Smooth => LOD_MODE_SMOOTH,
+                DistanceMode::Debug => LOD_MODE_DEBUG,
+            },
+            shading: match settings.shading {
+                Shading::Lit => SHADE_LIT,
+                Shading::LodColors => SHADE_LOD_COLORS,
+                Shading::Flat => SHADE_FLAT,
+            },
+            cells_per_patch: info.cells_per_patch(),
+            lod_metric: match settings.lod_metric {
+                LodMetric::Distance => LOD_METRIC_DISTANCE,
+                LodMetric::Error(_) => LOD_METRIC_ERROR,
+                LodMetric::Peer(PeerPolicy::Sphere) => LOD_METRIC_SPHERE,
+                LodMetric::Peer(PeerPolicy::EdgeLength) => LOD_METRIC_EDGE_LENGTH,
+                LodMetric::Peer(PeerPolicy::Cdlod) => LOD_METRIC_CDLOD,
+            },
             error_lod: [
                 match settings.lod_metric {
                     LodMetric::Error(pixels) => pixels,

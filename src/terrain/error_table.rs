@@ -47,11 +47,30 @@ use rayon::prelude::*;
 use super::grid::{PatchGrid, SampleRect};
 use super::heightmap::Heightmap;
 
+use crate::shader_constants::{ERROR_LEVEL_COUNT, MAX_TESS_FACTOR};
+
+/// Levels per patch in the table; GLSL reads the same count
+/// (`ERROR_LEVEL_COUNT`, shared through shader_constants).
+pub const LEVEL_COUNT: usize = ERROR_LEVEL_COUNT as usize;
+
 /// The tessellation levels the table covers: 1, 2, 4, ..., 64.
-pub const ERROR_LEVELS: [u32; 7] = [1, 2, 4, 8, 16, 32, 64];
+pub const ERROR_LEVELS: [u32; LEVEL_COUNT] = {
+    let mut levels = [0u32; LEVEL_COUNT];
+    let mut k = 0;
+    while k < LEVEL_COUNT {
+        levels[k] = 1 << k;
+        k += 1;
+    }
+    levels
+};
+// The last level is the largest factor a control shader may output.
+const _: () = assert!(ERROR_LEVELS[LEVEL_COUNT - 1] as f32 == MAX_TESS_FACTOR);
+
+/// One patch's errors, one per level.
+pub type PatchErrors = [f32; LEVEL_COUNT];
 
 /// Errors of every patch at every level, flat: patch `p`, level index `k`
-/// (level `ERROR_LEVELS[k]`) is `errors[p * 7 + k]`. Patches are row-major,
+/// (level `ERROR_LEVELS[k]`) is `errors[p * LEVEL_COUNT + k]`. Patches are row-major,
 /// as in the patch grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ErrorTable {
@@ -59,7 +78,7 @@ pub struct ErrorTable {
 }
 
 impl ErrorTable {
-    pub const LEVELS: usize = ERROR_LEVELS.len();
+    pub const LEVELS: usize = LEVEL_COUNT;
 
     /// The tess path's table: either diagonal.
     pub fn compute(heightmap: &Heightmap, grid: &PatchGrid) -> ErrorTable {

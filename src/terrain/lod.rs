@@ -7,6 +7,8 @@
 
 use glam::{Vec2, Vec3};
 
+use super::error_table::PatchErrors;
+
 pub use crate::shader_constants::{MAX_TESS_EXPONENT, MAX_TESS_FACTOR, MIN_TESS_FACTOR};
 
 /// Parameters of the distance formula `2^lerp(max_exp, min_exp, s)`,
@@ -212,7 +214,7 @@ pub fn patch_tess_factors(
 /// segments puts its vertices exactly on the samples. A NaN scale gives
 /// the coarsest factor.
 pub fn error_tess_factor(
-    errors: &[f32; 7],
+    errors: &PatchErrors,
     distance: f32,
     pixels_per_radian: f32,
     pixel_error: f32,
@@ -243,7 +245,7 @@ pub fn error_tess_factor(
 /// edge it shares is tessellated with a vertex on every sample. The inside
 /// factor `patch_error_factors` gives is then the smaller side's count.
 pub fn patch_is_full_resolution(
-    own: &[f32; 7],
+    own: &PatchErrors,
     distance: f32,
     pixels_per_radian: f32,
     pixel_error: f32,
@@ -256,7 +258,7 @@ pub fn patch_is_full_resolution(
 /// `distance` away: the error-bounded factor over its smaller side, or None
 /// where that is the side itself (full resolution).
 pub fn patch_inside_factor(
-    own: &[f32; 7],
+    own: &PatchErrors,
     distance: f32,
     pixels_per_radian: f32,
     pixel_error: f32,
@@ -268,7 +270,7 @@ pub fn patch_inside_factor(
 }
 
 /// Per-level errors of an edge shared by two patches: the larger of each.
-pub fn shared_edge_errors(a: &[f32; 7], b: Option<&[f32; 7]>) -> [f32; 7] {
+pub fn shared_edge_errors(a: &PatchErrors, b: Option<&PatchErrors>) -> PatchErrors {
     match b {
         Some(b) => std::array::from_fn(|k| a[k].max(b[k])),
         None => *a,
@@ -315,8 +317,8 @@ pub fn patch_error_factors(
     corners: [Vec3; 4],
     bounds_y: [f32; 2],
     height_range: [f32; 2],
-    own: &[f32; 7],
-    neighbours: [Option<(&[f32; 7], bool)>; 4],
+    own: &PatchErrors,
+    neighbours: [Option<(&PatchErrors, bool)>; 4],
     cells: [u32; 2],
     pixels_per_radian: f32,
     pixel_error: f32,
@@ -393,7 +395,10 @@ pub fn choose_tess_error(
         let corners = terrain.patch_corners(id).map(|c| c - eye_local);
         let [lo, hi] = terrain.y_bounds()[p];
         let distance = patch_box_distance(corners, [lo - eye_local.y, hi - eye_local.y]);
-        let own: &[f32; 7] = table.patch(p).try_into().expect("7 levels a patch");
+        let own: &PatchErrors = table
+            .patch(p)
+            .try_into()
+            .expect("LEVEL_COUNT levels a patch");
         match patch_inside_factor(own, distance, pixels_per_radian, pixel_error, cells) {
             None => full_resolution[p / 32] |= 1 << (p % 32),
             Some(factor) => {

@@ -17,7 +17,7 @@ pub mod shading;
 
 pub use camera::{look_at, perspective, Frustum};
 pub use error::{HeightmapError, TerrainError};
-pub use error_table::{ErrorTable, ERROR_LEVELS};
+pub use error_table::{ErrorTable, PatchErrors, ERROR_LEVELS};
 pub use grid::{PatchGrid, PatchId, SampleRect};
 pub use heightmap::{Heightmap, HeightmapFormat, LoadOptions};
 pub use info::{TerrainInfo, DEFAULT_CELLS_PER_PATCH};

@@ -35,6 +35,12 @@ pub struct Capabilities {
     pub max_image_array_layers: u32,
     /// maxSamplerAnisotropy (meaningful with `sampler_anisotropy`).
     pub max_sampler_anisotropy: f32,
+}
+
+/// How the renderer must work around a driver's faults: kept apart from
+/// the device's public capabilities, which say what it can do.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Workarounds {
     /// Patches one tessellated draw may hold on this driver; None: no limit.
     ///
     /// lavapipe (Mesa 22.3) drops whole runs of triangles from a draw whose
@@ -118,6 +124,7 @@ impl std::ops::Deref for Device {
 /// instance goes after the device.
 pub struct DeviceShared {
     pub caps: Capabilities,
+    pub workarounds: Workarounds,
     pub(super) physical: vk::PhysicalDevice,
     pub(super) queue: vk::Queue,
     pub(super) queue_family: u32,
@@ -166,6 +173,7 @@ struct Candidate {
     physical: vk::PhysicalDevice,
     queue_family: u32,
     caps: Capabilities,
+    workarounds: Workarounds,
     rank: u32,
 }
 
@@ -238,6 +246,8 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
                 max_sampler_anisotropy: props.limits.max_sampler_anisotropy,
+            },
+            workarounds: Workarounds {
                 max_patches_per_draw: (driver.driver_id == vk::DriverId::MESA_LLVMPIPE)
                     .then_some(8),
             },
@@ -366,6 +376,7 @@ impl Device {
             queue,
             queue_family: best.queue_family,
             caps,
+            workarounds: best.workarounds,
             debug_utils,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             transient_pool: Mutex::new(transient_pool),

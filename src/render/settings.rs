@@ -1,0 +1,174 @@
+//! What a frame looks like apart from the camera: the render path, the LOD
+//! metric, shading, and the rest of `RenderSettings`, with the one policy
+//! that fits them to what a device can do.
+
+use crate::scene::{Fog, Lighting, Scene};
+use crate::terrain::lod::{PeerLod, PeerPolicy};
+use crate::terrain::{DistanceLod, DistanceMode};
+
+/// Which way the terrain is drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RenderPath {
+    /// Hardware tessellation.
+    #[default]
+    Tess,
+    /// Geomipmapping with stitched edges and geomorphing.
+    Geomip,
+    /// The full-resolution mesh.
+    Brute,
+}
+
+/// What the device lacks changes what is drawn: without tessellation
+/// shaders geomip draws the same terrain, without fillModeNonSolid it is
+/// drawn filled. Says so in `notes`.
+pub fn with_fallback(
+    settings: RenderSettings,
+    caps: &crate::vk::Capabilities,
+    notes: &mut Vec<String>,
+) -> RenderSettings {
+    let mut settings = settings;
+    if settings.wireframe && !caps.fill_mode_non_solid {
+        notes.push(format!(
+            "{}: fillModeNonSolid is unavailable, drawing filled instead of wireframe",
+            caps.device_name
+        ));
+        settings.wireframe = false;
+    }
+    if settings.path == RenderPath::Tess && !caps.tessellation_shader {
+        notes.push(format!(
+            "{}: tessellationShader is unavailable, falling back to the geomip path",
+            caps.device_name
+        ));
+        return RenderSettings {
+            path: RenderPath::Geomip,
+            ..settings
+        };
+    }
+    settings
+}
+
+/// How the fragment shader colours the terrain.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shading {
+    /// Height colours, one directional light plus ambient.
+    #[default]
+    Lit,
+    /// Colour by tessellation factor.
+    LodColors,
+    /// Constant white, unlit.
+    Flat,
+}
+
+/// How levels are chosen.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LodMetric {
+    /// By distance from the eye (`lod.min_dist` is the first level's range).
+    #[default]
+    Distance,
+    /// By the projected error of each level, at most this many pixels.
+    Error(f32),
+    /// A peer's policy with its published parameters
+    /// (`RenderSettings::peer`): SaschaWillems's screen-space edge spheres,
+    /// Dupuy's target edge length, or CDLOD's doubling distance ranges from
+    /// `lod.min_dist`. Tess path; geomip draws them by distance.
+    Peer(PeerPolicy),
+}
+
+/// What a frame looks like, apart from the camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    pub path: RenderPath,
+    /// How the geomip path picks levels.
+    pub lod_metric: LodMetric,
+    /// Geomip path: glide vertices between levels instead of popping.
+    pub geomorph: bool,
+    pub lod: DistanceLod,
+    pub lod_mode: DistanceMode,
+    pub shading: Shading,
+    pub wireframe: bool,
+    pub clear_color: [f32; 3],
+    /// GPU frustum culling of patches.
+    pub cull: bool,
+    pub lighting: Lighting,
+    pub fog: Option<Fog>,
+    /// The peers' published parameters.
+    pub peer: PeerLod,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            path: RenderPath::Tess,
+            lod_metric: LodMetric::Distance,
+            geomorph: true,
+            lod: DistanceLod::default(),
+            lod_mode: DistanceMode::Smooth,
+            shading: Shading::Lit,
+            wireframe: false,
+            clear_color: [0.52, 0.68, 0.86],
+            cull: true,
+            lighting: Lighting::default(),
+            fog: None,
+            peer: PeerLod::default(),
+        }
+    }
+}
+
+impl RenderSettings {
+    /// The defaults with a scene's LOD (for its terrain), lights and fog; with fog, the sky
+    /// behind the terrain takes the fog's colour, so distant ground fades
+    /// into it.
+    pub fn for_scene(scene: &Scene, info: &crate::terrain::TerrainInfo) -> Self {
+        let defaults = RenderSettings::default();
+        RenderSettings {
+            lod: scene.distance_lod(info),
+            lod_metric: scene
+                .pixel_error
+                .map_or(LodMetric::Distance, LodMetric::Error),
+            lighting: scene.lighting,
+            fog: scene.fog,
+            clear_color: scene
+                .fog
+                .map_or(defaults.clear_color, |f| f.color.to_array()),
+            ..defaults
+        }
+    }
+}
+
+/// What this device cannot measure or filter for `appearance`: notes for
+/// the user, beside those of `with_fallback`.
+pub fn measurement_notes(
+    caps: &crate::vk::Capabilities,
+    appearance: &crate::material::Appearance,
+) -> Vec<String> {
+    let mut notes = Vec::new();
+    let name = &caps.device_name;
+    if !caps.pipeline_statistics_query {
+        notes.push(format!(
+            "{name}: pipelineStatisticsQuery is unavailable, so triangle counts are not measured"
+        ));
+    }
+    if caps.timestamp_period_ns.is_none() {
+        notes.push(format!(
+            "{name}: timestamp queries are unavailable, so GPU time is not measured"
+        ));
+    }
+    let with_feature = crate::vk::Capabilities {
+        sampler_anisotropy: true,
+        ..caps.clone()
+    };
+    let asked = appearance.material.as_ref().map(|m| m.anisotropy);
+    if let Some(asked) = asked {
+        if !caps.sampler_anisotropy
+            && super::material::anisotropy_for(asked, &with_feature).is_some()
+        {
+            notes.push(format!(
+                "{name}: samplerAnisotropy is unavailable, so textures are filtered without anisotropy"
+            ));
+        }
+    }
+    notes
+}
