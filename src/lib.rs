@@ -10,7 +10,8 @@
 //! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
 //!   table, height queries, frustum and LOD maths). No GPU types.
-//! - [`shader_constants`]: constants shared with GLSL.
+//! - [`shader_constants`], [`shader_variants`]: constants and shader
+//!   variants shared with build.rs and GLSL.
 //!
 //! `unsafe` is denied everywhere but in [`vk`], by the lint below.
 
@@ -25,6 +26,8 @@ pub mod render;
 pub mod scene;
 /// Constants shared with GLSL, passed to the shader compiler by build.rs.
 pub mod shader_constants;
+/// The shader variants build.rs compiles and the renderer picks, typed.
+pub mod shader_variants;
 pub mod terrain;
 #[allow(unsafe_code)]
 pub mod vk;

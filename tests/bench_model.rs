@@ -8,7 +8,7 @@ use glam::DVec2;
 use vkterrain::bench::cameras::{flythrough, named_views};
 use vkterrain::bench::error::{ErrorHistogram, PixelError};
 use vkterrain::bench::report::{check_targets, csv, markdown, merge};
-use vkterrain::bench::run::{configs, Config, Row, QUICK_TAUS, TAUS};
+use vkterrain::bench::run::{configs, Config, Row, RowLod, RowPath, QUICK_TAUS, TAUS};
 use vkterrain::terrain::{DistanceLod, TerrainInfo};
 
 fn terrains() -> Vec<(&'static str, TerrainInfo)> {
@@ -126,13 +126,17 @@ fn configurations_cover_every_path_and_tolerance() {
     assert_eq!(full[0], Config::Brute);
     let count = |f: &dyn Fn(&Config) -> bool| full.iter().filter(|c| f(c)).count();
     assert_eq!(count(&|c| matches!(c, Config::TessDistance(_))), 8);
-    for (path, lod_name) in [("tess", "error"), ("geomip", "error"), ("oracle", "")] {
+    for (path, lod) in [
+        (RowPath::Tess, Some(RowLod::Error)),
+        (RowPath::Geomip, Some(RowLod::Error)),
+        (RowPath::Oracle, None),
+    ] {
         let taus: Vec<f32> = full
             .iter()
-            .filter(|c| c.path() == path && c.lod().unwrap_or("") == lod_name)
+            .filter(|c| c.path() == path && c.lod() == lod)
             .filter_map(|c| c.tau())
             .collect();
-        assert_eq!(taus, TAUS, "{path} {lod_name}");
+        assert_eq!(taus, TAUS, "{path:?} {lod:?}");
     }
     assert_eq!(count(&|c| matches!(c, Config::GeomipDistance(_))), 4);
     // The distance sweep spans the scene's distances from 1/4 to 8 times.
@@ -154,7 +158,7 @@ fn configurations_cover_every_path_and_tolerance() {
         .all(|t| QUICK_TAUS.contains(&t)));
     // Without tessellation there are no tess rows, the rest remains.
     let fallback = configs(lod, false, false);
-    assert!(fallback.iter().all(|c| c.path() != "tess"));
+    assert!(fallback.iter().all(|c| c.path() != RowPath::Tess));
     assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3);
     // The peers' policies, each once, in the quick run too.
     for run in [&full, &quick] {
@@ -163,7 +167,7 @@ fn configurations_cover_every_path_and_tolerance() {
             .filter(|c| matches!(c, Config::TessPeer(_)))
             .filter_map(|c| c.lod())
             .collect();
-        assert_eq!(peers, ["sphere", "edge-length", "cdlod"]);
+        assert_eq!(peers, [RowLod::Sphere, RowLod::EdgeLength, RowLod::Cdlod]);
     }
     // Labels name the parameters, and differ.
     let labels: std::collections::BTreeSet<String> = full.iter().map(Config::label).collect();
@@ -226,8 +230,9 @@ fn row(
         height: 32,
         camera: camera.into(),
         frames: 1,
-        path: path.into(),
-        lod: lod.map(Into::into),
+        // By name, as results.json spells them.
+        path: serde_json::from_str(&format!("{path:?}")).unwrap(),
+        lod: lod.map(|l| serde_json::from_str(&format!("{l:?}")).unwrap()),
         tau,
         config: format!("{path} {lod:?} {tau:?}, {tris}"),
         gpu_ms: Some(gpu),

@@ -7,7 +7,7 @@ use common::gpu::skip_gpu;
 use common::vkterrain_in as vkterrain;
 use common::*;
 use glam::DVec2;
-use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row};
+use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath};
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
 use vkterrain::vk::Gpu;
 
@@ -22,9 +22,9 @@ impl Progress for Count {
     }
 }
 
-fn rows_of<'a>(rows: &'a [Row], camera: &str, path: &str, lod: Option<&str>) -> Vec<&'a Row> {
+fn rows_of<'a>(rows: &'a [Row], camera: &str, path: RowPath, lod: Option<RowLod>) -> Vec<&'a Row> {
     rows.iter()
-        .filter(|r| r.camera == camera && r.path == path && r.lod.as_deref() == lod)
+        .filter(|r| r.camera == camera && r.path == path && r.lod == lod)
         .collect()
 }
 
@@ -67,7 +67,7 @@ fn a_quick_run_measures_every_configuration() {
     // One view and the flythrough, every configuration in each.
     assert_eq!(rows.len(), 2 * configs.len());
     for camera in ["grazing", "flythrough"] {
-        let brute = rows_of(&rows, camera, "brute", None)[0];
+        let brute = rows_of(&rows, camera, RowPath::Brute, None)[0];
         assert_eq!(
             (brute.max_px, brute.p99_px, brute.mismatched_pixels),
             (0.0, 0.0, 0)
@@ -92,19 +92,19 @@ fn a_quick_run_measures_every_configuration() {
             // Only the tess path tessellates; its error LOD may draw every
             // patch at full resolution instead.
             let tessellates = r.tes_invocations.unwrap() > 0;
-            if r.path != "tess" || r.lod.as_deref() == Some("distance") {
-                assert_eq!(tessellates, r.path == "tess", "{}", r.config);
+            if r.path != RowPath::Tess || r.lod == Some(RowLod::Distance) {
+                assert_eq!(tessellates, r.path == RowPath::Tess, "{}", r.config);
             }
             // The error LOD says what it expects; nothing else does.
             assert_eq!(
                 r.predicted_max_px.is_some(),
-                r.lod.as_deref() == Some("error"),
+                r.lod == Some(RowLod::Error),
                 "{}",
                 r.config
             );
             if let (Some(predicted), Some(tau)) = (r.predicted_max_px, r.tau) {
                 assert!(
-                    predicted <= f64::from(tau) + 1e-6 || r.path == "geomip",
+                    predicted <= f64::from(tau) + 1e-6 || r.path == RowPath::Geomip,
                     "{}: predicted {predicted} px over tau",
                     r.config
                 );
@@ -112,9 +112,9 @@ fn a_quick_run_measures_every_configuration() {
         }
         // Looser tolerances draw no more; the oracle draws no more than brute.
         for (path, lod) in [
-            ("tess", Some("error")),
-            ("geomip", Some("error")),
-            ("oracle", None),
+            (RowPath::Tess, Some(RowLod::Error)),
+            (RowPath::Geomip, Some(RowLod::Error)),
+            (RowPath::Oracle, None),
         ] {
             let tris: Vec<u64> = rows_of(&rows, camera, path, lod)
                 .iter()
@@ -123,10 +123,10 @@ fn a_quick_run_measures_every_configuration() {
             assert_eq!(tris.len(), 3);
             assert!(
                 tris.windows(2).all(|w| w[0] >= w[1]),
-                "{camera} {path}: {tris:?}"
+                "{camera} {path:?}: {tris:?}"
             );
         }
-        for r in rows_of(&rows, camera, "oracle", None) {
+        for r in rows_of(&rows, camera, RowPath::Oracle, None) {
             assert!(r.triangles.unwrap() <= brute_tris, "{}", r.config);
         }
     }

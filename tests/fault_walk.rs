@@ -143,29 +143,34 @@ fn render_fails_cleanly_at_every_point() {
     walk_both(&walk, 8, 16);
 }
 
+/// `command` on a small generated map at 32x18 pixels, with `extra`
+/// arguments; the map's folder lives as long as the walk.
+fn on_small_map(command: &str, extra: &[&str]) -> (tempfile::TempDir, Walk) {
+    let maps = tempfile::tempdir().unwrap();
+    let map = small_map(&maps).to_str().unwrap().to_string();
+    let mut list = vec![
+        command,
+        "--heightmap",
+        &map,
+        "--width",
+        "32",
+        "--height",
+        "18",
+    ];
+    list.extend_from_slice(extra);
+    let walk = Walk {
+        args: args(&list),
+        window: false,
+    };
+    (maps, walk)
+}
+
 #[test]
 fn bench_fails_cleanly_at_every_point() {
     if skip_gpu() {
         return;
     }
-    let maps = tempfile::tempdir().unwrap();
-    let map = small_map(&maps);
-    let walk = Walk {
-        args: args(&[
-            "bench",
-            "--heightmap",
-            map.to_str().unwrap(),
-            "--quick",
-            "--single-frame",
-            "--width",
-            "32",
-            "--height",
-            "18",
-            "--out",
-            "results",
-        ]),
-        window: false,
-    };
+    let (_maps, walk) = on_small_map("bench", &["--quick", "--single-frame", "--out", "results"]);
     // Three renderers and the target, then every render of every view.
     walk_both(&walk, 20, 16);
 }
@@ -175,26 +180,17 @@ fn soak_fails_cleanly_at_every_point() {
     if skip_gpu() {
         return;
     }
-    let maps = tempfile::tempdir().unwrap();
-    let map = small_map(&maps);
-    let walk = Walk {
-        args: args(&[
-            "soak",
-            "--heightmap",
-            map.to_str().unwrap(),
+    let (_maps, walk) = on_small_map(
+        "soak",
+        &[
             "--frames",
             "3",
             "--loop-frames",
             "3",
-            "--width",
-            "32",
-            "--height",
-            "18",
             "--report",
             "soak.json",
-        ]),
-        window: false,
-    };
+        ],
+    );
     walk_both(&walk, 6, 12);
 }
 
@@ -212,22 +208,7 @@ fn info_and_the_window_fail_cleanly_at_every_point() {
     walk_both(&info, 0, 0);
     // The window's setup (surface, swapchain, renderer, frames) and two
     // frames.
-    let maps = tempfile::tempdir().unwrap();
-    let map = small_map(&maps);
-    let demo = Walk {
-        args: args(&[
-            "demo",
-            "--heightmap",
-            map.to_str().unwrap(),
-            "--frames",
-            "2",
-            "--exit",
-            "--width",
-            "64",
-            "--height",
-            "48",
-        ]),
-        window: true,
-    };
+    let (_maps, mut demo) = on_small_map("demo", &["--frames", "2", "--exit"]);
+    demo.window = true;
     walk_both(&demo, 6, 12);
 }

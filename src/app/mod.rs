@@ -327,6 +327,18 @@ impl Graphics {
     }
 }
 
+impl Graphics {
+    /// Drops every object in field order, then the device, and reports
+    /// validation counted after its destruction.
+    fn shutdown(self) -> ValidationReport {
+        let gpu = Gpu {
+            device: self.gpu.device.clone(),
+        };
+        drop(self);
+        gpu.shutdown()
+    }
+}
+
 /// The paths a device can draw, in the order F6 cycles through them.
 fn paths(caps: &crate::vk::Capabilities) -> Vec<RenderPath> {
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
@@ -753,25 +765,7 @@ impl Running {
             graphics, stats, ..
         } = self;
         let device = graphics.gpu.device.caps.device_name.clone();
-        let Graphics {
-            commands,
-            image_available,
-            screenshot_buffer,
-            renderer,
-            swapchain,
-            surface,
-            gpu,
-        } = graphics;
-        // In this order (a tuple drops front to back), before the device.
-        drop((
-            commands,
-            image_available,
-            screenshot_buffer,
-            renderer,
-            swapchain,
-            surface,
-        ));
-        let validation = gpu.shutdown();
+        let validation = graphics.shutdown();
         DemoSummary {
             frames: stats.frame,
             seconds: stats.started.elapsed().as_secs_f64(),

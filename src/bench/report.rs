@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 
-use super::run::{Row, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
+use super::run::{Row, RowLod, RowPath, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
 use crate::output::write_atomically;
 
 /// Tolerances at which tess error mode's p99 must be within tau.
@@ -84,8 +84,8 @@ pub fn csv(rows: &[Row]) -> String {
             r.height.to_string(),
             csv_field(&r.camera),
             r.frames.to_string(),
-            r.path.clone(),
-            opt(r.lod.as_deref()),
+            r.path.name().to_string(),
+            opt(r.lod.map(RowLod::name)),
             opt(r.tau),
             csv_field(&r.config),
             opt(r.gpu_ms.map(|v| format!("{v:.3}"))),
@@ -208,13 +208,13 @@ pub struct TargetCheck {
 
 /// The targets, read from the rows of one scene, device and camera.
 pub fn check_targets(rows: &[&Row]) -> TargetCheck {
-    let find = |path: &str, tau: f32| {
+    let find = |path: RowPath, tau: f32| {
         rows.iter()
-            .find(|r| r.path == path && r.lod.as_deref() == Some("error") && r.tau == Some(tau))
+            .find(|r| r.path == path && r.lod == Some(RowLod::Error) && r.tau == Some(tau))
             .copied()
     };
-    let brute = rows.iter().find(|r| r.path == "brute").copied();
-    let (tess, geomip) = (find("tess", 1.0), find("geomip", 1.0));
+    let brute = rows.iter().find(|r| r.path == RowPath::Brute).copied();
+    let (tess, geomip) = (find(RowPath::Tess, 1.0), find(RowPath::Geomip, 1.0));
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
@@ -225,7 +225,7 @@ pub fn check_targets(rows: &[&Row]) -> TargetCheck {
         .filter(|r| r.p99_px <= 1.0 && r.triangles.is_some())
         .min_by_key(|r| r.triangles);
     TargetCheck {
-        tess_p99: TARGET_TAUS.map(|t| find("tess", t).map(|r| r.p99_px)),
+        tess_p99: TARGET_TAUS.map(|t| find(RowPath::Tess, t).map(|r| r.p99_px)),
         tess_vs_brute_triangles: ratio(tris(tess), tris(brute)),
         brute_vs_tess_triangles: ratio(tris(brute), tris(tess)),
         brute_vs_tess_gpu: ratio(brute.and_then(|b| b.gpu_ms), tess.and_then(|e| e.gpu_ms)),
@@ -279,7 +279,17 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         "\n![GPU time and triangles against p99 error]({pareto_link})\n"
     );
     let _ = writeln!(w, "{}", definitions());
+    targets_section(w, rows);
+    predicted_section(w, rows);
+    if !notes.trim().is_empty() {
+        let _ = writeln!(w, "{}\n", notes.trim());
+    }
+    results_section(w, rows);
+    md
+}
 
+/// The target table: each target read off the rows, met or missed.
+fn targets_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w, "## Targets\n");
     let _ = writeln!(
         w,
@@ -322,6 +332,10 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         );
     }
     let _ = writeln!(w);
+}
+
+/// Each error mode's predicted largest error beside the measured ones.
+fn predicted_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w, "## Predicted against measured error\n");
     let _ = writeln!(
         w,
@@ -334,10 +348,10 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
     );
     let _ = writeln!(w, "|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
-        let cell = |path: &str| {
+        let cell = |path: RowPath| {
             group
                 .iter()
-                .find(|r| r.path == path && r.lod.as_deref() == Some("error") && r.tau == Some(1.0))
+                .find(|r| r.path == path && r.lod == Some(RowLod::Error) && r.tau == Some(1.0))
                 .map_or("n/a".to_string(), |r| {
                     format!(
                         "{} / {:.2} / {:.3}",
@@ -351,15 +365,15 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         let _ = writeln!(
             w,
             "| {scene} | {device} | {camera} | {} | {} |",
-            cell("tess"),
-            cell("geomip")
+            cell(RowPath::Tess),
+            cell(RowPath::Geomip)
         );
     }
     let _ = writeln!(w);
-    if !notes.trim().is_empty() {
-        let _ = writeln!(w, "{}\n", notes.trim());
-    }
+}
 
+/// Every row, one table per scene, device and camera.
+fn results_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w, "## Results\n");
     for ((scene, device, camera), group) in groups(rows) {
         let first = group[0];
@@ -396,7 +410,6 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         }
         let _ = writeln!(w);
     }
-    md
 }
 
 fn definitions() -> String {
@@ -464,48 +477,50 @@ fn plotted<'a>(rows: &'a [Row], scene: &str, device: &str) -> Vec<&'a Row> {
 }
 
 fn series(rows: &[&Row], value: impl Fn(&Row) -> Option<f64>) -> Vec<Series> {
-    let families: [(&str, &str, Option<&str>, RGBColor); 9] = [
-        ("brute", "brute", None, RGBColor(0, 0, 0)),
+    use RowLod as L;
+    use RowPath as P;
+    let families: [(&str, RowPath, Option<RowLod>, RGBColor); 9] = [
+        ("brute", P::Brute, None, RGBColor(0, 0, 0)),
         (
             "SaschaWillems sphere",
-            "tess",
-            Some("sphere"),
+            P::Tess,
+            Some(L::Sphere),
             RGBColor(140, 86, 75),
         ),
         (
             "Dupuy edge length",
-            "tess",
-            Some("edge-length"),
+            P::Tess,
+            Some(L::EdgeLength),
             RGBColor(227, 119, 194),
         ),
-        ("CDLOD", "tess", Some("cdlod"), RGBColor(127, 127, 127)),
+        ("CDLOD", P::Tess, Some(L::Cdlod), RGBColor(127, 127, 127)),
         (
             "tess distance",
-            "tess",
-            Some("distance"),
+            P::Tess,
+            Some(L::Distance),
             RGBColor(31, 119, 180),
         ),
-        ("tess error", "tess", Some("error"), RGBColor(214, 39, 40)),
+        ("tess error", P::Tess, Some(L::Error), RGBColor(214, 39, 40)),
         (
             "geomip distance",
-            "geomip",
-            Some("distance"),
+            P::Geomip,
+            Some(L::Distance),
             RGBColor(44, 160, 44),
         ),
         (
             "geomip error",
-            "geomip",
-            Some("error"),
+            P::Geomip,
+            Some(L::Error),
             RGBColor(255, 127, 14),
         ),
-        ("oracle", "oracle", None, RGBColor(148, 103, 189)),
+        ("oracle", P::Oracle, None, RGBColor(148, 103, 189)),
     ];
     families
         .iter()
         .map(|&(name, path, lod, colour)| {
             let mut points: Vec<(f64, f64)> = rows
                 .iter()
-                .filter(|r| r.path == path && r.lod.as_deref() == lod)
+                .filter(|r| r.path == path && r.lod == lod)
                 .filter_map(|r| Some((r.p99_px.max(PLOT_MIN_P99), value(r)?)))
                 .filter(|p| p.1 > 0.0)
                 .collect();

@@ -50,22 +50,70 @@ pub enum Config {
     Oracle(f32),
 }
 
-impl Config {
-    pub fn path(&self) -> &'static str {
+/// How a row was drawn: a render path, or the oracle (geomip levels from
+/// measured error).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum RowPath {
+    Brute,
+    Tess,
+    Geomip,
+    Oracle,
+}
+
+/// How a row chose levels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RowLod {
+    Distance,
+    Error,
+    /// A peer's policy, by `PeerPolicy::name`.
+    Sphere,
+    EdgeLength,
+    Cdlod,
+}
+
+impl RowPath {
+    pub fn name(self) -> &'static str {
         match self {
-            Config::Brute => "brute",
-            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => "tess",
-            Config::GeomipDistance(_) | Config::GeomipError(_) => "geomip",
-            Config::Oracle(_) => "oracle",
+            RowPath::Brute => "brute",
+            RowPath::Tess => "tess",
+            RowPath::Geomip => "geomip",
+            RowPath::Oracle => "oracle",
+        }
+    }
+}
+
+impl RowLod {
+    pub fn name(self) -> &'static str {
+        match self {
+            RowLod::Distance => "distance",
+            RowLod::Error => "error",
+            RowLod::Sphere => PeerPolicy::Sphere.name(),
+            RowLod::EdgeLength => PeerPolicy::EdgeLength.name(),
+            RowLod::Cdlod => PeerPolicy::Cdlod.name(),
+        }
+    }
+}
+
+impl Config {
+    pub fn path(&self) -> RowPath {
+        match self {
+            Config::Brute => RowPath::Brute,
+            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => RowPath::Tess,
+            Config::GeomipDistance(_) | Config::GeomipError(_) => RowPath::Geomip,
+            Config::Oracle(_) => RowPath::Oracle,
         }
     }
 
-    pub fn lod(&self) -> Option<&'static str> {
+    pub fn lod(&self) -> Option<RowLod> {
         match self {
             Config::Brute | Config::Oracle(_) => None,
-            Config::TessDistance(_) | Config::GeomipDistance(_) => Some("distance"),
-            Config::TessError(_) | Config::GeomipError(_) => Some("error"),
-            Config::TessPeer(policy) => Some(policy.name()),
+            Config::TessDistance(_) | Config::GeomipDistance(_) => Some(RowLod::Distance),
+            Config::TessError(_) | Config::GeomipError(_) => Some(RowLod::Error),
+            Config::TessPeer(PeerPolicy::Sphere) => Some(RowLod::Sphere),
+            Config::TessPeer(PeerPolicy::EdgeLength) => Some(RowLod::EdgeLength),
+            Config::TessPeer(PeerPolicy::Cdlod) => Some(RowLod::Cdlod),
         }
     }
 
@@ -215,10 +263,9 @@ pub struct Row {
     pub camera: String,
     /// Frames the error is measured over (the flythrough's length, or 1).
     pub frames: usize,
-    /// brute, tess, geomip or oracle.
-    pub path: String,
-    /// distance, error, or null.
-    pub lod: Option<String>,
+    pub path: RowPath,
+    /// How levels were chosen; null for brute and the oracle.
+    pub lod: Option<RowLod>,
     pub tau: Option<f32>,
     pub config: String,
     /// Median GPU time of the timed frames; null without timestamps.
@@ -603,8 +650,8 @@ impl<'a> Bench<'a> {
                     height: options.height,
                     camera: name.clone(),
                     frames: cameras.len(),
-                    path: config.path().into(),
-                    lod: config.lod().map(Into::into),
+                    path: config.path(),
+                    lod: config.lod(),
                     tau: config.tau(),
                     config: config.label(),
                     gpu_ms: median(&mut g.gpu_ms),

@@ -149,49 +149,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
     // objects count.
     let ((rows, device_name, options), validation) =
         cmd.features.with_gpu(cmd.validate, |gpu| {
-            let tessellation = gpu.device.caps.tessellation_shader;
-            if !tessellation {
-                writeln!(
-                    out,
-                    "{}: tessellationShader is unavailable, so the tess rows are left out",
-                    gpu.device.caps.device_name
-                )?;
-            }
-            let scene_lod = scene.distance_lod(terrain.info());
-            let configs = configs(scene_lod, cmd.quick, tessellation);
-            let options = BenchOptions {
-                width: cmd.size.width,
-                height: cmd.size.height,
-                quick: cmd.quick,
-                flythrough_frames: if cmd.quick || cmd.single_frame {
-                    0
-                } else {
-                    cmd.frames
-                },
-                single_frame: cmd.single_frame,
-            };
-            let bar = ProgressBar::new(0).with_style(
-                ProgressStyle::with_template(
-                    "{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}",
-                )
-                .expect("a valid template")
-                .progress_chars("=> "),
-            );
-            let mut progress = Bar {
-                bar,
-                last_logged: 0,
-            };
-            let mut bench = Bench::new(
-                gpu,
-                &terrain,
-                scene_lod,
-                &configs,
-                options.width,
-                options.height,
-            )?;
-            let rows = bench.run(&name, &configs, &options, &mut progress);
-            progress.bar.finish_and_clear();
-            Ok((rows?, gpu.device.caps.device_name.clone(), options))
+            measure(gpu, &cmd, &scene, &terrain, &name, out)
         })?;
     let all = report::merge(&cmd.out, rows.clone())?;
     report::write_all(&cmd.out, &all, &notes, cmd.publish.as_deref())?;
@@ -238,4 +196,58 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             .map_or(String::new(), |p| format!(", and {}", p.display()))
     )?;
     Ok(())
+}
+
+/// Every configuration of `cmd` on every view of the terrain, on `gpu`.
+/// Returns the rows, the device's name and the options they were taken
+/// with.
+fn measure(
+    gpu: &crate::vk::Gpu,
+    cmd: &BenchCmd,
+    scene: &crate::scene::Scene,
+    terrain: &Terrain,
+    name: &str,
+    out: &mut dyn Write,
+) -> Result<(Vec<crate::bench::run::Row>, String, BenchOptions)> {
+    let tessellation = gpu.device.caps.tessellation_shader;
+    if !tessellation {
+        writeln!(
+            out,
+            "{}: tessellationShader is unavailable, so the tess rows are left out",
+            gpu.device.caps.device_name
+        )?;
+    }
+    let scene_lod = scene.distance_lod(terrain.info());
+    let configs = configs(scene_lod, cmd.quick, tessellation);
+    let options = BenchOptions {
+        width: cmd.size.width,
+        height: cmd.size.height,
+        quick: cmd.quick,
+        flythrough_frames: if cmd.quick || cmd.single_frame {
+            0
+        } else {
+            cmd.frames
+        },
+        single_frame: cmd.single_frame,
+    };
+    let bar = ProgressBar::new(0).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let mut progress = Bar {
+        bar,
+        last_logged: 0,
+    };
+    let mut bench = Bench::new(
+        gpu,
+        terrain,
+        scene_lod,
+        &configs,
+        options.width,
+        options.height,
+    )?;
+    let rows = bench.run(name, &configs, &options, &mut progress);
+    progress.bar.finish_and_clear();
+    Ok((rows?, gpu.device.caps.device_name.clone(), options))
 }

@@ -10,14 +10,14 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::args::{
-    parse_color, parse_dvec3, parse_fov, parse_range, FeatureArgs, SizeArgs, TerrainArgs,
+    parse_color, parse_dvec3, parse_fov, parse_range, with_gpu, FeatureArgs, SizeArgs, TerrainArgs,
 };
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
 use crate::render::settings::measurement_notes;
 use crate::render::{
-    with_fallback, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
-    Shading, TerrainRenderer,
+    offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
+    RendererOptions, Shading,
 };
 use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
@@ -25,7 +25,6 @@ use crate::terrain::generate::{generate as generate_heightmap, write_png16, Gene
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::lod::PeerPolicy;
 use crate::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
-use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::Capabilities;
 
 /// Which way the terrain is drawn.
@@ -370,48 +369,41 @@ pub struct RenderOutput {
 /// for its terrain: builds the GPU objects, draws, reads back, and tears
 /// everything down again, counting validation messages after the device
 /// is destroyed (any fails the render).
+///
+/// `view` gives the camera and settings for the loaded terrain; the GPU is
+/// opened with `gpu`.
 pub fn render_scene(
     scene: &Scene,
-    view: &ViewArgs,
-    width: u32,
-    height: u32,
-    validate: bool,
-    features: &FeatureArgs,
+    view: impl FnOnce(&TerrainInfo) -> Result<(Camera, RenderSettings)>,
+    (width, height): (u32, u32),
+    gpu: &crate::vk::GpuOptions,
 ) -> Result<RenderOutput> {
     let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
     let started = std::time::Instant::now();
     let info = scene.terrain_info()?;
     let load_ms = ms(started);
-    let camera = view.camera_override().apply(scene.camera_for(&info))?;
-    let settings = view.settings(scene, &info);
+    let (camera, settings) = view(&info)?;
     let started = std::time::Instant::now();
     let appearance = Appearance::load(scene, &info)?;
     let material_ms = ms(started);
     let started = std::time::Instant::now();
     let terrain = Terrain::new(info, appearance.y_margin())?;
     let bounds_ms = ms(started);
-    let ((frame, mut stats, notes), validation) = features.with_gpu(validate, |gpu| {
+    let ((frame, mut stats, notes), validation) = with_gpu(gpu, |gpu| {
         let mut notes = Vec::new();
         let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
         let caps = &gpu.device.caps;
         notes.extend(measurement_notes(caps, &appearance));
         let started = std::time::Instant::now();
-        let mut renderer = TerrainRenderer::with_appearance(
-            gpu,
-            &terrain,
-            &appearance,
-            OFFSCREEN_COLOR_FORMAT,
-            1,
-            &RendererOptions {
-                paths: vec![settings.path],
-                wireframe: settings.wireframe,
-            },
-        )
-        .context("preparing the terrain for the GPU")?;
+        let options = RendererOptions {
+            paths: vec![settings.path],
+            wireframe: settings.wireframe,
+        };
+        let (mut renderer, mut headless) =
+            offscreen(gpu, &terrain, &appearance, &options, (width, height))
+                .context("preparing the terrain for the GPU")?;
         let error_table_ms = renderer.error_table_ms();
         let gpu_setup_ms = ms(started) - error_table_ms;
-        let mut headless =
-            Headless::new(gpu, width, height).context("creating the offscreen target")?;
         let frame = headless
             .render(&mut renderer, &terrain, &camera, settings)
             .context("rendering")?;
@@ -466,13 +458,15 @@ pub fn render_scene(
 pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
+    let view = &cmd.view;
     let output = render_scene(
         &scene,
-        &cmd.view,
-        cmd.size.width,
-        cmd.size.height,
-        cmd.validate,
-        &cmd.view.features,
+        |info| {
+            let camera = view.camera_override().apply(scene.camera_for(info))?;
+            Ok((camera, view.settings(&scene, info)))
+        },
+        (cmd.size.width, cmd.size.height),
+        &view.features.gpu_options(cmd.validate),
     )?;
     for note in &output.notes {
         writeln!(out, "{note}")?;

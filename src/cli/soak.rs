@@ -10,11 +10,9 @@ use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::flythrough;
 use crate::material::Appearance;
 use crate::render::{
-    with_fallback, Headless, LodMetric, RenderPath, RenderSettings, RendererOptions,
-    TerrainRenderer,
+    offscreen, with_fallback, LodMetric, RenderPath, RenderSettings, RendererOptions,
 };
 use crate::terrain::Terrain;
-use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 
 fn parse_soak_frames(s: &str) -> Result<u64, String> {
     let n: u64 = s
@@ -133,20 +131,18 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
         for note in notes {
             writeln!(out, "{note}")?;
         }
-        let mut renderer = TerrainRenderer::with_appearance(
+        let options = RendererOptions {
+            paths: paths.clone(),
+            wireframe: false,
+        };
+        let (mut renderer, mut headless) = offscreen(
             gpu,
             &terrain,
             &appearance,
-            OFFSCREEN_COLOR_FORMAT,
-            1,
-            &RendererOptions {
-                paths: paths.clone(),
-                wireframe: false,
-            },
+            &options,
+            (cmd.size.width, cmd.size.height),
         )
         .context("preparing the terrain for the GPU")?;
-        let mut headless = Headless::new(gpu, cmd.size.width, cmd.size.height)
-            .context("creating the offscreen target")?;
         let mut baseline = (0, 0);
         for i in 0..cmd.frames {
             let camera = &cameras[(i % cameras.len() as u64) as usize];

@@ -3,13 +3,14 @@
 
 use std::time::Instant;
 
-use super::renderer::{FrameMeasurements, TerrainRenderer};
+use super::renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 use super::settings::RenderSettings;
 use super::view::FrameView;
+use crate::material::Appearance;
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
 use crate::vk::commands::CommandSlots;
-use crate::vk::target::{OffscreenTarget, Readback};
+use crate::vk::target::{OffscreenTarget, Readback, OFFSCREEN_COLOR_FORMAT};
 use crate::vk::{Device, Gpu, Result};
 
 /// One rendered frame.
@@ -32,6 +33,26 @@ impl HeadlessFrame {
         )
         .expect("readback holds width * height RGBA pixels")
     }
+}
+
+/// A renderer of `options` for offscreen targets, and a `width` x `height`
+/// target to draw into: what one-shot renders, the soak and the tests use.
+pub fn offscreen(
+    gpu: &Gpu,
+    terrain: &Terrain,
+    appearance: &Appearance,
+    options: &RendererOptions,
+    (width, height): (u32, u32),
+) -> Result<(TerrainRenderer, Headless)> {
+    let renderer = TerrainRenderer::with_appearance(
+        gpu,
+        terrain,
+        appearance,
+        OFFSCREEN_COLOR_FORMAT,
+        1,
+        options,
+    )?;
+    Ok((renderer, Headless::new(gpu, width, height)?))
 }
 
 /// An offscreen target and the command buffer that draws into it. Dropping

@@ -13,6 +13,7 @@ use crate::shader_constants::{
     BINDING_BLEND_MAPS, BINDING_DIFFUSE_MAPS, BINDING_HEIGHT_MAPS, BINDING_LIGHTMAP,
     BINDING_MATERIAL, BINDING_NORMAL_MAPS, MAX_LAYERS, SPEC_BLEND_MAP_COUNT, SPEC_LAYER_COUNT,
 };
+use crate::shader_variants::{Placing, Shading};
 use crate::terrain::TerrainInfo;
 use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::{Buffer, Image, TexelUpload};
@@ -117,31 +118,28 @@ impl ShaderVariant {
     }
 
     /// Macros of the fragment stage.
-    pub fn fragment_defines(&self) -> Vec<&'static str> {
-        let mut d = Vec::new();
-        for (on, name) in [
-            (self.material, "MATERIAL"),
-            (self.normal_maps, "NORMAL_MAPS"),
-            (self.blend_maps, "BLEND_MAPS"),
-            (self.lightmap, "LIGHTMAP"),
-        ] {
-            if on {
-                d.push(name);
+    /// The fragment shader's features.
+    pub fn shading(&self) -> Shading {
+        if self.material {
+            Shading::Material {
+                normal_maps: self.normal_maps,
+                blend_maps: self.blend_maps,
+                lightmap: self.lightmap,
+            }
+        } else {
+            Shading::Heights {
+                lightmap: self.lightmap,
             }
         }
-        d
     }
 
-    /// Macros of the stage that places vertices (vertex or evaluation).
-    pub fn vertex_defines(&self) -> Vec<&'static str> {
-        if !self.displace {
-            return Vec::new();
+    /// How the vertex-placing stages displace.
+    pub fn placing(&self) -> Placing {
+        match (self.displace, self.blend_maps) {
+            (false, _) => Placing::Plain,
+            (true, false) => Placing::Displaced,
+            (true, true) => Placing::DisplacedByBlendMaps,
         }
-        let mut d = vec!["MATERIAL", "DISPLACE"];
-        if self.blend_maps {
-            d.push("BLEND_MAPS");
-        }
-        d
     }
 
     /// Values of constant ids 0.. (SPEC_LAYER_COUNT, SPEC_BLEND_MAP_COUNT).

@@ -71,28 +71,11 @@ pub fn run_mirror_check(
     }
     let device = &gpu.device;
     let info = terrain.info();
-    let inputs: Vec<[f32; 4]> = cases
-        .iter()
-        .flat_map(|c| {
-            let e = c.errors;
-            [
-                c.position.extend(0.0).to_array(),
-                c.extents.extend(0.0).to_array(),
-                c.grid.extend(c.cells as f32).extend(0.0).to_array(),
-                [e[0], e[1], e[2], e[3]],
-                [e[4], e[5], e[6], 0.0],
-            ]
-        })
-        .collect();
+    let inputs = pack_cases(cases);
     let uniforms = FrameUniforms::new(terrain, view, settings);
     let results_size = (cases.len() * 3 * size_of::<[f32; 4]>()) as u64;
 
-    let heightmap = device.upload_r32f_image(
-        "mirror.heightmap",
-        info.cols() as u32,
-        info.rows() as u32,
-        info.heightmap().heights(),
-    )?;
+    let heightmap = super::renderer::upload_heightmap(device, info, "mirror.heightmap")?;
     let sampler = device.create_nearest_sampler("mirror.sampler")?;
     let frame = device.create_host_buffer(
         "mirror.frame",
@@ -146,14 +129,7 @@ pub fn run_mirror_check(
         "mirror.set",
     )?;
     let set = sets.get(0);
-    device.write_buffer(
-        set,
-        BINDING_FRAME,
-        vk::DescriptorType::UNIFORM_BUFFER,
-        &frame,
-        size_of::<FrameUniforms>() as u64,
-    );
-    device.write_sampled_image(set, BINDING_HEIGHTMAP, &heightmap, &sampler);
+    super::renderer::write_frame_bindings(device, set, &frame, &heightmap, &sampler);
     device.write_buffer(
         set,
         BINDING_MIRROR_CASES,
@@ -168,8 +144,11 @@ pub fn run_mirror_check(
         &output,
         results_size,
     );
-    let pipeline =
-        device.create_compute_pipeline(shaders::mirror_check_comp(), &layout, "mirror.pipeline")?;
+    let pipeline = device.create_compute_pipeline(
+        shaders::spirv(crate::shader_variants::Shader::MirrorCheckComp),
+        &layout,
+        "mirror.pipeline",
+    )?;
     let groups = (cases.len() as u32).div_ceil(LOCAL_SIZE);
     device.one_shot("mirror.commands", |rec| {
         rec.dispatch_for_host(&pipeline, &layout, set, groups);
@@ -177,8 +156,29 @@ pub fn run_mirror_check(
     let bytes = output
         .mapped()
         .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
-    let values: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(bytes);
-    Ok(values
+    Ok(unpack_results(&bytemuck::pod_collect_to_vec(bytes)))
+}
+
+/// Five vec4s a case, as glsl/mirror_check.comp reads them.
+fn pack_cases(cases: &[MirrorCase]) -> Vec<[f32; 4]> {
+    cases
+        .iter()
+        .flat_map(|c| {
+            let e = c.errors;
+            [
+                c.position.extend(0.0).to_array(),
+                c.extents.extend(0.0).to_array(),
+                c.grid.extend(c.cells as f32).extend(0.0).to_array(),
+                [e[0], e[1], e[2], e[3]],
+                [e[4], e[5], e[6], 0.0],
+            ]
+        })
+        .collect()
+}
+
+/// Three vec4s a case, as glsl/mirror_check.comp writes them.
+fn unpack_results(values: &[[f32; 4]]) -> Vec<MirrorResult> {
+    values
         .chunks_exact(3)
         .map(|v| MirrorResult {
             tess_factor: v[0][0],
@@ -191,5 +191,5 @@ pub fn run_mirror_check(
             edge_length_tess_factor: v[2][1],
             cdlod_tess_factor: v[2][2],
         })
-        .collect())
+        .collect()
 }

@@ -10,7 +10,7 @@ pub mod shaders;
 pub mod uniforms;
 pub mod view;
 
-pub use headless::{Headless, HeadlessFrame};
+pub use headless::{offscreen, Headless, HeadlessFrame};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 pub use settings::{with_fallback, LodMetric, RenderPath, RenderSettings, Shading};
 pub use uniforms::FrameUniforms;

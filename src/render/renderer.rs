@@ -30,8 +30,9 @@ use crate::material::Appearance;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP,
 };
+use crate::shader_variants::Shader;
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
-use crate::terrain::{geomip, ErrorTable, Terrain};
+use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
 use crate::vk::commands::Recorder;
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
 use crate::vk::memory::{Buffer, Image};
@@ -208,12 +209,7 @@ impl TerrainRenderer {
         check_device(device, terrain, options)?;
         let wants = |path| options.paths.contains(&path);
         let info = terrain.info();
-        let heightmap = device.upload_r32f_image(
-            "terrain.heightmap",
-            info.cols() as u32,
-            info.rows() as u32,
-            info.heightmap().heights(),
-        )?;
+        let heightmap = upload_heightmap(device, info, "terrain.heightmap")?;
         let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
         let appearance = GpuAppearance::new(device, appearance, info)?;
         let layout = DescriptorPlan::new(options, &appearance);
@@ -318,14 +314,7 @@ impl TerrainRenderer {
                 }
                 None => None,
             };
-            device.write_buffer(
-                set,
-                BINDING_FRAME,
-                vk::DescriptorType::UNIFORM_BUFFER,
-                &uniforms,
-                size_of::<FrameUniforms>() as u64,
-            );
-            device.write_sampled_image(set, BINDING_HEIGHTMAP, &self.heightmap, &self.sampler);
+            write_frame_bindings(device, set, &uniforms, &self.heightmap, &self.sampler);
             self.appearance.write(device, set);
             let storage = [
                 (BINDING_ERROR_TABLE, self.error_table.as_ref()),
@@ -587,6 +576,32 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
     Ok(())
 }
 
+/// Points a set's frame-uniform and heightmap bindings at their objects:
+/// what every pipeline of the renderer (and the mirror check) reads.
+pub(super) fn write_frame_bindings(
+    device: &Device,
+    set: DescriptorSet,
+    uniforms: &Buffer,
+    heightmap: &Image,
+    sampler: &Sampler,
+) {
+    let size = size_of::<FrameUniforms>() as u64;
+    device.write_buffer(
+        set,
+        BINDING_FRAME,
+        vk::DescriptorType::UNIFORM_BUFFER,
+        uniforms,
+        size,
+    );
+    device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap, sampler);
+}
+
+/// The terrain's heights as an R32_SFLOAT image, one texel per sample.
+pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) -> Result<Image> {
+    let (cols, rows) = (info.cols() as u32, info.rows() as u32);
+    device.upload_r32f_image(name, cols, rows, info.heightmap().heights())
+}
+
 /// Brute draws 6 vertices per cell, counted by a signed index in GLSL.
 fn brute_vertex_count(terrain: &Terrain) -> u64 {
     let info = terrain.info();
@@ -681,12 +696,8 @@ fn create_pipeline(
     polygon_mode: vk::PolygonMode,
     suffix: &str,
 ) -> Result<Pipeline> {
-    let frag = shaders::spirv("terrain.frag", &variant.fragment_defines());
-    let placing = |file| shaders::spirv(file, &variant.vertex_defines());
-    let mut tese_defines = variant.vertex_defines();
-    if equal_spacing {
-        tese_defines.push("EQUAL_SPACING");
-    }
+    let frag = shaders::spirv(Shader::TerrainFrag(variant.shading()));
+    let placing = variant.placing();
     let (name, stages, topology, patch_control_points, vertex_stride, vertex_attributes): (
         String,
         &[_],
@@ -702,14 +713,20 @@ fn create_pipeline(
                 format!("terrain.pipeline.tess.{suffix}")
             },
             &[
-                (vk::ShaderStageFlags::VERTEX, shaders::terrain_vert()),
+                (
+                    vk::ShaderStageFlags::VERTEX,
+                    shaders::spirv(Shader::TerrainVert),
+                ),
                 (
                     vk::ShaderStageFlags::TESSELLATION_CONTROL,
-                    shaders::terrain_tesc(),
+                    shaders::spirv(Shader::TerrainTesc),
                 ),
                 (
                     vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-                    shaders::spirv("terrain.tese", &tese_defines),
+                    shaders::spirv(Shader::TerrainTese {
+                        placing,
+                        equal_spacing,
+                    }),
                 ),
                 (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
@@ -721,7 +738,10 @@ fn create_pipeline(
         RenderPath::Geomip => (
             format!("terrain.pipeline.geomip.{suffix}"),
             &[
-                (vk::ShaderStageFlags::VERTEX, placing("geomip.vert")),
+                (
+                    vk::ShaderStageFlags::VERTEX,
+                    shaders::spirv(Shader::GeomipVert(placing)),
+                ),
                 (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
             vk::PrimitiveTopology::TRIANGLE_LIST,
@@ -732,7 +752,10 @@ fn create_pipeline(
         RenderPath::Brute => (
             format!("terrain.pipeline.brute.{suffix}"),
             &[
-                (vk::ShaderStageFlags::VERTEX, placing("brute.vert")),
+                (
+                    vk::ShaderStageFlags::VERTEX,
+                    shaders::spirv(Shader::BruteVert(placing)),
+                ),
                 (vk::ShaderStageFlags::FRAGMENT, frag),
             ],
             vk::PrimitiveTopology::TRIANGLE_LIST,

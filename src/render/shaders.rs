@@ -1,33 +1,33 @@
 //! SPIR-V compiled by build.rs from glsl/, embedded in the binary: every
-//! stage, and the material variants of some (see `variants` in build.rs).
+//! variant of `Shader` (src/shader_variants.rs).
+
+use crate::shader_variants::Shader;
 
 include!(concat!(env!("OUT_DIR"), "/spirv_table.rs"));
 
-/// The SPIR-V of `file` compiled with the macros `defines` (in any order).
-/// Panics on a combination build.rs doesn't compile: that is a bug in the
-/// caller, not bad input.
-pub fn spirv(file: &str, defines: &[&str]) -> &'static [u8] {
-    let mut sorted = defines.to_vec();
-    sorted.sort_unstable();
-    let key = std::iter::once(file)
-        .chain(sorted)
-        .collect::<Vec<_>>()
-        .join("+");
-    SPIRV
+/// The SPIR-V of `shader`. Every value of `Shader` is in `Shader::all`,
+/// which build.rs compiled in this order.
+pub fn spirv(shader: Shader) -> &'static [u8] {
+    let index = Shader::all()
         .iter()
-        .find(|(k, _)| *k == key)
-        .map(|(_, bytes)| *bytes)
-        .unwrap_or_else(|| panic!("no shader variant {key} was compiled"))
+        .position(|&s| s == shader)
+        .expect("Shader::all lists every value of Shader");
+    SPIRV[index]
 }
 
-pub fn terrain_vert() -> &'static [u8] {
-    spirv("terrain.vert", &[])
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-pub fn terrain_tesc() -> &'static [u8] {
-    spirv("terrain.tesc", &[])
-}
-
-pub fn mirror_check_comp() -> &'static [u8] {
-    spirv("mirror_check.comp", &[])
+    #[test]
+    fn every_variant_has_its_own_spirv() {
+        let all = Shader::all();
+        assert_eq!(all.len(), SPIRV.len());
+        let keys: std::collections::BTreeSet<String> = all.iter().map(|s| s.key()).collect();
+        assert_eq!(keys.len(), all.len(), "two variants share a key");
+        for shader in all {
+            let words = spirv(shader);
+            assert_eq!(&words[..4], &0x0723_0203u32.to_le_bytes(), "{shader:?}");
+        }
+    }
 }

@@ -241,70 +241,8 @@ impl Scene {
             },
         };
 
-        let defaults = DistanceLod::default();
-        let l = &parsed.lod;
-        let pick = |v: &Option<Spanned<f32>>, d: f32| v.as_ref().map_or(d, |s| *s.get_ref());
-        let lod = DistanceLod {
-            min_dist: pick(&l.min_distance, defaults.min_dist),
-            max_dist: pick(&l.max_distance, defaults.max_dist),
-            min_exp: pick(&l.min_level, defaults.min_exp),
-            max_exp: pick(&l.max_level, defaults.max_exp),
-        };
-        if let Err(e) = lod.validate() {
-            // Point at the first LOD key given, or the table if none was.
-            let span = [&l.min_distance, &l.max_distance, &l.min_level, &l.max_level]
-                .iter()
-                .find_map(|v| v.as_ref().map(|s| s.span()))
-                .unwrap_or(0..0);
-            return check.invalid("lod", span, e.to_string());
-        }
-        let distances = [&l.min_distance, &l.max_distance, &l.min_level, &l.max_level]
-            .iter()
-            .any(|v| v.is_some());
-        let pixel_error = match &l.pixel_error {
-            Some(px) if !(px.get_ref().is_finite() && *px.get_ref() > 0.0) => {
-                return check.invalid(
-                    "lod.pixel_error",
-                    px.span(),
-                    format!("must be a positive number of pixels, got {}", px.get_ref()),
-                );
-            }
-            Some(px) => Some(*px.get_ref()),
-            None if distances => None,
-            None => Some(super::DEFAULT_PIXEL_ERROR),
-        };
-        let lod = distances.then_some(lod);
-
-        let camera = match &parsed.camera {
-            None => None,
-            Some(c) => {
-                let eye = DVec3::from(check.finite("camera.eye", &c.eye)?);
-                let target = DVec3::from(check.finite("camera.target", &c.target)?);
-                if eye == target {
-                    return check.invalid(
-                        "camera.target",
-                        c.target.span(),
-                        "equals the eye position".into(),
-                    );
-                }
-                let fov = match &c.fov {
-                    None => super::DEFAULT_FOV_DEG,
-                    Some(f) if *f.get_ref() > 0.0 && *f.get_ref() < 180.0 => *f.get_ref(),
-                    Some(f) => {
-                        return check.invalid(
-                            "camera.fov",
-                            f.span(),
-                            format!("{} must be between 0 and 180 degrees", f.get_ref()),
-                        )
-                    }
-                };
-                Some(Camera {
-                    eye,
-                    target,
-                    fov_y_deg: fov,
-                })
-            }
-        };
+        let (lod, pixel_error) = parse_lod(&check, &parsed.lod)?;
+        let camera = parse_camera(&check, parsed.camera.as_ref())?;
 
         let (lighting, lightmap) = parse_lighting(&check, parsed.lighting.as_ref())?;
         let fog = parse_fog(&check, parsed.fog.as_ref())?;
@@ -316,7 +254,7 @@ impl Scene {
         let displaces = material
             .as_ref()
             .is_some_and(|m| m.layers.iter().any(|l| l.displacement != 0.0));
-        let pixel_error = if displaces && l.pixel_error.is_none() {
+        let pixel_error = if displaces && parsed.lod.pixel_error.is_none() {
             None
         } else {
             pixel_error
@@ -345,4 +283,76 @@ impl Scene {
             material,
         })
     }
+}
+
+/// The `[lod]` table: distances (when any is given) and the error LOD's
+/// pixel error (by default 1 px, unless distances are given).
+fn parse_lod(
+    check: &Checker,
+    l: &LodToml,
+) -> Result<(Option<DistanceLod>, Option<f32>), SceneFileError> {
+    let defaults = DistanceLod::default();
+    let pick = |v: &Option<Spanned<f32>>, d: f32| v.as_ref().map_or(d, |s| *s.get_ref());
+    let lod = DistanceLod {
+        min_dist: pick(&l.min_distance, defaults.min_dist),
+        max_dist: pick(&l.max_distance, defaults.max_dist),
+        min_exp: pick(&l.min_level, defaults.min_exp),
+        max_exp: pick(&l.max_level, defaults.max_exp),
+    };
+    let given = [&l.min_distance, &l.max_distance, &l.min_level, &l.max_level];
+    if let Err(e) = lod.validate() {
+        // Point at the first LOD key given, or the table if none was.
+        let span = given
+            .iter()
+            .find_map(|v| v.as_ref().map(|s| s.span()))
+            .unwrap_or(0..0);
+        return check.invalid("lod", span, e.to_string());
+    }
+    let distances = given.iter().any(|v| v.is_some());
+    let pixel_error = match &l.pixel_error {
+        Some(px) if !(px.get_ref().is_finite() && *px.get_ref() > 0.0) => {
+            return check.invalid(
+                "lod.pixel_error",
+                px.span(),
+                format!("must be a positive number of pixels, got {}", px.get_ref()),
+            );
+        }
+        Some(px) => Some(*px.get_ref()),
+        None if distances => None,
+        None => Some(super::DEFAULT_PIXEL_ERROR),
+    };
+    Ok((distances.then_some(lod), pixel_error))
+}
+
+/// The `[camera]` table: finite eye and target apart, a field of view
+/// strictly between 0 and 180 degrees.
+fn parse_camera(check: &Checker, c: Option<&CameraToml>) -> Result<Option<Camera>, SceneFileError> {
+    let Some(c) = c else {
+        return Ok(None);
+    };
+    let eye = DVec3::from(check.finite("camera.eye", &c.eye)?);
+    let target = DVec3::from(check.finite("camera.target", &c.target)?);
+    if eye == target {
+        return check.invalid(
+            "camera.target",
+            c.target.span(),
+            "equals the eye position".into(),
+        );
+    }
+    let fov = match &c.fov {
+        None => super::DEFAULT_FOV_DEG,
+        Some(f) if *f.get_ref() > 0.0 && *f.get_ref() < 180.0 => *f.get_ref(),
+        Some(f) => {
+            return check.invalid(
+                "camera.fov",
+                f.span(),
+                format!("{} must be between 0 and 180 degrees", f.get_ref()),
+            )
+        }
+    };
+    Ok(Some(Camera {
+        eye,
+        target,
+        fov_y_deg: fov,
+    }))
 }

@@ -359,19 +359,6 @@ pub(super) fn parse_material(
     let Some(t) = t else {
         return Ok(None);
     };
-    let asset = |key: String, v: &Spanned<String>| {
-        let p = Path::new(v.get_ref());
-        Asset {
-            source: AssetSource::File(if p.is_absolute() {
-                p.to_path_buf()
-            } else {
-                scene_dir.join(p)
-            }),
-            scene: check.path.to_path_buf(),
-            line: super::file::line_of(check.text, v.span().start),
-            key,
-        }
-    };
     let layers_toml = t.layer.get_ref();
     if layers_toml.is_empty() || layers_toml.len() > MAX_LAYERS {
         return check.invalid(
@@ -384,184 +371,17 @@ pub(super) fn parse_material(
         );
     }
     let weights = match &t.blend_maps {
-        Some(maps) => {
-            let list = maps.get_ref();
-            if list.is_empty() || list.len() > MAX_BLEND_MAPS {
-                return check.invalid(
-                    "material.blend_maps",
-                    maps.span(),
-                    format!("{} blend maps; give 1 or {MAX_BLEND_MAPS}", list.len()),
-                );
-            }
-            // Each map's RGBA weighs four layers over the base.
-            let carried = 1 + 4 * list.len();
-            if layers_toml.len() > carried {
-                return check.invalid(
-                    "material.blend_maps",
-                    maps.span(),
-                    format!(
-                        "{} blend map(s) weigh at most {carried} layers, but there are {}",
-                        list.len(),
-                        layers_toml.len()
-                    ),
-                );
-            }
-            for (key, span) in [
-                (
-                    "material.cliff_layer",
-                    t.cliff_layer.as_ref().map(|v| v.span()),
-                ),
-                (
-                    "material.cliff_slope",
-                    t.cliff_slope.as_ref().map(|v| v.span()),
-                ),
-            ] {
-                if let Some(span) = span {
-                    return check.invalid(
-                        key,
-                        span,
-                        "is a rules-mode key, but the material has blend maps".into(),
-                    );
-                }
-            }
-            WeightSource::BlendMaps(
-                list.iter()
-                    .enumerate()
-                    .map(|(i, m)| asset(format!("material.blend_maps[{i}]"), m))
-                    .collect(),
-            )
-        }
-        None => {
-            let cliff = match (&t.cliff_layer, &t.cliff_slope) {
-                (None, None) => None,
-                (Some(l), s) => {
-                    let layer = *l.get_ref();
-                    if layer >= layers_toml.len() {
-                        return check.invalid(
-                            "material.cliff_layer",
-                            l.span(),
-                            format!(
-                                "layer {layer} does not exist ({} layers)",
-                                layers_toml.len()
-                            ),
-                        );
-                    }
-                    let slope = match s {
-                        None => [30.0, 45.0],
-                        Some(s) => {
-                            let [a, b] = *s.get_ref();
-                            if !(a.is_finite() && b.is_finite() && 0.0 <= a && a <= b && b <= 90.0)
-                            {
-                                return check.invalid(
-                                    "material.cliff_slope",
-                                    s.span(),
-                                    format!("[{a}, {b}] must be increasing degrees in 0..=90"),
-                                );
-                            }
-                            [a, b]
-                        }
-                    };
-                    Some(Cliff {
-                        layer,
-                        slope_deg: slope,
-                    })
-                }
-                (None, Some(s)) => {
-                    return check.invalid(
-                        "material.cliff_slope",
-                        s.span(),
-                        "needs material.cliff_layer".into(),
-                    )
-                }
-            };
-            WeightSource::Rules { cliff }
-        }
+        Some(maps) => parse_blend_maps(check, t, maps, layers_toml.len(), scene_dir)?,
+        None => WeightSource::Rules {
+            cliff: parse_cliff(check, t, layers_toml.len())?,
+        },
     };
     let rules = matches!(weights, WeightSource::Rules { .. });
-    let mut layers = Vec::with_capacity(layers_toml.len());
-    for (i, l) in layers_toml.iter().enumerate() {
-        let key = |k: &str| format!("material.layer[{i}].{k}");
-        let tile_size = match &l.tile_size {
-            None => Vec2::splat(16.0),
-            Some(s) => {
-                let v = match *s.get_ref() {
-                    TileSize::Uniform(x) => Vec2::splat(x),
-                    TileSize::PerAxis(xz) => Vec2::from(xz),
-                };
-                if !(v.is_finite() && v.min_element() > 0.0) {
-                    return check.invalid(
-                        &key("tile_size"),
-                        s.span(),
-                        format!("{v} must be positive and finite"),
-                    );
-                }
-                v
-            }
-        };
-        let tile_rotation_deg = match &l.tile_rotation {
-            None => 0.0,
-            Some(v) => finite_f32(check, &key("tile_rotation"), v)?,
-        };
-        let tile_offset = match &l.tile_offset {
-            None => Vec2::ZERO,
-            Some(v) => {
-                let o = Vec2::from(*v.get_ref());
-                if !o.is_finite() {
-                    return check.invalid(
-                        &key("tile_offset"),
-                        v.span(),
-                        format!("{o} must be finite"),
-                    );
-                }
-                o
-            }
-        };
-        let displacement = match &l.displacement {
-            None => 0.0,
-            Some(v) => {
-                let d = finite_f32(check, &key("displacement"), v)?;
-                if l.height.is_none() && d != 0.0 {
-                    return check.invalid(
-                        &key("displacement"),
-                        v.span(),
-                        "needs a height map (height = ...)".into(),
-                    );
-                }
-                d
-            }
-        };
-        let band = match &l.height_band {
-            None => None,
-            Some(_) if !rules => {
-                return check.invalid(
-                    &key("height_band"),
-                    l.height_band.as_ref().unwrap().span(),
-                    "is a rules-mode key, but the material has blend maps".into(),
-                )
-            }
-            Some(v) => {
-                let [centre, half_width] = *v.get_ref();
-                if !(centre.is_finite() && half_width.is_finite() && half_width > 0.0) {
-                    return check.invalid(
-                        &key("height_band"),
-                        v.span(),
-                        format!("[{centre}, {half_width}] needs a finite centre and a positive half-width"),
-                    );
-                }
-                Some(HeightBand { centre, half_width })
-            }
-        };
-        layers.push(LayerSpec {
-            diffuse: asset(key("diffuse"), &l.diffuse),
-            normal: l.normal.as_ref().map(|v| asset(key("normal"), v)),
-            height: l.height.as_ref().map(|v| asset(key("height"), v)),
-            tile_size,
-            tile_rotation_deg,
-            tile_offset,
-            displacement,
-            band,
-        });
-    }
+    let layers = layers_toml
+        .iter()
+        .enumerate()
+        .map(|(i, l)| parse_layer(check, i, l, rules, scene_dir))
+        .collect::<Result<Vec<_>, _>>()?;
     let anisotropy = match &t.anisotropy {
         None => None,
         Some(v) => {
@@ -581,4 +401,208 @@ pub(super) fn parse_material(
         weights,
         anisotropy,
     }))
+}
+
+/// A file named by the scene at `key`, relative to the scene's folder.
+fn asset(check: &Checker, scene_dir: &Path, key: String, v: &Spanned<String>) -> Asset {
+    let p = Path::new(v.get_ref());
+    Asset {
+        source: AssetSource::File(if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            scene_dir.join(p)
+        }),
+        scene: check.path.to_path_buf(),
+        line: super::file::line_of(check.text, v.span().start),
+        key,
+    }
+}
+
+/// Blend-map mode: 1 to MAX_BLEND_MAPS maps, enough for the layers, and
+/// none of the rules-mode keys.
+fn parse_blend_maps(
+    check: &Checker,
+    t: &MaterialToml,
+    maps: &Spanned<Vec<Spanned<String>>>,
+    layer_count: usize,
+    scene_dir: &Path,
+) -> Result<WeightSource, SceneFileError> {
+    let list = maps.get_ref();
+    if list.is_empty() || list.len() > MAX_BLEND_MAPS {
+        return check.invalid(
+            "material.blend_maps",
+            maps.span(),
+            format!("{} blend maps; give 1 or {MAX_BLEND_MAPS}", list.len()),
+        );
+    }
+    // Each map's RGBA weighs four layers over the base.
+    let carried = 1 + 4 * list.len();
+    if layer_count > carried {
+        return check.invalid(
+            "material.blend_maps",
+            maps.span(),
+            format!(
+                "{} blend map(s) weigh at most {carried} layers, but there are {layer_count}",
+                list.len(),
+            ),
+        );
+    }
+    for (key, span) in [
+        (
+            "material.cliff_layer",
+            t.cliff_layer.as_ref().map(|v| v.span()),
+        ),
+        (
+            "material.cliff_slope",
+            t.cliff_slope.as_ref().map(|v| v.span()),
+        ),
+    ] {
+        if let Some(span) = span {
+            return check.invalid(
+                key,
+                span,
+                "is a rules-mode key, but the material has blend maps".into(),
+            );
+        }
+    }
+    Ok(WeightSource::BlendMaps(
+        list.iter()
+            .enumerate()
+            .map(|(i, m)| asset(check, scene_dir, format!("material.blend_maps[{i}]"), m))
+            .collect(),
+    ))
+}
+
+/// Rules mode's cliff: a layer that exists, and a slope range (default 30
+/// to 45 degrees) only with it.
+fn parse_cliff(
+    check: &Checker,
+    t: &MaterialToml,
+    layer_count: usize,
+) -> Result<Option<Cliff>, SceneFileError> {
+    let (l, s) = match (&t.cliff_layer, &t.cliff_slope) {
+        (None, None) => return Ok(None),
+        (None, Some(s)) => {
+            return check.invalid(
+                "material.cliff_slope",
+                s.span(),
+                "needs material.cliff_layer".into(),
+            )
+        }
+        (Some(l), s) => (l, s),
+    };
+    let layer = *l.get_ref();
+    if layer >= layer_count {
+        return check.invalid(
+            "material.cliff_layer",
+            l.span(),
+            format!("layer {layer} does not exist ({layer_count} layers)"),
+        );
+    }
+    let slope_deg = match s {
+        None => [30.0, 45.0],
+        Some(s) => {
+            let [a, b] = *s.get_ref();
+            if !(a.is_finite() && b.is_finite() && 0.0 <= a && a <= b && b <= 90.0) {
+                return check.invalid(
+                    "material.cliff_slope",
+                    s.span(),
+                    format!("[{a}, {b}] must be increasing degrees in 0..=90"),
+                );
+            }
+            [a, b]
+        }
+    };
+    Ok(Some(Cliff { layer, slope_deg }))
+}
+
+/// Layer `i`: its maps, tiling, displacement (only with a height map) and
+/// height band (rules mode only).
+fn parse_layer(
+    check: &Checker,
+    i: usize,
+    l: &LayerToml,
+    rules: bool,
+    scene_dir: &Path,
+) -> Result<LayerSpec, SceneFileError> {
+    let key = |k: &str| format!("material.layer[{i}].{k}");
+    let tile_size = match &l.tile_size {
+        None => Vec2::splat(16.0),
+        Some(s) => {
+            let v = match *s.get_ref() {
+                TileSize::Uniform(x) => Vec2::splat(x),
+                TileSize::PerAxis(xz) => Vec2::from(xz),
+            };
+            if !(v.is_finite() && v.min_element() > 0.0) {
+                return check.invalid(
+                    &key("tile_size"),
+                    s.span(),
+                    format!("{v} must be positive and finite"),
+                );
+            }
+            v
+        }
+    };
+    let tile_rotation_deg = match &l.tile_rotation {
+        None => 0.0,
+        Some(v) => finite_f32(check, &key("tile_rotation"), v)?,
+    };
+    let tile_offset = match &l.tile_offset {
+        None => Vec2::ZERO,
+        Some(v) => {
+            let o = Vec2::from(*v.get_ref());
+            if !o.is_finite() {
+                return check.invalid(&key("tile_offset"), v.span(), format!("{o} must be finite"));
+            }
+            o
+        }
+    };
+    let displacement = match &l.displacement {
+        None => 0.0,
+        Some(v) => {
+            let d = finite_f32(check, &key("displacement"), v)?;
+            if l.height.is_none() && d != 0.0 {
+                return check.invalid(
+                    &key("displacement"),
+                    v.span(),
+                    "needs a height map (height = ...)".into(),
+                );
+            }
+            d
+        }
+    };
+    let band = match &l.height_band {
+        None => None,
+        Some(v) if !rules => {
+            return check.invalid(
+                &key("height_band"),
+                v.span(),
+                "is a rules-mode key, but the material has blend maps".into(),
+            )
+        }
+        Some(v) => {
+            let [centre, half_width] = *v.get_ref();
+            if !(centre.is_finite() && half_width.is_finite() && half_width > 0.0) {
+                return check.invalid(
+                    &key("height_band"),
+                    v.span(),
+                    format!(
+                        "[{centre}, {half_width}] needs a finite centre and a positive half-width"
+                    ),
+                );
+            }
+            Some(HeightBand { centre, half_width })
+        }
+    };
+    let file = |k: &str, v: &Spanned<String>| asset(check, scene_dir, key(k), v);
+    Ok(LayerSpec {
+        diffuse: file("diffuse", &l.diffuse),
+        normal: l.normal.as_ref().map(|v| file("normal", v)),
+        height: l.height.as_ref().map(|v| file("height", v)),
+        tile_size,
+        tile_rotation_deg,
+        tile_offset,
+        displacement,
+        band,
+    })
 }

@@ -66,22 +66,17 @@ impl Device {
         fence: &Fence,
     ) -> Result<()> {
         let cmds = [vk::CommandBufferSubmitInfo::default().command_buffer(cmd)];
-        let waits: Vec<_> = wait
-            .iter()
-            .map(|&s| {
-                vk::SemaphoreSubmitInfo::default()
-                    .semaphore(s)
-                    .stage_mask(vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT)
-            })
-            .collect();
-        let signals: Vec<_> = signal
-            .iter()
-            .map(|&s| {
-                vk::SemaphoreSubmitInfo::default()
-                    .semaphore(s)
-                    .stage_mask(vk::PipelineStageFlags2::ALL_COMMANDS)
-            })
-            .collect();
+        let infos = |list: &[vk::Semaphore], stage| -> Vec<vk::SemaphoreSubmitInfo> {
+            list.iter()
+                .map(|&s| {
+                    vk::SemaphoreSubmitInfo::default()
+                        .semaphore(s)
+                        .stage_mask(stage)
+                })
+                .collect()
+        };
+        let waits = infos(wait, vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT);
+        let signals = infos(signal, vk::PipelineStageFlags2::ALL_COMMANDS);
         let submit = vk::SubmitInfo2::default()
             .command_buffer_infos(&cmds)
             .wait_semaphore_infos(&waits)

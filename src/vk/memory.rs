@@ -399,6 +399,40 @@ pub(super) struct Transition {
 }
 
 impl Transition {
+    /// A colour and a depth image made attachments, their old contents
+    /// discarded, once the work before them at `color_after` and
+    /// `depth_after` (stage, access) is done.
+    pub fn to_attachments(
+        color: vk::Image,
+        color_after: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        depth: vk::Image,
+        depth_after: (vk::PipelineStageFlags2, vk::AccessFlags2),
+    ) -> [Transition; 2] {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        [
+            Transition {
+                image: color,
+                aspect: vk::ImageAspectFlags::COLOR,
+                from: (L::UNDEFINED, color_after.0, color_after.1),
+                to: (
+                    L::COLOR_ATTACHMENT_OPTIMAL,
+                    S::COLOR_ATTACHMENT_OUTPUT,
+                    A::COLOR_ATTACHMENT_WRITE,
+                ),
+            },
+            Transition {
+                image: depth,
+                aspect: vk::ImageAspectFlags::DEPTH,
+                from: (L::UNDEFINED, depth_after.0, depth_after.1),
+                to: (
+                    L::DEPTH_ATTACHMENT_OPTIMAL,
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+            },
+        ]
+    }
+
     /// A colour attachment just drawn, made ready to be copied from.
     pub fn color_output_to_copy(image: vk::Image) -> Transition {
         use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};

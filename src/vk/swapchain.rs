@@ -85,49 +85,38 @@ pub enum Acquired {
     OutOfDate,
 }
 
-/// A swapchain with a view and a semaphore per image and one depth
-/// image. Dropping it waits for the device to go idle first.
-pub struct Swapchain {
-    loader: ash::khr::swapchain::Device,
-    raw: vk::SwapchainKHR,
-    pub format: vk::SurfaceFormatKHR,
-    pub extent: vk::Extent2D,
-    pub present_mode: vk::PresentModeKHR,
-    images: Vec<vk::Image>,
-    views: Vec<Owned<vk::ImageView>>,
-    /// One per image: a semaphore is only reused once its image comes back.
-    render_finished: Vec<Semaphore>,
-    depth: Image,
-    /// Whether images can be copied out (for screenshots).
-    pub readable: bool,
-    device: Device,
+/// What a swapchain for a surface will be: an sRGB format where offered,
+/// the present mode asked for or FIFO, the surface's extent (or `size`
+/// within its limits), one image more than the minimum.
+struct SurfaceChoice {
+    format: vk::SurfaceFormatKHR,
+    present_mode: vk::PresentModeKHR,
+    extent: vk::Extent2D,
+    image_count: u32,
+    /// Images can be copied out (for screenshots).
+    readable: bool,
+    transform: vk::SurfaceTransformFlagsKHR,
 }
 
-impl Swapchain {
-    /// A swapchain for `surface` of about `size` (the surface may insist on
-    /// its own), in `present_mode` when supported and FIFO otherwise. sRGB
-    /// formats are preferred. `old` is retired by the new one.
-    pub fn new(
+impl SurfaceChoice {
+    fn new(
         device: &Device,
         surface: &Surface,
         size: vk::Extent2D,
         present_mode: vk::PresentModeKHR,
-        old: Option<Swapchain>,
     ) -> Result<Self> {
+        let (loader, physical) = (&surface.loader, device.physical);
         // SAFETY: plain queries on a live surface.
         let (caps, formats, modes) = unsafe {
             (
-                surface
-                    .loader
-                    .get_physical_device_surface_capabilities(device.physical, surface.raw)
+                loader
+                    .get_physical_device_surface_capabilities(physical, surface.raw)
                     .context("reading surface capabilities")?,
-                surface
-                    .loader
-                    .get_physical_device_surface_formats(device.physical, surface.raw)
+                loader
+                    .get_physical_device_surface_formats(physical, surface.raw)
                     .context("reading surface formats")?,
-                surface
-                    .loader
-                    .get_physical_device_surface_present_modes(device.physical, surface.raw)
+                loader
+                    .get_physical_device_surface_present_modes(physical, surface.raw)
                     .context("reading present modes")?,
             )
         };
@@ -164,9 +153,57 @@ impl Swapchain {
         if caps.max_image_count > 0 {
             image_count = image_count.min(caps.max_image_count);
         }
-        let readable = caps
-            .supported_usage_flags
-            .contains(vk::ImageUsageFlags::TRANSFER_SRC);
+        Ok(SurfaceChoice {
+            format,
+            present_mode,
+            extent,
+            image_count,
+            readable: caps
+                .supported_usage_flags
+                .contains(vk::ImageUsageFlags::TRANSFER_SRC),
+            transform: caps.current_transform,
+        })
+    }
+}
+
+/// A swapchain with a view and a semaphore per image and one depth
+/// image. Dropping it waits for the device to go idle first.
+pub struct Swapchain {
+    loader: ash::khr::swapchain::Device,
+    raw: vk::SwapchainKHR,
+    pub format: vk::SurfaceFormatKHR,
+    pub extent: vk::Extent2D,
+    pub present_mode: vk::PresentModeKHR,
+    images: Vec<vk::Image>,
+    views: Vec<Owned<vk::ImageView>>,
+    /// One per image: a semaphore is only reused once its image comes back.
+    render_finished: Vec<Semaphore>,
+    depth: Image,
+    /// Whether images can be copied out (for screenshots).
+    pub readable: bool,
+    device: Device,
+}
+
+impl Swapchain {
+    /// A swapchain for `surface` of about `size` (the surface may insist on
+    /// its own), in `present_mode` when supported and FIFO otherwise. sRGB
+    /// formats are preferred. `old` is retired by the new one.
+    pub fn new(
+        device: &Device,
+        surface: &Surface,
+        size: vk::Extent2D,
+        present_mode: vk::PresentModeKHR,
+        old: Option<Swapchain>,
+    ) -> Result<Self> {
+        let choice = SurfaceChoice::new(device, surface, size, present_mode)?;
+        let SurfaceChoice {
+            format,
+            present_mode,
+            extent,
+            image_count,
+            readable,
+            transform,
+        } = choice;
         let mut usage = vk::ImageUsageFlags::COLOR_ATTACHMENT;
         if readable {
             usage |= vk::ImageUsageFlags::TRANSFER_SRC;
@@ -181,7 +218,7 @@ impl Swapchain {
             .image_array_layers(1)
             .image_usage(usage)
             .image_sharing_mode(vk::SharingMode::EXCLUSIVE)
-            .pre_transform(caps.current_transform)
+            .pre_transform(transform)
             .composite_alpha(vk::CompositeAlphaFlagsKHR::OPAQUE)
             .present_mode(present_mode)
             .clipped(true)
@@ -298,36 +335,19 @@ impl Swapchain {
     /// Makes image `index` and the depth image attachments; earlier
     /// contents are discarded.
     pub fn record_begin(&self, rec: &Recorder, index: u32) {
-        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        rec.transition_images(&[
-            Transition {
-                image: self.images[index as usize],
-                aspect: vk::ImageAspectFlags::COLOR,
-                // Ordered after the acquire semaphore's wait stage.
-                from: (L::UNDEFINED, S::COLOR_ATTACHMENT_OUTPUT, A::NONE),
-                to: (
-                    L::COLOR_ATTACHMENT_OPTIMAL,
-                    S::COLOR_ATTACHMENT_OUTPUT,
-                    A::COLOR_ATTACHMENT_WRITE,
-                ),
-            },
-            Transition {
-                image: self.depth.raw(),
-                aspect: vk::ImageAspectFlags::DEPTH,
-                // The depth image is shared by the frames in flight: the
-                // previous frame's depth writes must finish first.
-                from: (
-                    L::UNDEFINED,
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
-                to: (
-                    L::DEPTH_ATTACHMENT_OPTIMAL,
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
-            },
-        ]);
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        rec.transition_images(&Transition::to_attachments(
+            self.images[index as usize],
+            // Ordered after the acquire semaphore's wait stage.
+            (S::COLOR_ATTACHMENT_OUTPUT, A::NONE),
+            self.depth.raw(),
+            // The depth image is shared by the frames in flight: the
+            // previous frame's depth writes must finish first.
+            (
+                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+            ),
+        ));
     }
 
     /// Makes image `index` ready to present after drawing, copying it into

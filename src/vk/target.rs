@@ -138,30 +138,14 @@ impl OffscreenTarget {
 
     /// Makes both images attachments; earlier contents are discarded.
     pub fn record_begin(&self, rec: &Recorder) {
-        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
-        rec.transition_images(&[
-            Transition {
-                image: self.color.raw(),
-                aspect: vk::ImageAspectFlags::COLOR,
-                // A previous frame's copy must finish before we overwrite.
-                from: (L::UNDEFINED, S::COPY, A::NONE),
-                to: (
-                    L::COLOR_ATTACHMENT_OPTIMAL,
-                    S::COLOR_ATTACHMENT_OUTPUT,
-                    A::COLOR_ATTACHMENT_WRITE,
-                ),
-            },
-            Transition {
-                image: self.depth.raw(),
-                aspect: vk::ImageAspectFlags::DEPTH,
-                from: (L::UNDEFINED, S::COPY, A::NONE),
-                to: (
-                    L::DEPTH_ATTACHMENT_OPTIMAL,
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
-            },
-        ]);
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        // A previous frame's copies must finish before we overwrite.
+        rec.transition_images(&Transition::to_attachments(
+            self.color.raw(),
+            (S::COPY, A::NONE),
+            self.depth.raw(),
+            (S::COPY, A::NONE),
+        ));
     }
 
     /// Copies both images into host-visible buffers after drawing.

@@ -6,11 +6,11 @@ use std::path::PathBuf;
 use glam::DVec3;
 use vkterrain::material::Appearance;
 use vkterrain::render::{
-    Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, TerrainRenderer,
+    offscreen, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions,
+    TerrainRenderer,
 };
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::Terrain;
-use vkterrain::vk::target::OFFSCREEN_COLOR_FORMAT;
 use vkterrain::vk::{Gpu, GpuOptions};
 
 /// True when the environment explicitly asks to skip GPU tests. The test
@@ -77,43 +77,26 @@ impl GpuScene {
         height: u32,
         wireframe: bool,
     ) -> Self {
-        Self::on_device(None, terrain, appearance, width, height, wireframe)
+        let gpu = open_gpu(None);
+        Self::on(gpu, terrain, appearance, (width, height, wireframe))
     }
 
     /// As `with_appearance`, on the device golden images were made on.
     pub fn for_golden(terrain: Terrain, appearance: &Appearance, width: u32, height: u32) -> Self {
-        Self::on_device(
-            Some(GOLDEN_DEVICE),
-            terrain,
-            appearance,
-            width,
-            height,
-            false,
-        )
+        let gpu = open_gpu(Some(GOLDEN_DEVICE));
+        Self::on(gpu, terrain, appearance, (width, height, false))
     }
 
-    fn on_device(
-        device: Option<&str>,
-        terrain: Terrain,
-        appearance: &Appearance,
-        width: u32,
-        height: u32,
-        wireframe: bool,
-    ) -> Self {
-        let gpu = open_gpu(device);
-        let renderer = TerrainRenderer::with_appearance(
-            &gpu,
-            &terrain,
-            appearance,
-            OFFSCREEN_COLOR_FORMAT,
-            1,
-            &RendererOptions {
-                paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
-                wireframe,
-            },
-        )
-        .expect("renderer");
-        let headless = Headless::new(&gpu, width, height).expect("offscreen target");
+    /// Every path's renderer and a target of (width, height), with line
+    /// pipelines when `wireframe`.
+    fn on(gpu: Gpu, terrain: Terrain, appearance: &Appearance, target: (u32, u32, bool)) -> Self {
+        let (width, height, wireframe) = target;
+        let options = RendererOptions {
+            paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
+            wireframe,
+        };
+        let (renderer, headless) = offscreen(&gpu, &terrain, appearance, &options, (width, height))
+            .expect("renderer and offscreen target");
         GpuScene {
             gpu,
             terrain,

@@ -1,0 +1,174 @@
+// The shader variants, shared by build.rs (which compiles every one) and the
+// renderer (which picks one). A variant is a typed value, not a string of
+// macro names, and `Shader::all` lists every value the types can hold, so
+// a variant the renderer asks for has always been compiled. Like
+// shader_constants.rs, this file is included by build.rs: keep it free of
+// `use` and of anything that needs the rest of the crate.
+
+/// How a vertex-placing stage displaces vertices with the material's
+/// height maps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Placing {
+    /// The heightmap alone.
+    Plain,
+    /// Height-map displacement, weighted by height bands (rules mode).
+    Displaced,
+    /// Height-map displacement, weighted by blend maps.
+    DisplacedByBlendMaps,
+}
+
+impl Placing {
+    pub const ALL: [Placing; 3] = [
+        Placing::Plain,
+        Placing::Displaced,
+        Placing::DisplacedByBlendMaps,
+    ];
+
+    fn defines(self) -> &'static [&'static str] {
+        match self {
+            Placing::Plain => &[],
+            Placing::Displaced => &["MATERIAL", "DISPLACE"],
+            Placing::DisplacedByBlendMaps => &["MATERIAL", "DISPLACE", "BLEND_MAPS"],
+        }
+    }
+}
+
+/// What the fragment shader samples besides the heightmap.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Shading {
+    /// Height colours; a lightmap when `lightmap`.
+    Heights { lightmap: bool },
+    /// Material layers, with their normal maps, blend maps and a lightmap
+    /// as given.
+    Material {
+        normal_maps: bool,
+        blend_maps: bool,
+        lightmap: bool,
+    },
+}
+
+impl Shading {
+    fn all() -> Vec<Shading> {
+        let mut all = vec![
+            Shading::Heights { lightmap: false },
+            Shading::Heights { lightmap: true },
+        ];
+        for bits in 0..8u32 {
+            all.push(Shading::Material {
+                normal_maps: bits & 1 != 0,
+                blend_maps: bits & 2 != 0,
+                lightmap: bits & 4 != 0,
+            });
+        }
+        all
+    }
+
+    fn defines(self) -> Vec<&'static str> {
+        match self {
+            Shading::Heights { lightmap } => {
+                if lightmap {
+                    vec!["LIGHTMAP"]
+                } else {
+                    vec![]
+                }
+            }
+            Shading::Material {
+                normal_maps,
+                blend_maps,
+                lightmap,
+            } => {
+                let mut d = vec!["MATERIAL"];
+                for (on, name) in [
+                    (normal_maps, "NORMAL_MAPS"),
+                    (blend_maps, "BLEND_MAPS"),
+                    (lightmap, "LIGHTMAP"),
+                ] {
+                    if on {
+                        d.push(name);
+                    }
+                }
+                d
+            }
+        }
+    }
+}
+
+/// One compiled shader: a stage of glsl/ with its features.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Shader {
+    TerrainVert,
+    TerrainTesc,
+    /// `equal_spacing`: whole factors for the error LOD; otherwise
+    /// fractional even spacing.
+    TerrainTese {
+        placing: Placing,
+        equal_spacing: bool,
+    },
+    TerrainFrag(Shading),
+    GeomipVert(Placing),
+    BruteVert(Placing),
+    MirrorCheckComp,
+}
+
+impl Shader {
+    /// Every variant there is, each compiled by build.rs, in the order of
+    /// the table it writes.
+    pub fn all() -> Vec<Shader> {
+        let mut all = vec![Shader::TerrainVert, Shader::TerrainTesc];
+        for placing in Placing::ALL {
+            for equal_spacing in [false, true] {
+                all.push(Shader::TerrainTese {
+                    placing,
+                    equal_spacing,
+                });
+            }
+            all.push(Shader::GeomipVert(placing));
+            all.push(Shader::BruteVert(placing));
+        }
+        for shading in Shading::all() {
+            all.push(Shader::TerrainFrag(shading));
+        }
+        all.push(Shader::MirrorCheckComp);
+        all
+    }
+
+    /// The file in glsl/.
+    pub fn file(self) -> &'static str {
+        match self {
+            Shader::TerrainVert => "terrain.vert",
+            Shader::TerrainTesc => "terrain.tesc",
+            Shader::TerrainTese { .. } => "terrain.tese",
+            Shader::TerrainFrag(_) => "terrain.frag",
+            Shader::GeomipVert(_) => "geomip.vert",
+            Shader::BruteVert(_) => "brute.vert",
+            Shader::MirrorCheckComp => "mirror_check.comp",
+        }
+    }
+
+    /// The macros the file is compiled with (each defined as 1).
+    pub fn defines(self) -> Vec<&'static str> {
+        match self {
+            Shader::TerrainTese {
+                placing,
+                equal_spacing,
+            } => {
+                let mut d = placing.defines().to_vec();
+                if equal_spacing {
+                    d.push("EQUAL_SPACING");
+                }
+                d
+            }
+            Shader::GeomipVert(placing) | Shader::BruteVert(placing) => placing.defines().to_vec(),
+            Shader::TerrainFrag(shading) => shading.defines(),
+            Shader::TerrainVert | Shader::TerrainTesc | Shader::MirrorCheckComp => Vec::new(),
+        }
+    }
+
+    /// A name for the compiled file: "terrain.frag+MATERIAL+LIGHTMAP".
+    pub fn key(self) -> String {
+        std::iter::once(self.file())
+            .chain(self.defines())
+            .collect::<Vec<_>>()
+            .join("+")
+    }
+}
