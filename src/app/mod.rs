@@ -5,11 +5,12 @@
 pub mod camera;
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
 use ash::vk;
-use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
+use raw_window_handle::HasDisplayHandle;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{DeviceEvent, DeviceId, ElementState, KeyEvent, MouseButton, WindowEvent};
@@ -129,7 +130,7 @@ struct Graphics {
     screenshot_buffer: Option<Buffer>,
     renderer: TerrainRenderer,
     swapchain: Option<Swapchain>,
-    surface: Surface,
+    surface: Arc<Surface>,
     gpu: Gpu,
 }
 
@@ -176,8 +177,8 @@ struct Running {
     stats: Stats,
     settings: RenderSettings,
     rebuild: bool,
-    /// The last field, so it outlives the surface made from it.
-    window: Window,
+    /// Also held by the surface made from it.
+    window: Arc<Window>,
 }
 
 impl ApplicationHandler for App {
@@ -252,14 +253,10 @@ impl ApplicationHandler for App {
 impl Graphics {
     /// The device, the window's surface, a first swapchain (its format is
     /// the pipelines'), the renderer and the frames in flight.
-    fn new(window: &Window, options: &DemoOptions) -> Result<Graphics> {
+    fn new(window: &Arc<Window>, options: &DemoOptions) -> Result<Graphics> {
         let display = window
             .display_handle()
             .context("reading the display handle")?
-            .as_raw();
-        let handle = window
-            .window_handle()
-            .context("reading the window handle")?
             .as_raw();
         let gpu = Gpu::open(&GpuOptions {
             instance_extensions: surface_extensions(display)?.to_vec(),
@@ -267,7 +264,7 @@ impl Graphics {
             ..options.gpu.clone()
         })
         .context("starting Vulkan")?;
-        match Self::build(&gpu, display, handle, window.inner_size(), options) {
+        match Self::build(&gpu, window, options) {
             Ok(graphics) => Ok(Graphics { gpu, ..graphics }),
             // What was built is gone by now; validation is counted after the
             // device goes, so a leak on this path is reported too.
@@ -277,15 +274,10 @@ impl Graphics {
 
     /// Everything but the device; `gpu` in the result is a second handle
     /// to the same device, replaced by the caller.
-    fn build(
-        gpu: &Gpu,
-        display: raw_window_handle::RawDisplayHandle,
-        handle: raw_window_handle::RawWindowHandle,
-        size: PhysicalSize<u32>,
-        options: &DemoOptions,
-    ) -> Result<Graphics> {
+    fn build(gpu: &Gpu, window: &Arc<Window>, options: &DemoOptions) -> Result<Graphics> {
+        let size = window.inner_size();
         let device = &gpu.device;
-        let surface = Surface::new(device, display, handle)?;
+        let surface = Arc::new(Surface::new(device, Arc::clone(window))?);
         let swapchain = Swapchain::new(
             device,
             &surface,
@@ -350,13 +342,15 @@ fn paths(caps: &crate::vk::Capabilities) -> Vec<RenderPath> {
 
 impl Running {
     fn start(event_loop: &ActiveEventLoop, options: &DemoOptions) -> Result<Running> {
-        let window = event_loop
-            .create_window(
-                Window::default_attributes()
-                    .with_title("vkterrain")
-                    .with_inner_size(PhysicalSize::new(options.width, options.height)),
-            )
-            .context("creating the window")?;
+        let window = Arc::new(
+            event_loop
+                .create_window(
+                    Window::default_attributes()
+                        .with_title("vkterrain")
+                        .with_inner_size(PhysicalSize::new(options.width, options.height)),
+                )
+                .context("creating the window")?,
+        );
         let graphics = Graphics::new(&window, options)?;
         let mut notes = Vec::new();
         let settings =

@@ -3,7 +3,7 @@
 use ash::vk;
 
 use super::device::Device;
-use super::error::{Result, VkResultExt};
+use super::error::{Result, VkError, VkResultExt};
 use super::memory::{Buffer, Image};
 use super::owned::{DescriptorSetLayout, Owned, Sampler};
 
@@ -158,6 +158,12 @@ impl Device {
         repeat: bool,
         anisotropy: Option<f32>,
     ) -> Result<Sampler> {
+        if anisotropy.is_some() && !self.caps.sampler_anisotropy {
+            return Err(VkError::Unsupported(format!(
+                "{name}: anisotropic filtering needs samplerAnisotropy, which {} lacks",
+                self.caps.device_name
+            )));
+        }
         let address = if repeat {
             vk::SamplerAddressMode::REPEAT
         } else {
@@ -173,8 +179,8 @@ impl Device {
             .max_lod(vk::LOD_CLAMP_NONE)
             .anisotropy_enable(anisotropy.is_some())
             .max_anisotropy(anisotropy.unwrap_or(1.0));
-        // SAFETY: valid create info; anisotropy only when the caller has
-        // checked the feature.
+        // SAFETY: valid create info; anisotropy only with the feature
+        // (checked above).
         let sampler =
             unsafe { self.ash().create_sampler(&info, None) }.context("creating a sampler")?;
         Ok(Owned::new(self, sampler, name))

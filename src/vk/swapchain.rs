@@ -4,7 +4,9 @@
 use std::ffi::c_char;
 
 use ash::vk;
-use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
+use std::sync::Arc;
+
+use raw_window_handle::{HasDisplayHandle, HasWindowHandle, RawDisplayHandle};
 
 use super::commands::Recorder;
 use super::device::Device;
@@ -19,35 +21,40 @@ pub fn surface_extensions(display: RawDisplayHandle) -> Result<&'static [*const 
         .context("listing the window system's Vulkan extensions")
 }
 
-/// A window's surface. It holds the device, whose instance it was made
-/// from, so the instance outlives it; swapchains hold the surface's
-/// handle only while the caller keeps the surface (the window's owner
-/// drops its swapchain first).
+/// A window's surface. It holds the window and the device (whose
+/// instance it was made from), so both outlive it; swapchains hold the
+/// surface, so it outlives them.
 pub struct Surface {
     loader: ash::khr::surface::Instance,
     raw: vk::SurfaceKHR,
     device: Device,
+    _window: Arc<dyn std::any::Any + Send + Sync>,
 }
 
 impl Surface {
-    /// A surface for the window, checked to be one `device` can present to.
-    /// The window must outlive the surface.
-    pub fn new(
-        device: &Device,
-        display: RawDisplayHandle,
-        window: RawWindowHandle,
-    ) -> Result<Self> {
+    /// A surface for `window`, checked to be one `device` can present to.
+    pub fn new<W>(device: &Device, window: Arc<W>) -> Result<Self>
+    where
+        W: HasDisplayHandle + HasWindowHandle + Send + Sync + 'static,
+    {
+        let handles = window.display_handle().and_then(|d| {
+            let w = window.window_handle()?;
+            Ok((d.as_raw(), w.as_raw()))
+        });
+        let (display, handle) = handles
+            .map_err(|e| VkError::Unsupported(format!("the window has no usable handle: {e}")))?;
         let instance = device.instance();
-        // SAFETY: the handles come from a live window that the caller keeps
-        // alive for longer than the surface.
+        // SAFETY: the handles come from `window`, which the surface holds
+        // for as long as it lives.
         let raw = unsafe {
-            ash_window::create_surface(&instance.entry, &instance.raw, display, window, None)
+            ash_window::create_surface(&instance.entry, &instance.raw, display, handle, None)
         }
         .context("creating a window surface")?;
         let surface = Surface {
             loader: ash::khr::surface::Instance::new(&instance.entry, &instance.raw),
             raw,
             device: device.clone(),
+            _window: window,
         };
         // SAFETY: plain query.
         let supported = unsafe {
@@ -71,8 +78,8 @@ impl Surface {
 impl Drop for Surface {
     fn drop(&mut self) {
         let _ = self.device.wait_idle();
-        // SAFETY: every swapchain of this surface has been dropped (their
-        // owner drops them first); the instance is alive while `device` is.
+        // SAFETY: every swapchain of this surface has been dropped: each
+        // holds the surface. The instance is alive while `device` is.
         unsafe { self.loader.destroy_surface(self.raw, None) };
     }
 }
@@ -182,6 +189,8 @@ pub struct Swapchain {
     /// Whether images can be copied out (for screenshots).
     pub readable: bool,
     device: Device,
+    /// Kept alive for as long as the swapchain.
+    _surface: Arc<Surface>,
 }
 
 impl Swapchain {
@@ -190,7 +199,7 @@ impl Swapchain {
     /// formats are preferred. `old` is retired by the new one.
     pub fn new(
         device: &Device,
-        surface: &Surface,
+        surface: &Arc<Surface>,
         size: vk::Extent2D,
         present_mode: vk::PresentModeKHR,
         old: Option<Swapchain>,
@@ -232,7 +241,7 @@ impl Swapchain {
             },
             "swapchain.depth",
         )?;
-        // SAFETY: the surface outlives the swapchain; the old swapchain is
+        // SAFETY: the swapchain holds the surface; the old swapchain is
         // retired here and dropped below (its Drop waits for idle).
         let created = unsafe { loader.create_swapchain(&info, None) };
         drop(old);
@@ -251,6 +260,7 @@ impl Swapchain {
             depth,
             readable,
             device: device.clone(),
+            _surface: Arc::clone(surface),
         };
         // SAFETY: the swapchain was just created.
         let images = unsafe { swapchain.loader.get_swapchain_images(raw) }
