@@ -285,7 +285,7 @@ fn only_the_resources_a_scene_uses_are_created() {
         let (terrain, appearance, _) = prepare(scene);
         let gpu = GpuScene::with_appearance(terrain, &appearance, 8, 8, false);
         let names = gpu
-            .gpu
+            .gpu()
             .device
             .memory_report()
             .into_iter()
@@ -423,7 +423,7 @@ fn anisotropic_filtering_when_the_scene_asks_for_it() {
         );
         let camera = scene.camera_for(terrain.info());
         let mut gpu = GpuScene::with_appearance(terrain, &appearance, 48, 27, false);
-        let has = gpu.gpu.device.caps.sampler_anisotropy;
+        let has = gpu.gpu().device.caps.sampler_anisotropy;
         let image = gpu.render(&camera, &settings).rgba_image();
         gpu.finish();
         (image, has)

@@ -30,7 +30,7 @@ fn an_8193_square_terrain_renders() {
     assert_eq!(terrain.grid().patch_count(), 256 * 256);
     let mut scene = GpuScene::new(terrain, 320, 180, false);
     let heightmap_bytes = scene
-        .gpu
+        .gpu()
         .device
         .memory_report()
         .into_iter()

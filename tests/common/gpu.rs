@@ -55,9 +55,11 @@ pub fn open_gpu(device: Option<&str>) -> Gpu {
     })
 }
 
-/// A terrain on the GPU with an offscreen target.
+/// A terrain on the GPU with an offscreen target. Dropping it (or
+/// `finish`) tears everything down and fails the test unless memory is all
+/// freed and validation reported nothing by the device's destruction.
 pub struct GpuScene {
-    pub gpu: Gpu,
+    gpu: Option<Gpu>,
     pub terrain: Terrain,
     renderer: Option<TerrainRenderer>,
     headless: Option<Headless>,
@@ -98,7 +100,7 @@ impl GpuScene {
         let (renderer, headless) = offscreen(&gpu, &terrain, appearance, &options, (width, height))
             .expect("renderer and offscreen target");
         GpuScene {
-            gpu,
+            gpu: Some(gpu),
             terrain,
             renderer: Some(renderer),
             headless: Some(headless),
@@ -121,27 +123,47 @@ impl GpuScene {
         frame
     }
 
+    pub fn gpu(&self) -> &Gpu {
+        self.gpu
+            .as_ref()
+            .expect("the GPU lives until the scene drops")
+    }
+
     pub fn assert_clean(&self, when: &str) {
         assert_eq!(
-            self.gpu.validation_messages(),
+            self.gpu().validation_messages(),
             0,
             "validation messages while {when}"
         );
     }
 
-    /// Tears down and checks that teardown was clean too: no memory left
-    /// allocated, and no validation message by the time the device is
-    /// destroyed (objects left alive are reported then).
-    pub fn finish(mut self) {
+    /// Tears down and checks that teardown was clean (see `Drop`).
+    pub fn finish(self) {
+        drop(self);
+    }
+}
+
+impl Drop for GpuScene {
+    /// Checks that teardown was clean too: no memory left allocated, and
+    /// no validation message by the time the device is destroyed (objects
+    /// left alive are reported then). Skipped while a test is already
+    /// failing.
+    fn drop(&mut self) {
         drop(self.headless.take());
         drop(self.renderer.take());
+        let Some(gpu) = self.gpu.take() else {
+            return;
+        };
+        if std::thread::panicking() {
+            return;
+        }
         assert_eq!(
-            self.gpu.device.memory_in_use(),
+            gpu.device.memory_in_use(),
             0,
             "GPU memory left allocated: {:?}",
-            self.gpu.device.memory_report()
+            gpu.device.memory_report()
         );
-        let report = self.gpu.shutdown();
+        let report = gpu.shutdown();
         assert_eq!(
             report.count, 0,
             "validation messages by device destruction: {:#?}",
