@@ -1052,3 +1052,57 @@ fn error_lod_popping_stays_within_twice_tau() {
     );
     scene.finish();
 }
+
+/// A renderer built for the geomip path alone draws the tess path, and
+/// wireframe, when a frame asks for them: `prepare` builds what is missing,
+/// so a frame's settings cannot disagree with the renderer. The pictures
+/// equal those of a renderer built with every path up front.
+#[test]
+fn paths_a_renderer_lacks_are_built_when_a_frame_asks() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let cam = crack_cameras(&terrain)[0].1;
+    let mut full = GpuScene::new(terrain.clone(), 96, 64, true);
+    let gpu = open_gpu(None);
+    let options = vkterrain::render::RendererOptions {
+        paths: vec![RenderPath::Geomip],
+        wireframe: false,
+    };
+    let (mut renderer, mut headless) =
+        vkterrain::render::offscreen(&gpu, &terrain, &Appearance::default(), &options, (96, 64))
+            .expect("a geomip renderer");
+    let before = gpu.device.memory_report();
+    assert!(!before.iter().any(|(n, _)| n == "terrain.error_table"));
+    for (path, lod_metric, wireframe) in [
+        (RenderPath::Tess, LodMetric::Distance, false),
+        (RenderPath::Tess, LodMetric::Error(1.0), true),
+        (RenderPath::Brute, LodMetric::Distance, true),
+    ] {
+        let settings = RenderSettings {
+            path,
+            lod_metric,
+            wireframe,
+            ..RenderSettings::default()
+        };
+        let lazy = headless
+            .render(&mut renderer, &terrain, &cam, &settings)
+            .expect("built on demand");
+        let eager = full.render(&cam, &settings);
+        assert_eq!(
+            lazy.measurements.statistics, eager.measurements.statistics,
+            "{path:?} {lod_metric:?}"
+        );
+        assert!(
+            lazy.readback.rgba == eager.readback.rgba,
+            "{path:?} {lod_metric:?} wireframe {wireframe}: the images differ"
+        );
+    }
+    let after = gpu.device.memory_report();
+    assert!(after.iter().any(|(n, _)| n == "terrain.error_table"));
+    drop((renderer, headless));
+    let report = gpu.shutdown();
+    assert_eq!(report.count, 0, "{:#?}", report.messages);
+    full.finish();
+}

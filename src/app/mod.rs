@@ -101,9 +101,9 @@ pub fn run(options: DemoOptions) -> Result<DemoSummary> {
     if let Some(e) = app.error {
         // Validation was counted when the device went; name it beside the
         // error.
-        return Err(match app.summary.map(|s| s.validation.check()) {
-            Some(Err(validation)) => e.context(validation.to_string()),
-            _ => e,
+        return Err(match &app.summary {
+            Some(summary) => with_validation(e, &summary.validation),
+            None => e,
         });
     }
     app.summary
@@ -268,7 +268,7 @@ impl Graphics {
             Ok(graphics) => Ok(Graphics { gpu, ..graphics }),
             // What was built is gone by now; validation is counted after the
             // device goes, so a leak on this path is reported too.
-            Err(e) => Err(gpu.fail(e)),
+            Err(e) => Err(with_validation(e, &gpu.shutdown())),
         }
     }
 
@@ -678,9 +678,7 @@ impl Running {
         let views = swapchain.views(index);
         let rec = graphics.commands.begin(slot)?;
         swapchain.record_begin(&rec, index);
-        graphics
-            .renderer
-            .record(&rec, slot, &views, &self.settings)?;
+        graphics.renderer.record(&rec, slot, &views)?;
         swapchain.record_present(&rec, index, capture_into);
         rec.submit_frame(
             &graphics.image_available[slot],
@@ -769,6 +767,15 @@ impl Running {
             swapchains_built: stats.swapchains_built,
             sizes: stats.sizes,
         }
+    }
+}
+
+/// `error`, naming beside it what validation reported by the device's
+/// destruction, if anything.
+pub fn with_validation(error: anyhow::Error, report: &ValidationReport) -> anyhow::Error {
+    match report.check() {
+        Ok(()) => error,
+        Err(validation) => error.context(validation.to_string()),
     }
 }
 

@@ -410,7 +410,14 @@ pub fn with_gpu<T>(
     use anyhow::Context;
     let gpu = crate::vk::Gpu::open(options).context("starting Vulkan")?;
     let result = work(&gpu);
-    gpu.finish(result)
+    let report = gpu.shutdown();
+    match result {
+        Ok(value) => {
+            report.check()?;
+            Ok((value, report))
+        }
+        Err(e) => Err(crate::app::with_validation(e, &report)),
+    }
 }
 
 /// A command's arguments as clap parses `args`: with none given, its

@@ -89,7 +89,7 @@ impl Headless {
         renderer.prepare(0, terrain, &view, settings)?;
         let rec = self.commands.begin(0)?;
         self.target.record_begin(&rec);
-        renderer.record(&rec, 0, &views, settings)?;
+        renderer.record(&rec, 0, &views)?;
         self.target.record_readback(&rec);
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         rec.submit_and_wait()?;

@@ -50,9 +50,13 @@ struct FrameSlot {
     queries: FrameQueries,
     /// The tess path's full-resolution patches, one bit each (error LOD).
     full_resolution: Option<Buffer>,
+    /// What `prepare` set this slot's frame up for; `record` draws it.
+    settings: Option<RenderSettings>,
 }
 
-/// What a renderer builds.
+/// What a renderer builds up front. A frame asking for anything else
+/// (another path, line pipelines) has it built by `prepare`, so the
+/// settings of a frame and the renderer cannot disagree.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RendererOptions {
     pub paths: Vec<RenderPath>,
@@ -207,12 +211,13 @@ impl TerrainRenderer {
     ) -> Result<Self> {
         let device = &gpu.device;
         check_device(device, terrain, options)?;
-        let wants = |path| options.paths.contains(&path);
         let info = terrain.info();
         let heightmap = upload_heightmap(device, info, "terrain.heightmap")?;
         let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
         let appearance = GpuAppearance::new(device, appearance, info)?;
-        let layout = DescriptorPlan::new(options, &appearance);
+        // With tessellation the layout has the tess path's bindings, so the
+        // path can be built later (`ensure`) on the same sets.
+        let layout = DescriptorPlan::new(device.caps.tessellation_shader, &appearance);
         let set_layout =
             device.create_descriptor_set_layout(&layout.bindings, "terrain.set_layout")?;
         let pipeline_layout =
@@ -223,28 +228,12 @@ impl TerrainRenderer {
             frames_in_flight,
             "terrain.frame_set",
         )?;
-        // The tess path's error-bounded factors read the per-patch error
-        // table (ERROR_LEVEL_COUNT floats a patch); the geomip path's error LOD has its own,
-        // for its fixed diagonal. Both come from one pass, kept by the
-        // terrain.
-        let table_start = std::time::Instant::now();
-        let tables =
-            (wants(RenderPath::Tess) || wants(RenderPath::Geomip)).then(|| terrain.error_tables());
-        let error_table_ms = table_start.elapsed().as_secs_f64() * 1e3;
-        let error_table = match (wants(RenderPath::Tess), tables) {
-            (true, Some((table, _))) => Some(device.upload_buffer(
-                "terrain.error_table",
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(table.as_slice()),
-            )?),
-            _ => None,
-        };
         let mut renderer = TerrainRenderer {
             frames: Vec::new(),
             tess: None,
             geomip: None,
             brute: None,
-            error_table,
+            error_table: None,
             sets,
             pipeline_layout,
             set_layout,
@@ -254,46 +243,142 @@ impl TerrainRenderer {
             device: device.clone(),
             color_format,
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
-            error_table_ms,
+            error_table_ms: 0.0,
             predicted_max_px: None,
         };
-        renderer.frames = renderer.build_frames(terrain)?;
-        if let (true, Some((table, _))) = (wants(RenderPath::Tess), tables) {
-            renderer.tess = Some(build_tess(
-                &renderer,
-                terrain,
-                table.clone(),
-                options.wireframe,
-            )?);
-        }
-        // The tess path draws its full-resolution patches with geomip's
-        // level 0.
-        let geomip_needed = wants(RenderPath::Geomip) || wants(RenderPath::Tess);
-        if let (true, Some((_, table))) = (geomip_needed, tables) {
-            renderer.geomip = Some(build_geomip(
-                &renderer,
-                terrain,
-                table.clone(),
-                options.wireframe,
-            )?);
-        }
-        if wants(RenderPath::Brute) {
-            renderer.brute = Some(BruteGeometry {
-                vertex_count: brute_vertex_count(terrain) as u32,
-                pipelines: build_pipelines(
-                    &renderer,
-                    &renderer.pipeline_layout,
-                    (RenderPath::Brute, false),
-                    options.wireframe,
-                )?,
-            });
+        renderer.frames = renderer.build_frames()?;
+        for &path in &options.paths {
+            renderer.ensure(terrain, path, options.wireframe)?;
         }
         Ok(renderer)
     }
 
-    /// One uniform block, query set and (error LOD) full-resolution bit
-    /// buffer per descriptor set, with the set written.
-    fn build_frames(&self, terrain: &Terrain) -> Result<Vec<FrameSlot>> {
+    /// Builds what drawing `path` (with line pipelines when `wireframe`)
+    /// needs and this renderer lacks: the path's geometry and pipelines,
+    /// and for the tess path the error table, the full-resolution bits and
+    /// the geomip path's level 0. A no-op when all is there. Building
+    /// rewrites descriptor sets, so it first waits for the GPU.
+    fn ensure(&mut self, terrain: &Terrain, path: RenderPath, wireframe: bool) -> Result<()> {
+        // The tess path draws its full-resolution patches with geomip's
+        // level 0.
+        let needed: &[RenderPath] = match path {
+            RenderPath::Tess => &[RenderPath::Tess, RenderPath::Geomip],
+            RenderPath::Geomip => &[RenderPath::Geomip],
+            RenderPath::Brute => &[RenderPath::Brute],
+        };
+        if needed.iter().all(|&p| self.has(p, wireframe)) {
+            return Ok(());
+        }
+        check_path(&self.device, terrain, path, wireframe)?;
+        self.device.wait_idle()?;
+        for &p in needed {
+            if !self.has(p, wireframe) {
+                self.build(terrain, p, wireframe)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether `path` is built, with line pipelines when `wireframe`.
+    fn has(&self, path: RenderPath, wireframe: bool) -> bool {
+        let pipelines = match path {
+            RenderPath::Tess => self.tess.as_ref().map(|t| &t.error_pipelines),
+            RenderPath::Geomip => self.geomip.as_ref().map(|g| &g.pipelines),
+            RenderPath::Brute => self.brute.as_ref().map(|b| &b.pipelines),
+        };
+        pipelines.is_some_and(|p| !wireframe || p.wireframe.is_some())
+    }
+
+    /// Builds `path` (again, with line pipelines, when it lacks them).
+    fn build(&mut self, terrain: &Terrain, path: RenderPath, wireframe: bool) -> Result<()> {
+        // A path built before keeps its line pipelines.
+        let wireframe = wireframe
+            || match path {
+                RenderPath::Tess => self.tess.as_ref().map(|t| &t.pipelines),
+                RenderPath::Geomip => self.geomip.as_ref().map(|g| &g.pipelines),
+                RenderPath::Brute => self.brute.as_ref().map(|b| &b.pipelines),
+            }
+            .is_some_and(|p| p.wireframe.is_some());
+        match path {
+            RenderPath::Tess => {
+                // The tess path's error-bounded factors read the per-patch
+                // error table (ERROR_LEVEL_COUNT floats a patch); the geomip
+                // path's error LOD has its own, for its fixed diagonal.
+                // Both come from one pass, kept by the terrain.
+                let (table, _) = self.error_tables(terrain);
+                if self.error_table.is_none() {
+                    self.error_table = Some(self.device.upload_buffer(
+                        "terrain.error_table",
+                        vk::BufferUsageFlags::STORAGE_BUFFER,
+                        bytemuck::cast_slice(table.as_slice()),
+                    )?);
+                    self.add_full_resolution_bits(terrain)?;
+                }
+                self.tess = Some(build_tess(self, terrain, table.clone(), wireframe)?);
+            }
+            RenderPath::Geomip => {
+                let (_, table) = self.error_tables(terrain);
+                self.geomip = Some(build_geomip(self, terrain, table.clone(), wireframe)?);
+            }
+            RenderPath::Brute => {
+                self.brute = Some(BruteGeometry {
+                    vertex_count: brute_vertex_count(terrain) as u32,
+                    pipelines: build_pipelines(
+                        self,
+                        &self.pipeline_layout,
+                        (RenderPath::Brute, false),
+                        wireframe,
+                    )?,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The terrain's error tables; the first call's time is kept for
+    /// `error_table_ms`.
+    fn error_tables<'t>(&mut self, terrain: &'t Terrain) -> &'t (ErrorTable, ErrorTable) {
+        let start = std::time::Instant::now();
+        let tables = terrain.error_tables();
+        if self.error_table_ms == 0.0 {
+            self.error_table_ms = start.elapsed().as_secs_f64() * 1e3;
+        }
+        tables
+    }
+
+    /// Per frame slot, the buffer of full-resolution patch bits, and the
+    /// slot's set pointed at it and at the error table.
+    fn add_full_resolution_bits(&mut self, terrain: &Terrain) -> Result<()> {
+        let device = &self.device;
+        let errors = self.error_table.as_ref().expect("uploaded by the caller");
+        let words = terrain.grid().patch_count().div_ceil(32).max(1);
+        for (i, frame) in self.frames.iter_mut().enumerate() {
+            let bits = device.create_host_buffer(
+                &format!("terrain.full_resolution[{i}]"),
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytemuck::cast_slice(&vec![0u32; words]),
+            )?;
+            for (binding, buffer) in [
+                (BINDING_ERROR_TABLE, errors),
+                (BINDING_FULL_RESOLUTION, &bits),
+            ] {
+                let size = buffer.desc.size;
+                device.write_buffer(
+                    frame.set,
+                    binding,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    buffer,
+                    size,
+                );
+            }
+            frame.full_resolution = Some(bits);
+        }
+        Ok(())
+    }
+
+    /// One uniform block and query set per descriptor set, with the set
+    /// written (the tess path adds its own bindings when it is built).
+    fn build_frames(&self) -> Result<Vec<FrameSlot>> {
         let device = &self.device;
         let mut frames = Vec::new();
         for (i, set) in self.sets.iter().enumerate() {
@@ -303,40 +388,14 @@ impl TerrainRenderer {
                 bytemuck::bytes_of(&FrameUniforms::default()),
             )?;
             let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
-            let full_resolution = match &self.error_table {
-                Some(_) => {
-                    let words = terrain.grid().patch_count().div_ceil(32).max(1);
-                    Some(device.create_host_buffer(
-                        &format!("terrain.full_resolution[{i}]"),
-                        vk::BufferUsageFlags::STORAGE_BUFFER,
-                        bytemuck::cast_slice(&vec![0u32; words]),
-                    )?)
-                }
-                None => None,
-            };
             write_frame_bindings(device, set, &uniforms, &self.heightmap, &self.sampler);
             self.appearance.write(device, set);
-            let storage = [
-                (BINDING_ERROR_TABLE, self.error_table.as_ref()),
-                (BINDING_FULL_RESOLUTION, full_resolution.as_ref()),
-            ];
-            for (binding, buffer) in storage {
-                if let Some(buffer) = buffer {
-                    let size = buffer.desc.size;
-                    device.write_buffer(
-                        set,
-                        binding,
-                        vk::DescriptorType::STORAGE_BUFFER,
-                        buffer,
-                        size,
-                    );
-                }
-            }
             frames.push(FrameSlot {
                 uniforms,
                 set,
                 queries,
-                full_resolution,
+                full_resolution: None,
+                settings: None,
             });
         }
         Ok(frames)
@@ -351,9 +410,11 @@ impl TerrainRenderer {
         self.color_format
     }
 
-    /// Writes the uniforms of frame slot `slot` (its previous frame must
-    /// have completed) and, for the geomip path, chooses this frame's patch
-    /// levels.
+    /// Sets frame slot `slot` up for a frame of `settings` (its previous
+    /// frame must have completed): builds the path if this renderer lacks
+    /// it, writes the uniforms and, for the geomip path and the tess
+    /// path's error LOD, chooses this frame's patch levels. `record` then
+    /// draws exactly this.
     pub fn prepare(
         &mut self,
         slot: usize,
@@ -361,6 +422,8 @@ impl TerrainRenderer {
         view: &FrameView,
         settings: &RenderSettings,
     ) -> Result<()> {
+        self.ensure(terrain, settings.path, settings.wireframe)?;
+        self.frames[slot].settings = Some(*settings);
         let uniforms = FrameUniforms::new(terrain, view, settings);
         self.frames[slot]
             .uniforms
@@ -419,6 +482,7 @@ impl TerrainRenderer {
     /// the stitched sides still meet. This is how the benchmark's oracle
     /// draws its per-patch levels.
     pub fn set_geomip_levels(&mut self, terrain: &Terrain, levels: Option<&[u8]>) -> Result<()> {
+        self.ensure(terrain, RenderPath::Geomip, false)?;
         let geomip = self.geomip.as_mut().ok_or_else(|| {
             VkError::Unsupported("the geomip path was not built for this renderer".into())
         })?;
@@ -447,15 +511,15 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// Records the terrain draw of `settings.path` into `target` (already in
-    /// attachment layouts), timed and counted by slot `slot`'s queries.
-    pub fn record(
-        &self,
-        rec: &Recorder,
-        slot: usize,
-        target: &TargetViews,
-        settings: &RenderSettings,
-    ) -> Result<()> {
+    /// Records the frame `prepare` set slot `slot` up for into `target`
+    /// (already in attachment layouts), timed and counted by the slot's
+    /// queries.
+    pub fn record(&self, rec: &Recorder, slot: usize, target: &TargetViews) -> Result<()> {
+        let settings = &self.frames[slot].settings.ok_or_else(|| {
+            VkError::Unsupported(format!(
+                "frame slot {slot} was recorded before it was prepared"
+            ))
+        })?;
         let not_built = || {
             VkError::Unsupported(format!(
                 "the {:?} path was not built for this renderer",
@@ -553,23 +617,35 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
             device.caps.device_name
         )));
     }
-    if options.wireframe && !device.caps.fill_mode_non_solid {
+    for &path in &options.paths {
+        check_path(device, terrain, path, options.wireframe)?;
+    }
+    Ok(())
+}
+
+/// Refuses a path (with line pipelines when `wireframe`) this device or
+/// the draw limits cannot do.
+fn check_path(device: &Device, terrain: &Terrain, path: RenderPath, wireframe: bool) -> Result<()> {
+    let caps = &device.caps;
+    if wireframe && !caps.fill_mode_non_solid {
         return Err(VkError::Unsupported(format!(
             "wireframe needs fillModeNonSolid, which {} lacks",
-            device.caps.device_name
+            caps.device_name
         )));
     }
-    let wants = |path| options.paths.contains(&path);
-    if wants(RenderPath::Tess) && !device.caps.tessellation_shader {
+    if path == RenderPath::Tess && !caps.tessellation_shader {
         return Err(VkError::Unsupported(format!(
             "the tess path needs tessellationShader, which {} lacks",
-            device.caps.device_name
+            caps.device_name
         )));
     }
     let brute_vertices = brute_vertex_count(terrain);
-    if wants(RenderPath::Brute) && brute_vertices > i32::MAX as u64 {
+    if path == RenderPath::Brute && brute_vertices > i32::MAX as u64 {
+        let info = terrain.info();
         return Err(VkError::Unsupported(format!(
-            "the brute path draws {brute_vertices} vertices for {cols}x{rows} samples, over the {} one draw can address",
+            "the brute path draws {brute_vertices} vertices for {}x{} samples, over the {} one draw can address",
+            info.cols(),
+            info.rows(),
             i32::MAX
         )));
     }
@@ -617,8 +693,7 @@ struct DescriptorPlan {
 }
 
 impl DescriptorPlan {
-    fn new(options: &RendererOptions, appearance: &GpuAppearance) -> Self {
-        let tess = options.paths.contains(&RenderPath::Tess);
+    fn new(tess: bool, appearance: &GpuAppearance) -> Self {
         let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
         if tess {
             stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL

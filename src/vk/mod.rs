@@ -130,29 +130,6 @@ impl Gpu {
         self.device.instance().validation_enabled()
     }
 
-    /// Tears down (see `shutdown`) after `result`, the outcome of work done
-    /// with this GPU: validation messages fail a run that worked, and a run
-    /// that failed names them beside its own error.
-    pub fn finish<T>(self, result: anyhow::Result<T>) -> anyhow::Result<(T, ValidationReport)> {
-        match result {
-            Ok(value) => {
-                let report = self.shutdown();
-                report.check()?;
-                Ok((value, report))
-            }
-            Err(e) => Err(self.fail(e)),
-        }
-    }
-
-    /// Tears down after `error`, and returns it, naming validation
-    /// messages beside it when there were any.
-    pub fn fail(self, error: anyhow::Error) -> anyhow::Error {
-        match self.shutdown().check() {
-            Ok(()) => error,
-            Err(validation) => error.context(validation.to_string()),
-        }
-    }
-
     /// Tears the device and instance down and reports what validation said
     /// by the end, their destruction included. An object still alive here
     /// (held elsewhere, or leaked) keeps the device alive: each one counts
