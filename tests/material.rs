@@ -484,3 +484,49 @@ fn maps_without_the_channels_they_need_are_refused() {
     .unwrap();
     Appearance::load(&scene, &scene.terrain_info().unwrap()).unwrap();
 }
+
+/// The lightmap cache gives back exactly what the bake gives, and a
+/// missing, truncated or foreign entry is baked again, never trusted.
+#[test]
+fn the_lightmap_cache_returns_the_bake_and_survives_bad_entries() {
+    let info =
+        TerrainInfo::new(noise_map(65, 49, 3), DVec2::new(4.0, 3.0), 16, DVec2::ZERO).unwrap();
+    let sun = glam::DVec3::new(0.6, 0.5, -0.3);
+    let baked = vkterrain::terrain::shading::bake_lightmap(&info, sun);
+    let dir = tempfile::tempdir().unwrap();
+    let cached = |d: Option<&std::path::Path>| vkterrain::material::cached_lightmap(d, &info, sun);
+    assert_eq!(cached(None), baked, "without a cache directory");
+    assert_eq!(cached(Some(dir.path())), baked, "first launch: baked");
+    let entries: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(entries.len(), 1, "{entries:?}");
+    let entry = &entries[0];
+    assert_eq!(
+        std::fs::metadata(entry).unwrap().len(),
+        24 + baked.len() as u64
+    );
+    assert_eq!(cached(Some(dir.path())), baked, "second launch: cached");
+    // Truncated, then another format's bytes: baked again and rewritten.
+    let full = std::fs::read(entry).unwrap();
+    for bad in [
+        full[..full.len() / 2].to_vec(),
+        [b"NOTOURS!".to_vec(), full[8..].to_vec()].concat(),
+    ] {
+        std::fs::write(entry, &bad).unwrap();
+        assert_eq!(cached(Some(dir.path())), baked);
+        assert_eq!(
+            std::fs::read(entry).unwrap(),
+            full,
+            "the entry is rewritten"
+        );
+    }
+    // Another sun is another entry.
+    let other = glam::DVec3::new(-0.6, 0.5, 0.3);
+    assert_eq!(
+        vkterrain::material::cached_lightmap(Some(dir.path()), &info, other),
+        vkterrain::terrain::shading::bake_lightmap(&info, other)
+    );
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+}

@@ -3,6 +3,7 @@
 //! baked lightmap. Only what the scene names is loaded. Pure Rust: the
 //! renderer uploads what this builds.
 
+pub mod cache;
 pub mod generate;
 mod mips;
 
@@ -214,7 +215,7 @@ impl Appearance {
                 width: info.cols() as u32,
                 height: info.rows() as u32,
                 layers: 1,
-                levels: vec![bake_lightmap(info, sun)],
+                levels: vec![cached_lightmap(cache::dir().as_deref(), info, sun)],
             }
         });
         Ok(Appearance { material, lightmap })
@@ -226,6 +227,30 @@ impl Appearance {
             .as_ref()
             .map_or(0.0, Material::max_displacement)
     }
+}
+
+/// `bake_lightmap(info, sun)`, from the cache in `dir` when an earlier
+/// launch baked the same heights, spacing and sun (see `cache`).
+pub fn cached_lightmap(
+    dir: Option<&std::path::Path>,
+    info: &TerrainInfo,
+    sun: glam::DVec3,
+) -> Vec<u8> {
+    use crate::terrain::shading::{LIGHTMAP_FINE_STEPS, LIGHTMAP_SOFTNESS_DEG};
+    let heights: &[u8] = bytemuck::cast_slice(info.heightmap().heights());
+    let numbers = [
+        info.spacing().x,
+        info.spacing().y,
+        sun.x,
+        sun.y,
+        sun.z,
+        LIGHTMAP_SOFTNESS_DEG,
+        LIGHTMAP_FINE_STEPS,
+    ]
+    .map(f64::to_bits);
+    let key = cache::key((heights, info.cols(), info.rows(), numbers));
+    let len = info.cols() * info.rows();
+    cache::load_or_compute(dir, "lightmap", key, len, || bake_lightmap(info, sun))
 }
 
 /// Reads an asset as an image, refusing oversized ones before decoding.

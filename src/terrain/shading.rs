@@ -135,7 +135,7 @@ pub const LIGHTMAP_SOFTNESS_DEG: f64 = 1.5;
 /// cells away, then steps of this fraction of the distance: far occluders
 /// need a horizon angle, not every cell (a 1025^2 map bakes about 4x
 /// faster).
-const LIGHTMAP_FINE_STEPS: f64 = 24.0;
+pub const LIGHTMAP_FINE_STEPS: f64 = 24.0;
 
 /// Sunlight visibility per sample (row-major, 0 shadowed .. 255 lit) for a
 /// light in direction `to_light`: from each sample, march the heightmap
