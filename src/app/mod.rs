@@ -250,6 +250,17 @@ impl ApplicationHandler for App {
     }
 }
 
+/// What `Graphics::build` makes on the device, in the order it is made:
+/// the surface, the swapchain, the renderer, the frames' semaphores and
+/// command slots.
+type GraphicsParts = (
+    Arc<Surface>,
+    Swapchain,
+    TerrainRenderer,
+    Vec<Semaphore>,
+    CommandSlots,
+);
+
 impl Graphics {
     /// The device, the window's surface, a first swapchain (its format is
     /// the pipelines'), the renderer and the frames in flight.
@@ -265,16 +276,23 @@ impl Graphics {
         })
         .context("starting Vulkan")?;
         match Self::build(&gpu, window, options) {
-            Ok(graphics) => Ok(Graphics { gpu, ..graphics }),
+            Ok((surface, swapchain, renderer, image_available, commands)) => Ok(Graphics {
+                commands,
+                image_available,
+                screenshot_buffer: None,
+                renderer,
+                swapchain: Some(swapchain),
+                surface,
+                gpu,
+            }),
             // What was built is gone by now; validation is counted after the
             // device goes, so a leak on this path is reported too.
             Err(e) => Err(with_validation(e, &gpu.shutdown())),
         }
     }
 
-    /// Everything but the device; `gpu` in the result is a second handle
-    /// to the same device, replaced by the caller.
-    fn build(gpu: &Gpu, window: &Arc<Window>, options: &DemoOptions) -> Result<Graphics> {
+    /// Everything but the device, in the order it is made.
+    fn build(gpu: &Gpu, window: &Arc<Window>, options: &DemoOptions) -> Result<GraphicsParts> {
         let size = window.inner_size();
         let device = &gpu.device;
         let surface = Arc::new(Surface::new(device, Arc::clone(window))?);
@@ -305,28 +323,31 @@ impl Graphics {
         let image_available = (0..FRAMES_IN_FLIGHT)
             .map(|i| device.create_semaphore(&format!("demo.image_available[{i}]")))
             .collect::<crate::vk::Result<Vec<_>>>()?;
-        Ok(Graphics {
-            commands: device.create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?,
-            image_available,
-            screenshot_buffer: None,
-            renderer,
-            swapchain: Some(swapchain),
-            surface,
-            gpu: Gpu {
-                device: device.clone(),
-            },
-        })
+        let commands = device.create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?;
+        Ok((surface, swapchain, renderer, image_available, commands))
     }
-}
 
-impl Graphics {
     /// Drops every object in field order, then the device, and reports
     /// validation counted after its destruction.
     fn shutdown(self) -> ValidationReport {
-        let gpu = Gpu {
-            device: self.gpu.device.clone(),
-        };
-        drop(self);
+        let Graphics {
+            commands,
+            image_available,
+            screenshot_buffer,
+            renderer,
+            swapchain,
+            surface,
+            gpu,
+        } = self;
+        // A tuple drops front to back: the field order, before the device.
+        drop((
+            commands,
+            image_available,
+            screenshot_buffer,
+            renderer,
+            swapchain,
+            surface,
+        ));
         gpu.shutdown()
     }
 }

@@ -279,26 +279,26 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// Whether `path` is built, with line pipelines when `wireframe`.
-    fn has(&self, path: RenderPath, wireframe: bool) -> bool {
-        let pipelines = match path {
-            RenderPath::Tess => self.tess.as_ref().map(|t| &t.error_pipelines),
+    /// The pipelines of `path` when it is built (the tess path's two sets
+    /// are always built together, with or without lines).
+    fn path_pipelines(&self, path: RenderPath) -> Option<&PathPipelines> {
+        match path {
+            RenderPath::Tess => self.tess.as_ref().map(|t| &t.pipelines),
             RenderPath::Geomip => self.geomip.as_ref().map(|g| &g.pipelines),
             RenderPath::Brute => self.brute.as_ref().map(|b| &b.pipelines),
-        };
-        pipelines.is_some_and(|p| !wireframe || p.wireframe.is_some())
+        }
+    }
+
+    /// Whether `path` is built, with line pipelines when `wireframe`.
+    fn has(&self, path: RenderPath, wireframe: bool) -> bool {
+        self.path_pipelines(path)
+            .is_some_and(|p| !wireframe || p.wireframe.is_some())
     }
 
     /// Builds `path` (again, with line pipelines, when it lacks them).
     fn build(&mut self, terrain: &Terrain, path: RenderPath, wireframe: bool) -> Result<()> {
         // A path built before keeps its line pipelines.
-        let wireframe = wireframe
-            || match path {
-                RenderPath::Tess => self.tess.as_ref().map(|t| &t.pipelines),
-                RenderPath::Geomip => self.geomip.as_ref().map(|g| &g.pipelines),
-                RenderPath::Brute => self.brute.as_ref().map(|b| &b.pipelines),
-            }
-            .is_some_and(|p| p.wireframe.is_some());
+        let wireframe = wireframe || self.has(path, true);
         match path {
             RenderPath::Tess => {
                 // The tess path's error-bounded factors read the per-patch

@@ -96,14 +96,6 @@ impl Device {
 }
 
 impl CommandSlots {
-    pub fn len(&self) -> usize {
-        self.slots.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.slots.is_empty()
-    }
-
     /// Waits for slot `slot`'s last submission. True when there was one,
     /// so what it wrote (queries, readbacks) can be read now.
     pub fn wait(&self, slot: usize) -> Result<bool> {

@@ -3,7 +3,7 @@
 use std::collections::BTreeMap;
 use std::ffi::{c_char, CStr, CString};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::AtomicU64;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use ash::vk;
@@ -334,7 +334,7 @@ impl Device {
             .enabled_extension_names(&extension_names)
             .push_next(&mut v13);
         // SAFETY: the create info points at locals alive for the call.
-        let guard = DeviceGuard(Some(
+        let mut guard = DeviceGuard(Some(
             unsafe { instance.raw.create_device(best.physical, &info, None) }
                 .context("creating the Vulkan device")?,
         ));
@@ -368,7 +368,6 @@ impl Device {
             .as_ref()
             .map(|_| ash::ext::debug_utils::Device::new(&instance.raw, &raw));
         // From here the shared state's Drop destroys the device.
-        let mut guard = guard;
         guard.0 = None;
         let device = Device(Arc::new(DeviceShared {
             physical: best.physical,
@@ -415,8 +414,16 @@ impl DeviceShared {
         self.transient_pool.lock().expect("command pool lock")
     }
 
-    pub(super) fn memory_budget_bytes(&self) -> &AtomicU64 {
-        &self.memory_budget
+    /// Refuses allocations that would bring the bytes in use past `budget`
+    /// (None: no limit), with an error naming the resource.
+    pub fn set_memory_budget(&self, budget: Option<u64>) {
+        self.memory_budget
+            .store(budget.unwrap_or(u64::MAX), Ordering::Relaxed);
+    }
+
+    pub fn memory_budget(&self) -> Option<u64> {
+        let b = self.memory_budget.load(Ordering::Relaxed);
+        (b != u64::MAX).then_some(b)
     }
 
     /// Records an owned object as alive until `forget_object`.

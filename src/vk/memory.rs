@@ -6,7 +6,6 @@ use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
 use std::mem::ManuallyDrop;
-use std::sync::atomic::Ordering;
 
 use super::commands::Recorder;
 use super::device::{Device, DeviceShared};
@@ -129,18 +128,6 @@ impl DeviceShared {
     /// Bytes currently allocated in all.
     pub fn memory_in_use(&self) -> u64 {
         self.allocator().generate_report().total_allocated_bytes
-    }
-
-    /// Refuses allocations that would bring the bytes in use past `budget`
-    /// (None: no limit), with an error naming the resource.
-    pub fn set_memory_budget(&self, budget: Option<u64>) {
-        self.memory_budget_bytes()
-            .store(budget.unwrap_or(u64::MAX), Ordering::Relaxed);
-    }
-
-    pub fn memory_budget(&self) -> Option<u64> {
-        let b = self.memory_budget_bytes().load(Ordering::Relaxed);
-        (b != u64::MAX).then_some(b)
     }
 }
 

@@ -265,7 +265,6 @@ impl Swapchain {
         // SAFETY: the swapchain was just created.
         let images = unsafe { swapchain.loader.get_swapchain_images(raw) }
             .context("listing swapchain images")?;
-        swapchain.images = images.clone();
         for (i, &image) in images.iter().enumerate() {
             device.set_name(image, &format!("swapchain.image[{i}]"));
             let view_info = vk::ImageViewCreateInfo::default()
@@ -287,6 +286,7 @@ impl Swapchain {
                 .render_finished
                 .push(device.create_semaphore(&format!("swapchain.render_finished[{i}]"))?);
         }
+        swapchain.images = images;
         Ok(swapchain)
     }
 
