@@ -1,8 +1,9 @@
-// Material layers: parameters, weights and displacement. Included after
-// terrain_common.glsl by the stages of scenes with layers (MATERIAL), with
-// DISPLACE in the vertex stages of scenes whose layers displace, BLEND_MAPS
-// in blend-map mode and NORMAL_MAPS when a layer has a normal map. The
-// layer and blend-map counts are specialisation constants.
+// Material layers: parameters, weights, projections and displacement.
+// Included after terrain_common.glsl by the stages of scenes with layers
+// (MATERIAL), with DISPLACE in the vertex stages of scenes whose layers
+// displace, BLEND_MAPS in blend-map mode, NORMAL_MAPS when a layer has a
+// normal map and TRIPLANAR when steep ground is projected from the side.
+// The layer and blend-map counts are specialisation constants.
 
 layout(constant_id = SPEC_LAYER_COUNT) const uint LAYER_COUNT = 1u;
 layout(constant_id = SPEC_BLEND_MAP_COUNT) const uint BLEND_MAP_COUNT = 1u;
@@ -77,11 +78,57 @@ void rule_weights(float height, float normal_y, out float w[MAX_LAYERS]) {
 }
 #endif
 
-// Texture coordinates of layer i at local (x, z).
-vec2 layer_uv(int i, vec2 xz) {
+// Texture coordinates of layer i at plane coordinates q (local (x, z) for
+// the projection from above).
+vec2 layer_uv(int i, vec2 q) {
     vec4 m = material.layers[i].tile;
-    return vec2(dot(m.xy, xz), dot(m.zw, xz)) + material.layers[i].offset.xy;
+    return vec2(dot(m.xy, q), dot(m.zw, q)) + material.layers[i].offset.xy;
 }
+
+// Projections of the layers' maps, by the axis they look along: 0 along
+// x, 1 from above (along y), 2 along z. Every layer maps the plane
+// coordinates of each through its own tile matrix, so a texture keeps
+// its scale on every face.
+const int PROJECT_X = 0;
+const int PROJECT_Y = 1;
+const int PROJECT_Z = 2;
+
+// Plane coordinates of local point p = (x, height, z) in projection a:
+// (z, -y) along x, (x, z) from above, (x, -y) along z.
+vec2 projected(int a, vec3 p) {
+    return a == PROJECT_X ? vec2(p.z, -p.y) : a == PROJECT_Y ? p.xz : vec2(p.x, -p.y);
+}
+
+// The local direction of plane direction d of projection a, lifted along
+// the projection's axis onto the surface of unit normal n (whose
+// component along that axis is not 0 where the projection is used).
+vec3 lifted(int a, vec2 d, vec3 n) {
+    vec3 t = a == PROJECT_X ? vec3(0.0, -d.y, d.x)
+           : a == PROJECT_Y ? vec3(d.x, 0.0, d.y)
+                            : vec3(d.x, -d.y, 0.0);
+    t[a] = -dot(t, n) / n[a];
+    return normalize(t);
+}
+
+#ifdef TRIPLANAR
+// Where the side projections start: an axis takes part once the normal's
+// component along it passes this. Ground under about 33 degrees of slope
+// is projected from above alone, ground over about 57 degrees from the
+// sides alone, and every unit normal has a component past it (at least
+// 1 / sqrt(3)).
+const float TRIPLANAR_START = 0.55;
+
+// Weight of each projection (x, y, z) at unit normal n, summing to 1.
+vec3 projection_weights(vec3 n) {
+    vec3 w = max(abs(n) - TRIPLANAR_START, 0.0);
+    w *= w;
+    return w / (w.x + w.y + w.z);
+}
+#else
+vec3 projection_weights(vec3 n) {
+    return vec3(0.0, 1.0, 0.0);
+}
+#endif
 
 #ifdef DISPLACE
 layout(set = 0, binding = BINDING_HEIGHT_MAPS) uniform sampler2DArray height_maps;
@@ -102,12 +149,22 @@ float layer_displacement(vec2 g, float h) {
     rule_weights(normalised_height(h), gradient_normal(height_gradient(g)).y, w);
 #endif
     vec2 xz = grid_to_local(g);
+    vec3 p = vec3(xz.x, h, xz.y);
+    // Projected like the colour and normal maps, so the displaced surface
+    // and its shading agree.
+    vec3 pw = projection_weights(gradient_normal(height_gradient(g)));
     float d = 0.0;
     for (int i = 0; i < int(LAYER_COUNT); ++i) {
         int layer = int(material.layers[i].band.x);
         if (layer >= 0 && w[i] > 0.0) {
-            float s = textureLod(height_maps, vec3(layer_uv(i, xz), float(layer)),
-                                 material.layers[i].band.w).r;
+            float s = 0.0;
+            for (int a = 0; a < 3; ++a) {
+                if (pw[a] > 0.0) {
+                    s += pw[a] * textureLod(height_maps,
+                        vec3(layer_uv(i, projected(a, p)), float(layer)),
+                        material.layers[i].band.w).r;
+                }
+            }
             d += w[i] * material.layers[i].offset.z * (s - 0.5);
         }
     }

@@ -54,11 +54,12 @@ vec3 lighting(vec3 n) {
 }
 
 #ifdef MATERIAL
-// Blended colour and normal of the layers at this fragment. The tangent
-// frame follows each layer's texture axes over the surface: u and v run
-// along the rows of its tile matrix, lifted onto the surface by the height
-// gradient.
-void layered(vec2 gradient, vec3 n, out vec3 albedo, out vec3 normal) {
+// Blended colour and normal of the layers at this fragment, each layer's
+// maps projected as `projection_weights` says (from above alone but with
+// TRIPLANAR). A projection's tangent frame follows the layer's texture
+// axes in its plane: u and v run along the rows of the tile matrix,
+// lifted onto the surface along the projection's axis.
+void layered(vec3 n, out vec3 albedo, out vec3 normal) {
     float w[MAX_LAYERS];
 #ifdef BLEND_MAPS
     vec2 size = vec2(textureSize(blend_maps, 0).xy);
@@ -70,10 +71,13 @@ void layered(vec2 gradient, vec3 n, out vec3 albedo, out vec3 normal) {
     rule_weights(normalised_height(in_height), n.y, w);
 #endif
     vec2 xz = grid_to_local(in_grid);
-    // Derivatives taken here, in uniform control flow, so layers whose
-    // weight is 0 can be skipped without losing mip selection.
-    vec2 dx = dFdx(xz);
-    vec2 dy = dFdy(xz);
+    vec3 p = vec3(xz.x, in_height, xz.y);
+    // Derivatives taken here, in uniform control flow, so layers and
+    // projections whose weight is 0 can be skipped without losing mip
+    // selection.
+    vec3 dx = dFdx(p);
+    vec3 dy = dFdy(p);
+    vec3 pw = projection_weights(n);
     albedo = vec3(0.0);
     normal = vec3(0.0);
     for (int i = 0; i < int(LAYER_COUNT); ++i) {
@@ -81,25 +85,31 @@ void layered(vec2 gradient, vec3 n, out vec3 albedo, out vec3 normal) {
             continue;
         }
         vec4 m = material.layers[i].tile;
-        vec2 uv = layer_uv(i, xz);
-        vec2 gx = vec2(dot(m.xy, dx), dot(m.zw, dx));
-        vec2 gy = vec2(dot(m.xy, dy), dot(m.zw, dy));
-        albedo += w[i] * textureGrad(diffuse_maps, vec3(uv, float(i)), gx, gy).rgb;
-        vec3 layer_normal = n;
+        for (int a = 0; a < 3; ++a) {
+            if (pw[a] <= 0.0) {
+                continue;
+            }
+            float weight = w[i] * pw[a];
+            vec2 uv = layer_uv(i, projected(a, p));
+            vec2 qx = projected(a, dx);
+            vec2 qy = projected(a, dy);
+            vec2 gx = vec2(dot(m.xy, qx), dot(m.zw, qx));
+            vec2 gy = vec2(dot(m.xy, qy), dot(m.zw, qy));
+            albedo += weight * textureGrad(diffuse_maps, vec3(uv, float(i)), gx, gy).rgb;
+            vec3 layer_normal = n;
 #ifdef NORMAL_MAPS
-        int nl = int(material.layers[i].offset.w);
-        if (nl >= 0) {
-            vec3 t = textureGrad(normal_maps, vec3(uv, float(nl)), gx, gy).xyz * 2.0 - 1.0;
-            vec2 du = normalize(m.xy);
-            vec2 dv = normalize(m.zw);
-            vec3 tu = normalize(vec3(du.x, dot(gradient, du), du.y));
-            vec3 tv = normalize(vec3(dv.x, dot(gradient, dv), dv.y));
-            // The third axis along the surface normal, whatever the
-            // handedness of (u, v) on the ground.
-            layer_normal = normalize(t.x * tu + t.y * tv + t.z * n);
-        }
+            int nl = int(material.layers[i].offset.w);
+            if (nl >= 0) {
+                vec3 t = textureGrad(normal_maps, vec3(uv, float(nl)), gx, gy).xyz * 2.0 - 1.0;
+                vec3 tu = lifted(a, normalize(m.xy), n);
+                vec3 tv = lifted(a, normalize(m.zw), n);
+                // The third axis along the surface normal, whatever the
+                // handedness of (u, v) on the surface.
+                layer_normal = normalize(t.x * tu + t.y * tv + t.z * n);
+            }
 #endif
-        normal += w[i] * layer_normal;
+            normal += weight * layer_normal;
+        }
     }
     normal = normalize(normal);
 }
@@ -118,7 +128,7 @@ void main() {
         albedo = lod_color(in_inside_factor);
     } else {
 #ifdef MATERIAL
-        layered(gradient, n, albedo, n);
+        layered(n, albedo, n);
 #else
         albedo = height_color(clamp(normalised_height(in_height), 0.0, 1.0));
 #endif

@@ -50,6 +50,12 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
     vec4 viewport;
     // xyz: the camera's right vector.
     vec4 camera_right;
+    // Inverse of view_proj: clip-space points back to camera-relative ones.
+    mat4 sky_ray;
+    // rgb: the sky at the horizon; w: cosine of the sun disc's radius.
+    vec4 sky_horizon;
+    // rgb: the sky overhead.
+    vec4 sky_zenith;
 } frame;
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with

@@ -11,24 +11,48 @@
 pub enum Placing {
     /// The heightmap alone.
     Plain,
-    /// Height-map displacement, weighted by height bands (rules mode).
-    Displaced,
-    /// Height-map displacement, weighted by blend maps.
-    DisplacedByBlendMaps,
+    /// Height-map displacement, weighted by blend maps or (without) by
+    /// height bands; sampled in three projections when `triplanar`.
+    Displaced { blend_maps: bool, triplanar: bool },
 }
 
 impl Placing {
-    pub const ALL: [Placing; 3] = [
+    pub const ALL: [Placing; 5] = [
         Placing::Plain,
-        Placing::Displaced,
-        Placing::DisplacedByBlendMaps,
+        Placing::Displaced {
+            blend_maps: false,
+            triplanar: false,
+        },
+        Placing::Displaced {
+            blend_maps: true,
+            triplanar: false,
+        },
+        Placing::Displaced {
+            blend_maps: false,
+            triplanar: true,
+        },
+        Placing::Displaced {
+            blend_maps: true,
+            triplanar: true,
+        },
     ];
 
-    fn defines(self) -> &'static [&'static str] {
+    fn defines(self) -> Vec<&'static str> {
         match self {
-            Placing::Plain => &[],
-            Placing::Displaced => &["MATERIAL", "DISPLACE"],
-            Placing::DisplacedByBlendMaps => &["MATERIAL", "DISPLACE", "BLEND_MAPS"],
+            Placing::Plain => Vec::new(),
+            Placing::Displaced {
+                blend_maps,
+                triplanar,
+            } => {
+                let mut d = vec!["MATERIAL", "DISPLACE"];
+                if blend_maps {
+                    d.push("BLEND_MAPS");
+                }
+                if triplanar {
+                    d.push("TRIPLANAR");
+                }
+                d
+            }
         }
     }
 }
@@ -38,12 +62,13 @@ impl Placing {
 pub enum Shading {
     /// Height colours; a lightmap when `lightmap`.
     Heights { lightmap: bool },
-    /// Material layers, with their normal maps, blend maps and a lightmap
-    /// as given.
+    /// Material layers, with their normal maps, blend maps, a lightmap
+    /// and triplanar projection as given.
     Material {
         normal_maps: bool,
         blend_maps: bool,
         lightmap: bool,
+        triplanar: bool,
     },
 }
 
@@ -53,11 +78,12 @@ impl Shading {
             Shading::Heights { lightmap: false },
             Shading::Heights { lightmap: true },
         ];
-        for bits in 0..8u32 {
+        for bits in 0..16u32 {
             all.push(Shading::Material {
                 normal_maps: bits & 1 != 0,
                 blend_maps: bits & 2 != 0,
                 lightmap: bits & 4 != 0,
+                triplanar: bits & 8 != 0,
             });
         }
         all
@@ -76,12 +102,14 @@ impl Shading {
                 normal_maps,
                 blend_maps,
                 lightmap,
+                triplanar,
             } => {
                 let mut d = vec!["MATERIAL"];
                 for (on, name) in [
                     (normal_maps, "NORMAL_MAPS"),
                     (blend_maps, "BLEND_MAPS"),
                     (lightmap, "LIGHTMAP"),
+                    (triplanar, "TRIPLANAR"),
                 ] {
                     if on {
                         d.push(name);
@@ -107,6 +135,8 @@ pub enum Shader {
     TerrainFrag(Shading),
     GeomipVert(Placing),
     BruteVert(Placing),
+    SkyVert,
+    SkyFrag,
     MirrorCheckComp,
 }
 
@@ -128,6 +158,8 @@ impl Shader {
         for shading in Shading::all() {
             all.push(Shader::TerrainFrag(shading));
         }
+        all.push(Shader::SkyVert);
+        all.push(Shader::SkyFrag);
         all.push(Shader::MirrorCheckComp);
         all
     }
@@ -141,6 +173,8 @@ impl Shader {
             Shader::TerrainFrag(_) => "terrain.frag",
             Shader::GeomipVert(_) => "geomip.vert",
             Shader::BruteVert(_) => "brute.vert",
+            Shader::SkyVert => "sky.vert",
+            Shader::SkyFrag => "sky.frag",
             Shader::MirrorCheckComp => "mirror_check.comp",
         }
     }
@@ -152,15 +186,19 @@ impl Shader {
                 placing,
                 equal_spacing,
             } => {
-                let mut d = placing.defines().to_vec();
+                let mut d = placing.defines();
                 if equal_spacing {
                     d.push("EQUAL_SPACING");
                 }
                 d
             }
-            Shader::GeomipVert(placing) | Shader::BruteVert(placing) => placing.defines().to_vec(),
+            Shader::GeomipVert(placing) | Shader::BruteVert(placing) => placing.defines(),
             Shader::TerrainFrag(shading) => shading.defines(),
-            Shader::TerrainVert | Shader::TerrainTesc | Shader::MirrorCheckComp => Vec::new(),
+            Shader::TerrainVert
+            | Shader::TerrainTesc
+            | Shader::SkyVert
+            | Shader::SkyFrag
+            | Shader::MirrorCheckComp => Vec::new(),
         }
     }
 

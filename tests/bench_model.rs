@@ -7,7 +7,8 @@ use common::*;
 use glam::DVec2;
 use vkterrain::bench::cameras::{flythrough, named_views};
 use vkterrain::bench::error::{ErrorHistogram, PixelError};
-use vkterrain::bench::report::{check_targets, csv, markdown, merge};
+use vkterrain::bench::look::LookRow;
+use vkterrain::bench::report::{check_targets, csv, markdown, merge, Results};
 use vkterrain::bench::run::{configs, Config, Row, RowLod, RowPath, QUICK_TAUS, TAUS};
 use vkterrain::terrain::{DistanceLod, TerrainInfo};
 
@@ -278,7 +279,43 @@ fn targets_are_read_from_the_rows() {
     assert_eq!(c.tess_vs_best, Some(4.0 / 3.0));
     assert_eq!(c.geomip_p99, Some(0.2));
     assert_eq!(c.geomip_vs_best, Some(20.0 / 3.0));
-    let md = markdown(&rows, "## Why\n\nBecause.", "pareto.png");
+    let look_row = |config: &str, gpu_ms: f64| LookRow {
+        scene: "default".into(),
+        device: "llvmpipe".into(),
+        driver: "Mesa".into(),
+        width: 1280,
+        height: 720,
+        config: config.into(),
+        triplanar: false,
+        sky: config == "+ sky",
+        samples: 1,
+        frames: 5,
+        gpu_ms: Some(gpu_ms),
+    };
+    let look = [look_row("plain", 10.0), look_row("+ sky", 11.0)];
+    let without_look = markdown(
+        &Results {
+            rows: &rows,
+            look: &[],
+        },
+        "",
+        "pareto.png",
+    );
+    assert!(!without_look.contains("## What the picture costs"));
+    let md = markdown(
+        &Results {
+            rows: &rows,
+            look: &look,
+        },
+        "## Why\n\nBecause.",
+        "pareto.png",
+    );
+    assert!(md.contains("## What the picture costs"));
+    assert!(
+        md.contains("| + sky | 1 | 11.00 | +10.0 % |"),
+        "each addition over the plain row"
+    );
+    assert!(md.contains("| plain | 1 | 10.00 | +0.0 % |"));
     assert!(
         md.contains("|T.y - R.y| * K / |R - eye|"),
         "the definition is written down"

@@ -330,37 +330,54 @@ fn a_textured_scene_draws_on_a_terrain_that_is_not_2n_plus_1() {
         return;
     }
     // 100x70 samples with uneven spacing: texel-centre addressing of the
-    // lightmap and displacement on every path, validation-clean.
-    let map = Heightmap::from_fn(100, 70, |r, c| ((r * 7 + c * 13) % 50) as f32).unwrap();
-    let info = TerrainInfo::new(map, DVec2::new(3.0, 5.0), 8, DVec2::ZERO).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let mut scene = displaced_plane(&dir, 10.0);
-    scene.lightmap = true;
-    let appearance = Appearance::load(&scene, &info).unwrap();
-    let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
-    let camera: Camera = scene.camera_for(terrain.info());
-    let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 64, false);
-    let images: Vec<_> = [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute]
-        .into_iter()
-        .map(|path| {
-            // Near full resolution everywhere, so the paths draw the same
-            // surface of this sawtooth map.
-            let settings = RenderSettings {
-                path,
-                lod_metric: LodMetric::Error(0.25),
-                ..RenderSettings::default()
-            };
-            gpu.render(&camera, &settings).rgba_image()
-        })
-        .collect();
-    gpu.finish();
-    // The terrain fills most of the view, and every path draws the same
-    // displaced, lit surface up to its triangulation.
-    let background = *images[2].get_pixel(0, 0);
-    let drawn = images[2].pixels().filter(|&&p| p != background).count();
-    assert!(drawn * 2 > 64 * 64, "brute drew {drawn} pixels of 4096");
-    assert_images_match("uneven-textured-tess", &images[0], &images[2], 24, 0.05);
-    assert_images_match("uneven-textured-geomip", &images[1], &images[2], 24, 0.05);
+    // lightmap and displacement on every path, validation-clean, projected
+    // from above and triplanar (the sawtooth's slopes take the sides).
+    for triplanar in [false, true] {
+        let map = Heightmap::from_fn(100, 70, |r, c| ((r * 7 + c * 13) % 50) as f32).unwrap();
+        let info = TerrainInfo::new(map, DVec2::new(3.0, 5.0), 8, DVec2::ZERO).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let mut scene = displaced_plane(&dir, 10.0);
+        scene.lightmap = true;
+        scene.material.as_mut().unwrap().triplanar = triplanar;
+        let appearance = Appearance::load(&scene, &info).unwrap();
+        let terrain = Terrain::new(info, appearance.y_margin()).unwrap();
+        let camera: Camera = scene.camera_for(terrain.info());
+        let mut gpu = GpuScene::with_appearance(terrain, &appearance, 64, 64, false);
+        let images: Vec<_> = [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute]
+            .into_iter()
+            .map(|path| {
+                // Near full resolution everywhere, so the paths draw the
+                // same surface of this sawtooth map.
+                let settings = RenderSettings {
+                    path,
+                    lod_metric: LodMetric::Error(0.25),
+                    ..RenderSettings::default()
+                };
+                gpu.render(&camera, &settings).rgba_image()
+            })
+            .collect();
+        gpu.finish();
+        // The terrain fills most of the view, and every path draws the
+        // same displaced, lit surface up to its triangulation.
+        let background = *images[2].get_pixel(0, 0);
+        let drawn = images[2].pixels().filter(|&&p| p != background).count();
+        assert!(drawn * 2 > 64 * 64, "brute drew {drawn} pixels of 4096");
+        let name = if triplanar { "-triplanar" } else { "" };
+        assert_images_match(
+            &format!("uneven-textured{name}-tess"),
+            &images[0],
+            &images[2],
+            24,
+            0.05,
+        );
+        assert_images_match(
+            &format!("uneven-textured{name}-geomip"),
+            &images[1],
+            &images[2],
+            24,
+            0.05,
+        );
+    }
 }
 
 #[test]
@@ -381,6 +398,7 @@ fn anisotropy_follows_the_scene_within_the_device() {
         max_image_dimension_2d: 4096,
         max_image_array_layers: 256,
         max_sampler_anisotropy: 16.0,
+        sample_counts: vec![1, 4],
     };
     use vkterrain::render::material::anisotropy_for;
     let gpu = caps("discrete GPU", true);
@@ -521,4 +539,112 @@ fn odd_sized_and_odd_format_textures_load_and_draw() {
     );
     assert_images_match("odd-format-tess", &images[0], &images[2], 24, 0.05);
     assert_images_match("odd-format-geomip", &images[1], &images[2], 24, 0.05);
+}
+
+/// A scene over a 33x33 map with a 64 m step between columns 15 and 16 (a
+/// vertical cliff facing -x), one layer of a checker of 4 m squares
+/// (32 m per repeat), projected triplanar or from above.
+fn cliff_scene(dir: &tempfile::TempDir, triplanar: bool) -> Scene {
+    let heights = image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_fn(33, 33, |x, _| {
+        image::Luma([if x >= 16 { 65535 } else { 0 }])
+    });
+    heights.save(dir.path().join("cliff.png")).unwrap();
+    let checker = image::RgbImage::from_fn(64, 64, |x, y| {
+        if (x / 8 + y / 8) % 2 == 0 {
+            image::Rgb([200, 200, 200])
+        } else {
+            image::Rgb([40, 40, 40])
+        }
+    });
+    checker.save(dir.path().join("checker.png")).unwrap();
+    let text = format!(
+        "[heightmap]\npath = \"cliff.png\"\nheight_scale = 64.0\ncell_spacing = 1.0\n\
+         [terrain]\ncells_per_patch = 16\n\
+         [material]\ntriplanar = {triplanar}\n\
+         [[material.layer]]\ndiffuse = \"checker.png\"\ntile_size = 32.0\n"
+    );
+    Scene::load(&temp_file(dir, "scene.toml", text.as_bytes())).unwrap()
+}
+
+/// Texture frequency down the cliff face over frequency across it: the
+/// sign changes of luminance about its mean per pixel, down the columns
+/// over along the rows, in the middle half of a face-on view. 1 for a
+/// texture at its own scale; near 0 for one smeared into vertical streaks.
+fn cliff_stretch(triplanar: bool) -> f64 {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = cliff_scene(&dir, triplanar);
+    let (terrain, appearance, settings) = prepare(&scene);
+    let info = terrain.info();
+    let origin = info.origin();
+    let face_x = origin.x + 0.5 * (info.local_x(15) + info.local_x(16));
+    let mid_z = origin.y + info.local_z(16);
+    let cam = camera([face_x - 40.0, 32.0, mid_z], [face_x, 32.0, mid_z], 55.0);
+    let (w, h) = (128u32, 128u32);
+    let mut gpu = GpuScene::with_appearance(terrain, &appearance, w, h, false);
+    let frame = gpu.render(
+        &cam,
+        &RenderSettings {
+            path: RenderPath::Brute,
+            ..settings
+        },
+    );
+    gpu.finish();
+    let image = frame.rgba_image();
+    let luma = |x: u32, y: u32| {
+        let p = image.get_pixel(x, y);
+        0.2126 * f64::from(p[0]) + 0.7152 * f64::from(p[1]) + 0.0722 * f64::from(p[2])
+    };
+    let (lo, hi) = (w / 4, 3 * w / 4);
+    for y in lo..hi {
+        for x in lo..hi {
+            assert!(
+                frame.readback.depth[(y * w + x) as usize] > 0.0,
+                "pixel {x},{y} of the middle shows the cliff"
+            );
+        }
+    }
+    let mean = (lo..hi)
+        .flat_map(|y| (lo..hi).map(move |x| (x, y)))
+        .map(|(x, y)| luma(x, y))
+        .sum::<f64>()
+        / f64::from((hi - lo) * (hi - lo));
+    let changes = |a: (u32, u32), b: (u32, u32)| {
+        usize::from((luma(a.0, a.1) > mean) != (luma(b.0, b.1) > mean))
+    };
+    let (mut across, mut down) = (0, 0);
+    for y in lo..hi {
+        for x in lo..hi - 1 {
+            across += changes((x, y), (x + 1, y));
+        }
+    }
+    for x in lo..hi {
+        for y in lo..hi - 1 {
+            down += changes((x, y), (x, y + 1));
+        }
+    }
+    assert!(
+        across > 10,
+        "the checker shows across the face: {across} changes"
+    );
+    down as f64 / across as f64
+}
+
+#[test]
+fn triplanar_projection_keeps_the_texture_scale_on_a_vertical_cliff() {
+    if skip_gpu() {
+        return;
+    }
+    let triplanar = cliff_stretch(true);
+    assert!(
+        (0.75..=1.33).contains(&triplanar),
+        "triplanar: vertical over horizontal frequency {triplanar:.3}, not about 1"
+    );
+    // Projected from above, the face smears into vertical streaks: the
+    // measure sees it.
+    let planar = cliff_stretch(false);
+    eprintln!("cliff stretch (vertical / horizontal frequency): triplanar {triplanar:.3}, from above {planar:.3}");
+    assert!(
+        planar < 0.2,
+        "from above: vertical over horizontal frequency {planar:.3}, expected streaks"
+    );
 }

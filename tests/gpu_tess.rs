@@ -1066,10 +1066,7 @@ fn paths_a_renderer_lacks_are_built_when_a_frame_asks() {
     let cam = crack_cameras(&terrain)[0].1;
     let mut full = GpuScene::new(terrain.clone(), 96, 64, true);
     let gpu = open_gpu(None);
-    let options = vkterrain::render::RendererOptions {
-        paths: vec![RenderPath::Geomip],
-        wireframe: false,
-    };
+    let options = vkterrain::render::RendererOptions::single_sample(vec![RenderPath::Geomip]);
     let (mut renderer, mut headless) =
         vkterrain::render::offscreen(&gpu, &terrain, &Appearance::default(), &options, (96, 64))
             .expect("a geomip renderer");

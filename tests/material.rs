@@ -80,7 +80,7 @@ fn lights_fog_and_layers_are_read() {
         [[lighting.light]]\ndirection = [0.0, 2.0, 0.0]\ncolor = [1.0, 0.5, 0.25]\nintensity = 2.0\n\
         [[lighting.light]]\ndirection = [1.0, 0.0, 0.0]\n\
         [fog]\nstart = 100.0\nrange = 400.0\ncolor = [0.5, 0.6, 0.7]\n\
-        [material]\ncliff_layer = 1\ncliff_slope = [20.0, 40.0]\n\
+        [material]\ncliff_layer = 1\ncliff_slope = [20.0, 40.0]\ntriplanar = true\n\
         [[material.layer]]\ndiffuse = \"TEX/grass.png\"\nheight_band = [0.2, 0.3]\n\
         [[material.layer]]\ndiffuse = \"TEX/rock.png\"\nnormal = \"TEX/rock-normal.png\"\n\
         height = \"TEX/rock-height.png\"\ntile_size = [10.0, 20.0]\ntile_rotation = 90.0\n\
@@ -111,7 +111,8 @@ fn lights_fog_and_layers_are_read() {
             half_width: 0.3
         })
     );
-    assert_eq!(m.layers[1].diffuse.line, 25);
+    assert!(m.triplanar);
+    assert_eq!(m.layers[1].diffuse.line, 26);
     assert_eq!(m.layers[1].diffuse.key, "material.layer[1].diffuse");
 
     let info = scene.terrain_info().unwrap();
@@ -123,6 +124,7 @@ fn lights_fog_and_layers_are_read() {
     assert_eq!(mat.diffuse.levels.len(), 9, "256x256 down to 1x1");
     assert_eq!(mat.normals.as_ref().unwrap().layers, 1);
     assert_eq!(mat.heights.as_ref().unwrap().format, TexelFormat::R8);
+    assert!(mat.triplanar, "carried to the loaded material");
     assert_eq!(mat.layers[1].normal_index, Some(0));
     assert_eq!(mat.layers[0].normal_index, None);
     // 90 degrees: world x runs along -v, z along u, at 1/10 and 1/20 repeats a metre.
@@ -134,6 +136,12 @@ fn lights_fog_and_layers_are_read() {
 #[test]
 fn scene_errors_name_the_key_and_line() {
     assert_refused("[material]\nlayers = 3\n", "layers", 7, "unknown field");
+    assert_refused(
+        "[material]\ntriplanar = \"yes\"\n[[material.layer]]\ndiffuse = \"x.png\"\n",
+        "triplanar",
+        7,
+        "invalid type",
+    );
     let nine = "[[material.layer]]\ndiffuse = \"TEX/grass.png\"\n".repeat(9);
     assert_refused(
         &format!("[material]\n{nine}"),

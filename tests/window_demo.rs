@@ -108,6 +108,9 @@ fn a_storm_of_resizes_and_minimises_stays_clean() {
     let stdout = demo_under_xvfb(
         &[
             "--validate",
+            // Unlit, so the frames are cheap: what is tested is the
+            // swapchain and its multisampled images rebuilt at every size.
+            "--flat",
             "--width",
             "320",
             "--height",

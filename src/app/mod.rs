@@ -56,6 +56,9 @@ pub struct DemoOptions {
     pub width: u32,
     pub height: u32,
     pub present_mode: vk::PresentModeKHR,
+    /// Samples per pixel; None: `render::DEFAULT_SAMPLES` where the device
+    /// can draw them.
+    pub samples: Option<u32>,
     /// Validation, disabled features, memory budget and injected faults
     /// (the window adds its surface's extensions).
     pub gpu: GpuOptions,
@@ -296,6 +299,11 @@ impl Graphics {
         let size = window.inner_size();
         let device = &gpu.device;
         let surface = Arc::new(Surface::new(device, Arc::clone(window))?);
+        let mut notes = Vec::new();
+        let samples = crate::render::sample_count(options.samples, &device.caps, &mut notes)?;
+        for note in notes {
+            log::warn!("{note}");
+        }
         let swapchain = Swapchain::new(
             device,
             &surface,
@@ -304,6 +312,7 @@ impl Graphics {
                 height: size.height.max(1),
             },
             options.present_mode,
+            samples,
             None,
         )
         .context("building the swapchain")?;
@@ -317,6 +326,7 @@ impl Graphics {
                 paths: paths(&device.caps),
                 // Line pipelines are cheap to have ready for F2.
                 wireframe: device.caps.fill_mode_non_solid,
+                samples,
             },
         )
         .context("preparing the terrain for the GPU")?;
@@ -433,6 +443,7 @@ impl Running {
                 height: size.height,
             },
             options.present_mode,
+            graphics.renderer.samples(),
             old,
         )
         .context("building the swapchain")?;

@@ -1,5 +1,6 @@
-//! What a benchmark run writes: results.csv, results.json, pareto.png and
-//! BENCHMARKS.md. Rows of earlier runs in the same directory are kept,
+//! What a benchmark run writes: results.csv, results.json, look.json,
+//! pareto.png and BENCHMARKS.md. Rows of earlier runs in the same
+//! directory are kept,
 //! except those of the same scene on the same device, which the new run
 //! replaces; so one directory can hold the default scene and the DEM, on
 //! lavapipe and on a real GPU, in one report.
@@ -11,6 +12,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use plotters::prelude::*;
 
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+use super::look::{extra_percent, LookRow};
 use super::run::{Row, RowLod, RowPath, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
 use crate::output::write_atomically;
 
@@ -30,8 +35,25 @@ pub const TARGET_LARGE_GPU_VS_BRUTE: f64 = 5.0;
 /// Rows already in `dir`, less those `fresh` replaces (same scene and
 /// device), followed by `fresh`.
 pub fn merge(dir: &Path, fresh: Vec<Row>) -> Result<Vec<Row>> {
-    let path = dir.join("results.json");
-    let mut rows: Vec<Row> = match std::fs::read_to_string(&path) {
+    merge_file(&dir.join("results.json"), fresh, |r| {
+        (r.scene.clone(), r.device.clone())
+    })
+}
+
+/// Look rows already in `dir` (look.json), less those `fresh` replaces
+/// (same scene and device), followed by `fresh`.
+pub fn merge_look(dir: &Path, fresh: Vec<LookRow>) -> Result<Vec<LookRow>> {
+    merge_file(&dir.join("look.json"), fresh, |r| {
+        (r.scene.clone(), r.device.clone())
+    })
+}
+
+fn merge_file<T: DeserializeOwned>(
+    path: &Path,
+    fresh: Vec<T>,
+    key: impl Fn(&T) -> (String, String),
+) -> Result<Vec<T>> {
+    let mut rows: Vec<T> = match std::fs::read_to_string(path) {
         Ok(text) => serde_json::from_str(&text).with_context(|| {
             format!(
                 "{}: not the results of an earlier run; remove it or choose another --out",
@@ -41,11 +63,8 @@ pub fn merge(dir: &Path, fresh: Vec<Row>) -> Result<Vec<Row>> {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
         Err(e) => return Err(e).with_context(|| format!("{}: cannot read", path.display())),
     };
-    let replaced: BTreeSet<(String, String)> = fresh
-        .iter()
-        .map(|r| (r.scene.clone(), r.device.clone()))
-        .collect();
-    rows.retain(|r| !replaced.contains(&(r.scene.clone(), r.device.clone())));
+    let replaced: BTreeSet<(String, String)> = fresh.iter().map(&key).collect();
+    rows.retain(|r| !replaced.contains(&key(r)));
     rows.extend(fresh);
     Ok(rows)
 }
@@ -106,24 +125,36 @@ pub fn csv(rows: &[Row]) -> String {
     out
 }
 
+fn write_json<T: Serialize>(path: &Path, rows: &[T]) -> Result<()> {
+    write_text(path, &(serde_json::to_string_pretty(rows)? + "\n"))
+}
+
+/// What a report is made of: the speed-against-error rows and the look
+/// rows.
+pub struct Results<'a> {
+    pub rows: &'a [Row],
+    pub look: &'a [LookRow],
+}
+
 /// Writes every output into `dir` (and BENCHMARKS.md also to `publish`).
-pub fn write_all(dir: &Path, rows: &[Row], notes: &str, publish: Option<&Path>) -> Result<()> {
+pub fn write_all(dir: &Path, results: &Results, notes: &str, publish: Option<&Path>) -> Result<()> {
+    let rows = results.rows;
     std::fs::create_dir_all(dir)
         .with_context(|| format!("{}: cannot create the output directory", dir.display()))?;
-    write_text(
-        &dir.join("results.json"),
-        &(serde_json::to_string_pretty(rows)? + "\n"),
-    )?;
+    write_json(&dir.join("results.json"), rows)?;
+    if !results.look.is_empty() {
+        write_json(&dir.join("look.json"), results.look)?;
+    }
     write_text(&dir.join("results.csv"), &csv(rows))?;
     let png = dir.join("pareto.png");
     write_atomically(&png, |tmp| pareto(rows, tmp))?;
     write_text(
         &dir.join("BENCHMARKS.md"),
-        &markdown(rows, notes, "pareto.png"),
+        &markdown(results, notes, "pareto.png"),
     )?;
     if let Some(target) = publish {
         let link = relative_link(target, &png);
-        write_text(target, &markdown(rows, notes, &link))?;
+        write_text(target, &markdown(results, notes, &link))?;
     }
     Ok(())
 }
@@ -157,7 +188,7 @@ fn relative_link(from: &Path, to: &Path) -> String {
 }
 
 /// The distinct `key`s of `rows`, in first-seen order.
-pub fn first_seen<K: PartialEq>(rows: &[Row], key: impl Fn(&Row) -> K) -> Vec<K> {
+pub fn first_seen<T, K: PartialEq>(rows: &[T], key: impl Fn(&T) -> K) -> Vec<K> {
     let mut seen = Vec::new();
     for r in rows {
         let k = key(r);
@@ -255,8 +286,10 @@ fn mib(bytes: u64) -> String {
     format!("{:.1}", bytes as f64 / (1024.0 * 1024.0))
 }
 
-/// BENCHMARKS.md: definitions, the targets, every row, and the notes.
-pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
+/// BENCHMARKS.md: definitions, the targets, the notes, every row, and
+/// what the picture costs.
+pub fn markdown(results: &Results, notes: &str, pareto_link: &str) -> String {
+    let rows = results.rows;
     let mut md = String::new();
     let w = &mut md;
     let _ = writeln!(w, "# Benchmarks: speed against error\n");
@@ -285,7 +318,50 @@ pub fn markdown(rows: &[Row], notes: &str, pareto_link: &str) -> String {
         let _ = writeln!(w, "{}\n", notes.trim());
     }
     results_section(w, rows);
+    look_section(w, results.look);
     md
+}
+
+/// The look rows: GPU time of each addition to the picture, and its share.
+fn look_section(w: &mut String, look: &[LookRow]) {
+    if look.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        w,
+        "## What the picture costs
+"
+    );
+    let _ = writeln!(
+        w,
+        "`vkterrain bench --look`: the scene's own view, the tess path with the scene's LOD and          material, drawn plain (layers projected from above, one sample per pixel, a flat          background) and with each addition: triplanar projection of steep ground, the sky,          multisample anti-aliasing, and all three. Median GPU time of the timed frames after one          untimed; the last column is the time over the plain row's. The error rows above are          drawn plain, with one sample per pixel, so their figures keep their meaning.\n"
+    );
+    let keys = first_seen(look, |r| (r.scene.clone(), r.device.clone()));
+    for (scene, device) in keys {
+        let group: Vec<&LookRow> = look
+            .iter()
+            .filter(|r| r.scene == scene && r.device == device)
+            .collect();
+        let first = group[0];
+        let _ = writeln!(
+            w,
+            "### {scene} ({}x{}, {} frames), {device}\n",
+            first.width, first.height, first.frames
+        );
+        let _ = writeln!(w, "| look | samples | GPU ms | over plain |");
+        let _ = writeln!(w, "|---|---:|---:|---:|");
+        for r in group {
+            let _ = writeln!(
+                w,
+                "| {} | {} | {} | {} |",
+                r.config,
+                r.samples,
+                r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
+                extra_percent(look, r).map_or("n/a".into(), |p| format!("{p:+.1} %")),
+            );
+        }
+        let _ = writeln!(w);
+    }
 }
 
 /// The target table: each target read off the rows, met or missed.

@@ -309,7 +309,8 @@ struct Gathered {
     errors: ErrorHistogram,
 }
 
-fn median(values: &mut [f64]) -> Option<f64> {
+/// The median; None for no values.
+pub(crate) fn median(values: &mut [f64]) -> Option<f64> {
     if values.is_empty() {
         return None;
     }
@@ -358,7 +359,9 @@ impl<'a> Bench<'a> {
         height: u32,
     ) -> anyhow::Result<Self> {
         let before = gpu.device.memory_in_use();
-        let headless = Headless::new(gpu, width, height)?;
+        // One sample per pixel: the error measurement compares depth
+        // pixel for pixel with the reference's.
+        let headless = Headless::new(gpu, width, height, 1)?;
         let mut bench = Bench {
             gpu,
             terrain,
@@ -378,10 +381,7 @@ impl<'a> Bench<'a> {
                 terrain,
                 OFFSCREEN_COLOR_FORMAT,
                 1,
-                &RendererOptions {
-                    paths: vec![path],
-                    wireframe: false,
-                },
+                &RendererOptions::single_sample(vec![path]),
             )?;
             bench.renderers.push(PathRenderer {
                 path,

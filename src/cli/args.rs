@@ -286,6 +286,14 @@ pub struct FeatureArgs {
     pub device: Option<String>,
 }
 
+/// `--samples`: 1, 2, 4 or 8 samples per pixel.
+pub fn parse_samples(s: &str) -> Result<u32, String> {
+    match s.trim().parse::<u32>() {
+        Ok(n @ (1 | 2 | 4 | 8)) => Ok(n),
+        _ => Err(format!("{s:?}: expected 1, 2, 4 or 8 samples per pixel")),
+    }
+}
+
 fn parse_fault(s: &str) -> Result<crate::vk::Fault, String> {
     let (kind, n) = match s.split_once('@') {
         Some((kind, n)) => {

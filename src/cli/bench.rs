@@ -74,6 +74,12 @@ pub struct BenchCmd {
     #[arg(long)]
     pub report_only: bool,
 
+    /// Also time the scene's own view drawn plain and with each addition
+    /// to the picture (triplanar projection, the sky, multisampling):
+    /// look.json and a table in BENCHMARKS.md.
+    #[arg(long)]
+    pub look: bool,
+
     /// Turn on the Vulkan validation layer (slows every figure down).
     #[arg(long)]
     pub validate: bool,
@@ -129,13 +135,18 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             .with_context(|| format!("{}: cannot read the notes", path.display()))?,
         None => String::new(),
     };
-    // Refuse an unusable results file before the long run, not after.
+    // Refuse unusable results files before the long run, not after.
     let earlier = report::merge(&cmd.out, Vec::new())?;
+    let earlier_look = report::merge_look(&cmd.out, Vec::new())?;
     if cmd.report_only {
         if earlier.is_empty() {
             bail!("{}: no results.json to report on", cmd.out.display());
         }
-        report::write_all(&cmd.out, &earlier, &notes, cmd.publish.as_deref())?;
+        let results = report::Results {
+            rows: &earlier,
+            look: &earlier_look,
+        };
+        report::write_all(&cmd.out, &results, &notes, cmd.publish.as_deref())?;
         writeln!(
             out,
             "rewrote the report of {} rows in {}",
@@ -147,12 +158,31 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
     let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
     // Validation is counted after the device is destroyed, so leaked
     // objects count.
-    let ((rows, device_name, options), validation) =
+    let (((rows, device_name, options), look), validation) =
         cmd.features.with_gpu(cmd.validate, |gpu| {
-            measure(gpu, &cmd, &scene, &terrain, &name, out)
+            let measured = measure(gpu, &cmd, &scene, &terrain, &name, out)?;
+            let look = match cmd.look {
+                false => Vec::new(),
+                true => {
+                    let frames = if cmd.quick || cmd.single_frame { 2 } else { 5 };
+                    crate::bench::look::measure(
+                        gpu,
+                        &scene,
+                        &name,
+                        (cmd.size.width, cmd.size.height),
+                        frames,
+                    )?
+                }
+            };
+            Ok((measured, look))
         })?;
     let all = report::merge(&cmd.out, rows.clone())?;
-    report::write_all(&cmd.out, &all, &notes, cmd.publish.as_deref())?;
+    let all_look = report::merge_look(&cmd.out, look.clone())?;
+    let results = report::Results {
+        rows: &all,
+        look: &all_look,
+    };
+    report::write_all(&cmd.out, &results, &notes, cmd.publish.as_deref())?;
     writeln!(
         out,
         "{} rows on {} ({}x{}, {}), {} validation messages{}",
@@ -185,6 +215,16 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             f(c.geomip_p99),
             f(c.geomip_vs_best),
             c.best_config.as_deref().unwrap_or("none"),
+        )?;
+    }
+    for r in &look {
+        writeln!(
+            out,
+            "  look {}: GPU {} ms ({})",
+            r.config,
+            r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
+            crate::bench::look::extra_percent(&look, r)
+                .map_or("n/a".into(), |p| format!("{p:+.1} % over plain")),
         )?;
     }
     writeln!(

@@ -103,6 +103,7 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
             PresentModeArg::Mailbox => vk::PresentModeKHR::MAILBOX,
             PresentModeArg::Immediate => vk::PresentModeKHR::IMMEDIATE,
         },
+        samples: cmd.view.samples,
         gpu: cmd.view.features.gpu_options(cmd.validate),
         walk_height: cmd.walk_height,
         frames: cmd.frames,

@@ -10,11 +10,12 @@ use glam::DVec3;
 use serde::Serialize;
 
 use super::args::{
-    parse_color, parse_dvec3, parse_fov, parse_range, with_gpu, FeatureArgs, SizeArgs, TerrainArgs,
+    parse_color, parse_dvec3, parse_fov, parse_range, parse_samples, with_gpu, FeatureArgs,
+    SizeArgs, TerrainArgs,
 };
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
-use crate::render::settings::measurement_notes;
+use crate::render::settings::{measurement_notes, sample_count};
 use crate::render::{
     offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
     RendererOptions, Shading,
@@ -133,9 +134,19 @@ pub struct ViewArgs {
     #[arg(long)]
     pub flat: bool,
 
-    /// Background colour, components in [0, 1].
+    /// Background colour, components in [0, 1] (drawn flat, without the
+    /// sky).
     #[arg(long, value_name = "R,G,B", value_parser = parse_color)]
     pub clear_color: Option<[f32; 3]>,
+
+    /// Samples per pixel: 1 (no anti-aliasing), 2, 4 or 8, as the device
+    /// allows. Default: 4 where the device can draw them, otherwise 1.
+    #[arg(long, value_name = "N", value_parser = parse_samples)]
+    pub samples: Option<u32>,
+
+    /// A flat background of the clear colour instead of the sky.
+    #[arg(long)]
+    pub no_sky: bool,
 
     /// Turn GPU frustum culling of patches off.
     #[arg(long)]
@@ -235,6 +246,9 @@ impl ViewArgs {
             } else {
                 base.clear_color
             }),
+            // A colour of one's own, or flat white, asks for a flat
+            // background.
+            sky: base.sky && !self.no_sky && !self.flat && self.clear_color.is_none(),
             cull: !self.no_cull,
             geomorph: !self.no_morph,
             lod_metric,
@@ -305,6 +319,8 @@ pub struct FrameStats {
     pub lod: LodMetric,
     pub width: u32,
     pub height: u32,
+    /// Samples per pixel.
+    pub samples: u32,
     pub patches_total: usize,
     pub patches_in_frustum: usize,
     pub tcs_patches: Option<u64>,
@@ -357,6 +373,15 @@ pub fn resident_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
+/// The picture a render makes: its size, and its samples per pixel (None:
+/// `render::DEFAULT_SAMPLES` where the device can draw them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Picture {
+    pub width: u32,
+    pub height: u32,
+    pub samples: Option<u32>,
+}
+
 /// Everything one headless render produces.
 pub struct RenderOutput {
     pub frame: HeadlessFrame,
@@ -375,9 +400,10 @@ pub struct RenderOutput {
 pub fn render_scene(
     scene: &Scene,
     view: impl FnOnce(&TerrainInfo) -> Result<(Camera, RenderSettings)>,
-    (width, height): (u32, u32),
+    picture: Picture,
     gpu: &crate::vk::GpuOptions,
 ) -> Result<RenderOutput> {
+    let Picture { width, height, .. } = picture;
     let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
     let started = std::time::Instant::now();
     let info = scene.terrain_info()?;
@@ -394,10 +420,12 @@ pub fn render_scene(
         let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);
         let caps = &gpu.device.caps;
         notes.extend(measurement_notes(caps, &appearance));
+        let samples = sample_count(picture.samples, caps, &mut notes)?;
         let started = std::time::Instant::now();
         let options = RendererOptions {
             paths: vec![settings.path],
             wireframe: settings.wireframe,
+            samples,
         };
         let (mut renderer, mut headless) =
             offscreen(gpu, &terrain, &appearance, &options, (width, height))
@@ -417,6 +445,7 @@ pub fn render_scene(
             lod: settings.lod_metric,
             width,
             height,
+            samples,
             patches_total: terrain.grid().patch_count(),
             patches_in_frustum: frame.patches_in_frustum,
             tcs_patches: statistics.map(|s| s.tcs_patches),
@@ -465,7 +494,11 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
             let camera = view.camera_override().apply(scene.camera_for(info))?;
             Ok((camera, view.settings(&scene, info)))
         },
-        (cmd.size.width, cmd.size.height),
+        Picture {
+            width: cmd.size.width,
+            height: cmd.size.height,
+            samples: view.samples,
+        },
         &view.features.gpu_options(cmd.validate),
     )?;
     for note in &output.notes {

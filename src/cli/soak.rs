@@ -131,10 +131,7 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
         for note in notes {
             writeln!(out, "{note}")?;
         }
-        let options = RendererOptions {
-            paths: paths.clone(),
-            wireframe: false,
-        };
+        let options = RendererOptions::single_sample(paths.clone());
         let (mut renderer, mut headless) = offscreen(
             gpu,
             &terrain,

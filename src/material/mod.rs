@@ -170,6 +170,8 @@ pub struct Material {
     /// Most anisotropic filtering samples; None: the device's default
     /// (see `render::material::anisotropy_for`).
     pub anisotropy: Option<f32>,
+    /// Steep ground projected from the side too (`MaterialSpec::triplanar`).
+    pub triplanar: bool,
 }
 
 impl Material {
@@ -421,6 +423,7 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
         blend_maps,
         cliff,
         anisotropy: spec.anisotropy,
+        triplanar: spec.triplanar,
     })
 }
 

@@ -52,7 +52,10 @@ pub fn offscreen(
         1,
         options,
     )?;
-    Ok((renderer, Headless::new(gpu, width, height)?))
+    Ok((
+        renderer,
+        Headless::new(gpu, width, height, options.samples)?,
+    ))
 }
 
 /// An offscreen target and the command buffer that draws into it. Dropping
@@ -64,10 +67,11 @@ pub struct Headless {
 }
 
 impl Headless {
-    pub fn new(gpu: &Gpu, width: u32, height: u32) -> Result<Self> {
+    /// A `width` x `height` target of `samples` samples per pixel.
+    pub fn new(gpu: &Gpu, width: u32, height: u32, samples: u32) -> Result<Self> {
         let device = &gpu.device;
         Ok(Headless {
-            target: OffscreenTarget::new(device, width, height)?,
+            target: OffscreenTarget::new(device, width, height, samples)?,
             commands: device.create_command_slots(1, "headless.commands")?,
             device: device.clone(),
         })

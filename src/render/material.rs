@@ -97,6 +97,7 @@ pub struct ShaderVariant {
     pub blend_maps: bool,
     pub lightmap: bool,
     pub displace: bool,
+    pub triplanar: bool,
     pub layer_count: u32,
     pub blend_map_count: u32,
 }
@@ -110,6 +111,7 @@ impl ShaderVariant {
             blend_maps: m.is_some_and(|m| m.blend_maps.is_some()),
             lightmap: appearance.lightmap.is_some(),
             displace: m.is_some_and(Material::displaces),
+            triplanar: m.is_some_and(|m| m.triplanar),
             layer_count: m.map_or(1, |m| m.layers.len() as u32),
             blend_map_count: m
                 .and_then(|m| m.blend_maps.as_ref())
@@ -125,6 +127,7 @@ impl ShaderVariant {
                 normal_maps: self.normal_maps,
                 blend_maps: self.blend_maps,
                 lightmap: self.lightmap,
+                triplanar: self.triplanar,
             }
         } else {
             Shading::Heights {
@@ -135,10 +138,12 @@ impl ShaderVariant {
 
     /// How the vertex-placing stages displace.
     pub fn placing(&self) -> Placing {
-        match (self.displace, self.blend_maps) {
-            (false, _) => Placing::Plain,
-            (true, false) => Placing::Displaced,
-            (true, true) => Placing::DisplacedByBlendMaps,
+        match self.displace {
+            false => Placing::Plain,
+            true => Placing::Displaced {
+                blend_maps: self.blend_maps,
+                triplanar: self.triplanar,
+            },
         }
     }
 

@@ -12,6 +12,8 @@ pub mod view;
 
 pub use headless::{offscreen, Headless, HeadlessFrame};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
-pub use settings::{with_fallback, LodMetric, RenderPath, RenderSettings, Shading};
+pub use settings::{
+    sample_count, with_fallback, LodMetric, RenderPath, RenderSettings, Shading, DEFAULT_SAMPLES,
+};
 pub use uniforms::FrameUniforms;
 pub use view::FrameView;

@@ -39,8 +39,8 @@ use crate::vk::memory::{Buffer, Image};
 use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::pipeline::GraphicsPipelineDesc;
 use crate::vk::queries::{FrameQueries, PipelineStatistics};
-use crate::vk::target::{TargetViews, DEPTH_FORMAT};
-use crate::vk::{Device, Gpu, Result, VkError};
+use crate::vk::target::{sample_count_list, TargetViews, DEPTH_FORMAT};
+use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
 /// Per-frame-in-flight resources: the uniform block is rewritten each frame,
 /// so a frame still on the GPU keeps its own.
@@ -62,6 +62,20 @@ pub struct RendererOptions {
     pub paths: Vec<RenderPath>,
     /// Also build line pipelines (needs fillModeNonSolid).
     pub wireframe: bool,
+    /// Samples per pixel of the targets it draws into (see
+    /// `settings::sample_count`).
+    pub samples: u32,
+}
+
+impl RendererOptions {
+    /// Fill pipelines of `paths`, one sample per pixel.
+    pub fn single_sample(paths: Vec<RenderPath>) -> Self {
+        RendererOptions {
+            paths,
+            wireframe: false,
+            samples: 1,
+        }
+    }
 }
 
 /// Fill and (when asked for) wireframe pipelines of one path.
@@ -162,6 +176,9 @@ pub struct TerrainRenderer {
     appearance: GpuAppearance,
     device: Device,
     color_format: vk::Format,
+    samples: vk::SampleCountFlags,
+    /// The sky, drawn where the terrain left the far plane.
+    sky: Pipeline,
     max_patches_per_draw: Option<u32>,
     /// Milliseconds spent computing the error table in `new` (0 when no
     /// path needs it).
@@ -211,6 +228,7 @@ impl TerrainRenderer {
     ) -> Result<Self> {
         let device = &gpu.device;
         check_device(device, terrain, options)?;
+        let samples = sample_count_flag(options.samples);
         let info = terrain.info();
         let heightmap = upload_heightmap(device, info, "terrain.heightmap")?;
         let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
@@ -228,6 +246,7 @@ impl TerrainRenderer {
             frames_in_flight,
             "terrain.frame_set",
         )?;
+        let sky = create_sky_pipeline(device, &pipeline_layout, color_format, samples)?;
         let mut renderer = TerrainRenderer {
             frames: Vec::new(),
             tess: None,
@@ -240,8 +259,10 @@ impl TerrainRenderer {
             heightmap,
             sampler,
             appearance,
+            sky,
             device: device.clone(),
             color_format,
+            samples,
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms: 0.0,
             predicted_max_px: None,
@@ -410,6 +431,11 @@ impl TerrainRenderer {
         self.color_format
     }
 
+    /// Samples per pixel of the targets this renderer draws into.
+    pub fn samples(&self) -> u32 {
+        self.samples.as_raw()
+    }
+
     /// Sets frame slot `slot` up for a frame of `settings` (its previous
     /// frame must have completed): builds the path if this renderer lacks
     /// it, writes the uniforms and, for the geomip path and the tess
@@ -526,6 +552,12 @@ impl TerrainRenderer {
                 settings.path
             ))
         };
+        if target.samples != self.samples || target.color_format != self.color_format {
+            return Err(VkError::Unsupported(format!(
+                "a target of {:?} with {:?} samples per pixel, for a renderer built for {:?} with {:?}",
+                target.color_format, target.samples, self.color_format, self.samples
+            )));
+        }
         let frame = &self.frames[slot];
         frame.queries.reset(rec);
         rec.begin_rendering(target, settings.clear_color);
@@ -573,7 +605,14 @@ impl TerrainRenderer {
                 rec.draw(brute.vertex_count);
             }
         }
-        frame.queries.end(rec);
+        // The sky is timed with the terrain but not counted: the frame's
+        // triangle counts stay the terrain's.
+        frame.queries.end_counting(rec);
+        if settings.sky {
+            rec.bind_graphics(&self.sky, &self.pipeline_layout, frame.set);
+            rec.draw(3);
+        }
+        frame.queries.end_timing(rec);
         rec.end_rendering();
         Ok(())
     }
@@ -615,6 +654,14 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
         return Err(VkError::Unsupported(format!(
             "{} cannot sample R32_SFLOAT images ({features:?})",
             device.caps.device_name
+        )));
+    }
+    if !device.caps.supports_samples(options.samples) {
+        return Err(VkError::Unsupported(format!(
+            "{} cannot draw {} samples per pixel (it can draw {})",
+            device.caps.device_name,
+            options.samples,
+            sample_count_list(&device.caps.sample_counts)
         )));
     }
     for &path in &options.paths {
@@ -746,7 +793,7 @@ fn build_pipelines(
         create_pipeline(
             &renderer.device,
             layout,
-            renderer.color_format,
+            (renderer.color_format, renderer.samples),
             variant,
             path,
             mode,
@@ -765,7 +812,7 @@ fn build_pipelines(
 fn create_pipeline(
     device: &Device,
     layout: &PipelineLayout,
-    color_format: vk::Format,
+    (color_format, samples): (vk::Format, vk::SampleCountFlags),
     variant: &ShaderVariant,
     (path, equal_spacing): (RenderPath, bool),
     polygon_mode: vk::PolygonMode,
@@ -851,8 +898,45 @@ fn create_pipeline(
         depth_format: DEPTH_FORMAT,
         // Reversed Z: nearer is larger.
         depth_compare: vk::CompareOp::GREATER,
+        depth_write: true,
+        samples,
         layout,
         specialization: &variant.specialization(),
+    })
+}
+
+/// The sky's pipeline: one triangle at the far plane, drawn where the
+/// depth is still the cleared far value, writing no depth.
+fn create_sky_pipeline(
+    device: &Device,
+    layout: &PipelineLayout,
+    color_format: vk::Format,
+    samples: vk::SampleCountFlags,
+) -> Result<Pipeline> {
+    device.create_graphics_pipeline(&GraphicsPipelineDesc {
+        name: "terrain.pipeline.sky",
+        stages: &[
+            (
+                vk::ShaderStageFlags::VERTEX,
+                shaders::spirv(Shader::SkyVert),
+            ),
+            (
+                vk::ShaderStageFlags::FRAGMENT,
+                shaders::spirv(Shader::SkyFrag),
+            ),
+        ],
+        vertex_stride: 0,
+        vertex_attributes: &[],
+        topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+        patch_control_points: 0,
+        polygon_mode: vk::PolygonMode::FILL,
+        color_format,
+        depth_format: DEPTH_FORMAT,
+        depth_compare: vk::CompareOp::GREATER_OR_EQUAL,
+        depth_write: false,
+        samples,
+        layout,
+        specialization: &[],
     })
 }
 

@@ -48,6 +48,38 @@ pub fn with_fallback(
     settings
 }
 
+/// Samples per pixel when none are asked for and the device can draw them.
+pub const DEFAULT_SAMPLES: u32 = 4;
+
+/// Samples per pixel for a frame: `requested` when the device can draw
+/// it, an error naming what it can draw otherwise; with no request,
+/// `DEFAULT_SAMPLES` where the device can draw them and 1 (said in
+/// `notes`) where it cannot.
+pub fn sample_count(
+    requested: Option<u32>,
+    caps: &crate::vk::Capabilities,
+    notes: &mut Vec<String>,
+) -> crate::vk::Result<u32> {
+    let list = || crate::vk::target::sample_count_list(&caps.sample_counts);
+    match requested {
+        Some(n) if caps.supports_samples(n) => Ok(n),
+        Some(n) => Err(crate::vk::VkError::Unsupported(format!(
+            "{} cannot draw {n} samples per pixel (--samples {})",
+            caps.device_name,
+            list()
+        ))),
+        None if caps.supports_samples(DEFAULT_SAMPLES) => Ok(DEFAULT_SAMPLES),
+        None => {
+            notes.push(format!(
+                "{}: {DEFAULT_SAMPLES} samples per pixel are unavailable (it can draw {}), drawing without anti-aliasing",
+                caps.device_name,
+                list()
+            ));
+            Ok(1)
+        }
+    }
+}
+
 /// How the fragment shader colours the terrain.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -89,7 +121,11 @@ pub struct RenderSettings {
     pub lod_mode: DistanceMode,
     pub shading: Shading,
     pub wireframe: bool,
+    /// The background: the sky's colour at the horizon.
     pub clear_color: [f32; 3],
+    /// Draw a sky behind the terrain (a gradient from `clear_color` up,
+    /// and the first light's sun); otherwise a flat `clear_color`.
+    pub sky: bool,
     /// GPU frustum culling of patches.
     pub cull: bool,
     pub lighting: Lighting,
@@ -109,6 +145,7 @@ impl Default for RenderSettings {
             shading: Shading::Lit,
             wireframe: false,
             clear_color: [0.52, 0.68, 0.86],
+            sky: false,
             cull: true,
             lighting: Lighting::default(),
             fog: None,
@@ -118,9 +155,9 @@ impl Default for RenderSettings {
 }
 
 impl RenderSettings {
-    /// The defaults with a scene's LOD (for its terrain), lights and fog; with fog, the sky
-    /// behind the terrain takes the fog's colour, so distant ground fades
-    /// into it.
+    /// The defaults with a scene's LOD (for its terrain), lights, fog and
+    /// sky; with fog, the sky's horizon takes the fog's colour, so distant
+    /// ground fades into it.
     pub fn for_scene(scene: &Scene, info: &crate::terrain::TerrainInfo) -> Self {
         let defaults = RenderSettings::default();
         RenderSettings {
@@ -133,6 +170,7 @@ impl RenderSettings {
             clear_color: scene
                 .fog
                 .map_or(defaults.clear_color, |f| f.color.to_array()),
+            sky: true,
             ..defaults
         }
     }

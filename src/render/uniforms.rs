@@ -50,10 +50,16 @@ pub struct FrameUniforms {
     pub viewport: [f32; 4],
     /// The camera's right vector (unit).
     pub camera_right: [f32; 4],
+    /// Inverse of `view_proj`, for the sky's view rays.
+    pub sky_ray: [[f32; 4]; 4],
+    /// rgb: the sky at the horizon; w: cosine of the sun disc's radius.
+    pub sky_horizon: [f32; 4],
+    /// rgb: the sky overhead.
+    pub sky_zenith: [f32; 4],
 }
 
 // std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
-const _: () = assert!(size_of::<FrameUniforms>() == 464);
+const _: () = assert!(size_of::<FrameUniforms>() == 560);
 const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
 const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
 const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
@@ -72,6 +78,19 @@ const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
 const _: () = assert!(offset_of!(FrameUniforms, peer) == 416);
 const _: () = assert!(offset_of!(FrameUniforms, viewport) == 432);
 const _: () = assert!(offset_of!(FrameUniforms, camera_right) == 448);
+const _: () = assert!(offset_of!(FrameUniforms, sky_ray) == 464);
+const _: () = assert!(offset_of!(FrameUniforms, sky_horizon) == 528);
+const _: () = assert!(offset_of!(FrameUniforms, sky_zenith) == 544);
+
+/// Angular radius of the sun disc the sky draws, in degrees: about twice
+/// the real sun's, so that it reads at screen resolutions.
+pub const SUN_RADIUS_DEGREES: f32 = 0.6;
+
+/// The sky overhead for a horizon colour: the same light, deeper and bluer,
+/// as clear air scatters it.
+pub fn zenith_color(horizon: Vec3) -> Vec3 {
+    horizon * Vec3::new(0.55, 0.7, 1.0)
+}
 
 impl FrameUniforms {
     pub fn new(terrain: &Terrain, view: &FrameView, settings: &RenderSettings) -> Self {
@@ -157,6 +176,13 @@ impl FrameUniforms {
             ],
             viewport: [view.viewport.x, view.viewport.y, 0.0, 0.0],
             camera_right: view.right.extend(0.0).to_array(),
+            sky_ray: view.view_proj.inverse().to_cols_array_2d(),
+            sky_horizon: Vec3::from(settings.clear_color)
+                .extend(SUN_RADIUS_DEGREES.to_radians().cos())
+                .to_array(),
+            sky_zenith: zenith_color(Vec3::from(settings.clear_color))
+                .extend(0.0)
+                .to_array(),
         }
     }
 }

@@ -23,6 +23,8 @@
 //! cliff_slope = [30.0, 45.0]      # ... between these slopes, in degrees
 //! anisotropy = 16                 # most filtering samples; default: 16 on
 //!                                 # GPUs, off (1) on CPU rasterisers
+//! triplanar = true                # project steep ground from the side too,
+//!                                 # so cliffs don't stretch; default false
 //!
 //! [[material.layer]]              # 1 to 8; layer 0 is the base
 //! diffuse = "grass.png"           # sRGB colour
@@ -165,6 +167,9 @@ pub struct MaterialSpec {
     /// Most anisotropic filtering samples (1: off); None: the device's
     /// default.
     pub anisotropy: Option<f32>,
+    /// Project every layer's maps onto steep ground from the side as well
+    /// as from above, blended by slope (see glsl/material.glsl).
+    pub triplanar: bool,
 }
 
 impl MaterialSpec {
@@ -217,6 +222,8 @@ pub(super) struct MaterialToml {
     cliff_layer: Option<Spanned<usize>>,
     cliff_slope: Option<Spanned<[f32; 2]>>,
     anisotropy: Option<Spanned<f32>>,
+    #[serde(default)]
+    triplanar: bool,
     layer: Spanned<Vec<LayerToml>>,
 }
 
@@ -400,6 +407,7 @@ pub(super) fn parse_material(
         layers,
         weights,
         anisotropy,
+        triplanar: t.triplanar,
     }))
 }
 

@@ -234,16 +234,34 @@ impl<'a> Recorder<'a> {
     /// each time it flushes a full tile scene in the middle of a large draw,
     /// wiping everything drawn before the flush. A clear command runs once.
     pub fn begin_rendering(&self, target: &TargetViews, clear_color: [f32; 3]) {
-        let color = [vk::RenderingAttachmentInfo::default()
-            .image_view(target.color_view)
-            .image_layout(vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::DONT_CARE)
-            .store_op(vk::AttachmentStoreOp::STORE)];
-        let depth = vk::RenderingAttachmentInfo::default()
-            .image_view(target.depth_view)
-            .image_layout(vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL)
-            .load_op(vk::AttachmentLoadOp::DONT_CARE)
-            .store_op(vk::AttachmentStoreOp::STORE);
+        // Multisampled attachments are resolved and then discarded: colour
+        // by the average of its samples, depth by sample 0.
+        let attachment = |view, layout, resolve: Option<vk::ImageView>, mode| {
+            let info = vk::RenderingAttachmentInfo::default()
+                .image_view(view)
+                .image_layout(layout)
+                .load_op(vk::AttachmentLoadOp::DONT_CARE);
+            match resolve {
+                Some(resolve) => info
+                    .resolve_mode(mode)
+                    .resolve_image_view(resolve)
+                    .resolve_image_layout(layout)
+                    .store_op(vk::AttachmentStoreOp::DONT_CARE),
+                None => info.store_op(vk::AttachmentStoreOp::STORE),
+            }
+        };
+        let color = [attachment(
+            target.color_view,
+            vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+            target.color_resolve,
+            vk::ResolveModeFlags::AVERAGE,
+        )];
+        let depth = attachment(
+            target.depth_view,
+            vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+            target.depth_resolve,
+            vk::ResolveModeFlags::SAMPLE_ZERO,
+        );
         let area = vk::Rect2D::default().extent(target.extent);
         let info = vk::RenderingInfo::default()
             .render_area(area)

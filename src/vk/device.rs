@@ -35,6 +35,16 @@ pub struct Capabilities {
     pub max_image_array_layers: u32,
     /// maxSamplerAnisotropy (meaningful with `sampler_anisotropy`).
     pub max_sampler_anisotropy: f32,
+    /// Samples per pixel that colour and depth attachments both support,
+    /// of 1, 2, 4 and 8, ascending.
+    pub sample_counts: Vec<u32>,
+}
+
+impl Capabilities {
+    /// Whether attachments of `samples` samples per pixel can be drawn.
+    pub fn supports_samples(&self, samples: u32) -> bool {
+        self.sample_counts.contains(&samples)
+    }
 }
 
 /// How the renderer must work around a driver's faults: kept apart from
@@ -246,6 +256,10 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
                 max_sampler_anisotropy: props.limits.max_sampler_anisotropy,
+                sample_counts: sample_counts(
+                    props.limits.framebuffer_color_sample_counts
+                        & props.limits.framebuffer_depth_sample_counts,
+                ),
             },
             workarounds: Workarounds {
                 max_patches_per_draw: (driver.driver_id == vk::DriverId::MESA_LLVMPIPE)
@@ -503,5 +517,27 @@ impl Drop for DeviceShared {
             ManuallyDrop::drop(&mut self.allocator);
             self.raw.destroy_device(None);
         }
+    }
+}
+
+/// The counts of 1, 2, 4 and 8 samples per pixel in `flags`.
+fn sample_counts(flags: vk::SampleCountFlags) -> Vec<u32> {
+    [1u32, 2, 4, 8]
+        .into_iter()
+        .filter(|&n| flags.contains(sample_count_flag(n)))
+        .collect()
+}
+
+/// The flag of `n` samples per pixel (1, 2, 4, 8, 16, 32 or 64); 1 for
+/// anything else.
+pub fn sample_count_flag(n: u32) -> vk::SampleCountFlags {
+    match n {
+        2 => vk::SampleCountFlags::TYPE_2,
+        4 => vk::SampleCountFlags::TYPE_4,
+        8 => vk::SampleCountFlags::TYPE_8,
+        16 => vk::SampleCountFlags::TYPE_16,
+        32 => vk::SampleCountFlags::TYPE_32,
+        64 => vk::SampleCountFlags::TYPE_64,
+        _ => vk::SampleCountFlags::TYPE_1,
     }
 }

@@ -93,6 +93,8 @@ pub struct ImageDesc {
     pub format: vk::Format,
     pub usage: vk::ImageUsageFlags,
     pub aspect: vk::ImageAspectFlags,
+    /// Samples per pixel (TYPE_1 but for multisampled attachments).
+    pub samples: vk::SampleCountFlags,
 }
 
 /// An image, its whole view and its memory. Fields drop in order: the
@@ -272,7 +274,7 @@ impl Device {
             })
             .mip_levels(levels)
             .array_layers(layers)
-            .samples(vk::SampleCountFlags::TYPE_1)
+            .samples(desc.samples)
             .tiling(vk::ImageTiling::OPTIMAL)
             .usage(desc.usage)
             .sharing_mode(vk::SharingMode::EXCLUSIVE)
@@ -385,6 +387,24 @@ pub(super) struct Transition {
     pub to: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2),
 }
 
+/// The stages and accesses that write a depth image during rendering:
+/// depth tests, and (for the single-sample image a multisampled depth
+/// attachment resolves into) the resolve, which Vulkan counts as a colour
+/// attachment write whatever the format.
+pub const DEPTH_WRITTEN: (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2) = (
+    vk::ImageLayout::DEPTH_ATTACHMENT_OPTIMAL,
+    vk::PipelineStageFlags2::from_raw(
+        vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw()
+            | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw()
+            | vk::PipelineStageFlags2::COLOR_ATTACHMENT_OUTPUT.as_raw(),
+    ),
+    vk::AccessFlags2::from_raw(
+        vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_READ.as_raw()
+            | vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE.as_raw()
+            | vk::AccessFlags2::COLOR_ATTACHMENT_WRITE.as_raw(),
+    ),
+);
+
 impl Transition {
     /// A colour and a depth image made attachments, their old contents
     /// discarded, once the work before them at `color_after` and
@@ -395,29 +415,34 @@ impl Transition {
         depth: vk::Image,
         depth_after: (vk::PipelineStageFlags2, vk::AccessFlags2),
     ) -> [Transition; 2] {
-        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
         [
-            Transition {
-                image: color,
-                aspect: vk::ImageAspectFlags::COLOR,
-                from: (L::UNDEFINED, color_after.0, color_after.1),
-                to: (
-                    L::COLOR_ATTACHMENT_OPTIMAL,
-                    S::COLOR_ATTACHMENT_OUTPUT,
-                    A::COLOR_ATTACHMENT_WRITE,
-                ),
-            },
+            Transition::to_color_attachment(color, color_after),
             Transition {
                 image: depth,
                 aspect: vk::ImageAspectFlags::DEPTH,
-                from: (L::UNDEFINED, depth_after.0, depth_after.1),
-                to: (
-                    L::DEPTH_ATTACHMENT_OPTIMAL,
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
+                from: (vk::ImageLayout::UNDEFINED, depth_after.0, depth_after.1),
+                to: DEPTH_WRITTEN,
             },
         ]
+    }
+
+    /// A colour image made an attachment, its old contents discarded, once
+    /// the work before it at `after` (stage, access) is done.
+    pub fn to_color_attachment(
+        image: vk::Image,
+        after: (vk::PipelineStageFlags2, vk::AccessFlags2),
+    ) -> Transition {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        Transition {
+            image,
+            aspect: vk::ImageAspectFlags::COLOR,
+            from: (L::UNDEFINED, after.0, after.1),
+            to: (
+                L::COLOR_ATTACHMENT_OPTIMAL,
+                S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_WRITE,
+            ),
+        }
     }
 
     /// A colour attachment just drawn, made ready to be copied from.
@@ -474,6 +499,7 @@ impl Device {
                 format: up.format,
                 usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
                 aspect: vk::ImageAspectFlags::COLOR,
+                samples: vk::SampleCountFlags::TYPE_1,
             },
             levels.len() as u32,
             up.layers,

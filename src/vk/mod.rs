@@ -20,7 +20,7 @@ pub mod target;
 
 use std::ffi::{c_char, CStr};
 
-pub use device::{Capabilities, Device, DisabledFeatures, Fault, Workarounds};
+pub use device::{sample_count_flag, Capabilities, Device, DisabledFeatures, Fault, Workarounds};
 pub use error::{Result, VkError};
 pub use instance::Instance;
 

@@ -22,6 +22,10 @@ pub struct GraphicsPipelineDesc<'a> {
     pub color_format: vk::Format,
     pub depth_format: vk::Format,
     pub depth_compare: vk::CompareOp,
+    /// Whether fragments write depth (the test is always on).
+    pub depth_write: bool,
+    /// Samples per pixel of the attachments.
+    pub samples: vk::SampleCountFlags,
     pub layout: &'a PipelineLayout,
     /// Values of specialisation constants 0, 1, ... (u32 each), given to
     /// every stage; a stage ignores the ids it doesn't declare.
@@ -60,7 +64,7 @@ impl Device {
     }
 
     /// A graphics pipeline with dynamic viewport and scissor, no blending,
-    /// depth test and write, and no face culling.
+    /// a depth test, and no face culling.
     pub fn create_graphics_pipeline(&self, desc: &GraphicsPipelineDesc) -> Result<Pipeline> {
         let mut modules = Vec::with_capacity(desc.stages.len());
         for (stage, spirv) in desc.stages {
@@ -124,11 +128,11 @@ impl Device {
             .cull_mode(vk::CullModeFlags::NONE)
             .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
             .line_width(1.0);
-        let multisample = vk::PipelineMultisampleStateCreateInfo::default()
-            .rasterization_samples(vk::SampleCountFlags::TYPE_1);
+        let multisample =
+            vk::PipelineMultisampleStateCreateInfo::default().rasterization_samples(desc.samples);
         let depth = vk::PipelineDepthStencilStateCreateInfo::default()
             .depth_test_enable(true)
-            .depth_write_enable(true)
+            .depth_write_enable(desc.depth_write)
             .depth_compare_op(desc.depth_compare);
         let attachments = [vk::PipelineColorBlendAttachmentState::default()
             .color_write_mask(vk::ColorComponentFlags::RGBA)];

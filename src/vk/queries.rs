@@ -112,14 +112,22 @@ impl FrameQueries {
         }
     }
 
-    /// Stops counting and timing.
-    pub fn end(&self, rec: &Recorder) {
+    /// Stops counting: what is drawn after this is timed but not counted.
+    pub fn end_counting(&self, rec: &Recorder) {
         let (device, cmd) = (rec.device.ash(), rec.cmd);
         // SAFETY: matches `begin` in the same command buffer.
         unsafe {
             if let Some(pool) = &self.statistics {
                 device.cmd_end_query(cmd, pool.raw(), 0);
             }
+        }
+    }
+
+    /// Stops timing; after `end_counting`.
+    pub fn end_timing(&self, rec: &Recorder) {
+        let (device, cmd) = (rec.device.ash(), rec.cmd);
+        // SAFETY: matches `begin` in the same command buffer.
+        unsafe {
             if let Some(pool) = &self.timestamps {
                 device.cmd_write_timestamp2(
                     cmd,

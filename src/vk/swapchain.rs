@@ -13,7 +13,7 @@ use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
 use super::memory::{Buffer, Image, ImageDesc, Transition};
 use super::owned::{Owned, Semaphore};
-use super::target::{TargetViews, DEPTH_FORMAT};
+use super::target::{Multisampled, TargetViews, DEPTH_FORMAT};
 
 /// Instance extensions a surface for this display needs.
 pub fn surface_extensions(display: RawDisplayHandle) -> Result<&'static [*const c_char]> {
@@ -173,8 +173,18 @@ impl SurfaceChoice {
     }
 }
 
-/// A swapchain with a view and a semaphore per image and one depth
-/// image. Dropping it waits for the device to go idle first.
+/// What the frames in flight draw into besides the swapchain's images.
+enum Attachments {
+    /// One sample per pixel: a depth image.
+    Depth(Image),
+    /// More: multisampled colour and depth, the colour resolved into the
+    /// swapchain's image.
+    Multisampled(Multisampled),
+}
+
+/// A swapchain with a view and a semaphore per image, and the depth image
+/// (or multisampled colour and depth images) its frames in flight share.
+/// Dropping it waits for the device to go idle first.
 pub struct Swapchain {
     loader: ash::khr::swapchain::Device,
     raw: vk::SwapchainKHR,
@@ -185,7 +195,7 @@ pub struct Swapchain {
     views: Vec<Owned<vk::ImageView>>,
     /// One per image: a semaphore is only reused once its image comes back.
     render_finished: Vec<Semaphore>,
-    depth: Image,
+    attachments: Attachments,
     /// Whether images can be copied out (for screenshots).
     pub readable: bool,
     device: Device,
@@ -196,12 +206,14 @@ pub struct Swapchain {
 impl Swapchain {
     /// A swapchain for `surface` of about `size` (the surface may insist on
     /// its own), in `present_mode` when supported and FIFO otherwise. sRGB
-    /// formats are preferred. `old` is retired by the new one.
+    /// formats are preferred. `old` is retired by the new one. Frames are
+    /// drawn with `samples` samples per pixel.
     pub fn new(
         device: &Device,
         surface: &Arc<Surface>,
         size: vk::Extent2D,
         present_mode: vk::PresentModeKHR,
+        samples: u32,
         old: Option<Swapchain>,
     ) -> Result<Self> {
         let choice = SurfaceChoice::new(device, surface, size, present_mode)?;
@@ -232,15 +244,20 @@ impl Swapchain {
             .present_mode(present_mode)
             .clipped(true)
             .old_swapchain(old.as_ref().map_or(vk::SwapchainKHR::null(), |o| o.raw));
-        let depth = device.create_image(
-            ImageDesc {
-                extent,
-                format: DEPTH_FORMAT,
-                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-                aspect: vk::ImageAspectFlags::DEPTH,
-            },
-            "swapchain.depth",
-        )?;
+        let attachments =
+            match Multisampled::new(device, extent, format.format, samples, "swapchain")? {
+                Some(ms) => Attachments::Multisampled(ms),
+                None => Attachments::Depth(device.create_image(
+                    ImageDesc {
+                        extent,
+                        format: DEPTH_FORMAT,
+                        usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                        aspect: vk::ImageAspectFlags::DEPTH,
+                        samples: vk::SampleCountFlags::TYPE_1,
+                    },
+                    "swapchain.depth",
+                )?),
+            };
         // SAFETY: the swapchain holds the surface; the old swapchain is
         // retired here and dropped below (its Drop waits for idle).
         let created = unsafe { loader.create_swapchain(&info, None) };
@@ -257,7 +274,7 @@ impl Swapchain {
             images: Vec::new(),
             views: Vec::new(),
             render_finished: Vec::new(),
-            depth,
+            attachments,
             readable,
             device: device.clone(),
             _surface: Arc::clone(surface),
@@ -334,30 +351,45 @@ impl Swapchain {
     }
 
     pub fn views(&self, index: u32) -> TargetViews {
-        TargetViews {
-            extent: self.extent,
-            color_view: self.views[index as usize].raw(),
-            color_format: self.format.format,
-            depth_view: self.depth.view(),
+        let color = self.views[index as usize].raw();
+        match &self.attachments {
+            Attachments::Multisampled(ms) => ms.views(self.extent, color, None),
+            Attachments::Depth(depth) => TargetViews {
+                extent: self.extent,
+                color_view: color,
+                color_format: self.format.format,
+                samples: vk::SampleCountFlags::TYPE_1,
+                depth_view: depth.view(),
+                color_resolve: None,
+                depth_resolve: None,
+            },
         }
     }
 
-    /// Makes image `index` and the depth image attachments; earlier
-    /// contents are discarded.
+    /// Makes image `index` and the images drawn into with it attachments;
+    /// earlier contents are discarded.
     pub fn record_begin(&self, rec: &Recorder, index: u32) {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
-        rec.transition_images(&Transition::to_attachments(
-            self.images[index as usize],
-            // Ordered after the acquire semaphore's wait stage.
-            (S::COLOR_ATTACHMENT_OUTPUT, A::NONE),
-            self.depth.raw(),
-            // The depth image is shared by the frames in flight: the
-            // previous frame's depth writes must finish first.
-            (
-                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-            ),
-        ));
+        let image = self.images[index as usize];
+        // Ordered after the acquire semaphore's wait stage.
+        let after_acquire = (S::COLOR_ATTACHMENT_OUTPUT, A::NONE);
+        match &self.attachments {
+            Attachments::Depth(depth) => rec.transition_images(&Transition::to_attachments(
+                image,
+                after_acquire,
+                depth.raw(),
+                // The depth image is shared by the frames in flight: the
+                // previous frame's depth writes must finish first.
+                (
+                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+                ),
+            )),
+            Attachments::Multisampled(ms) => {
+                rec.transition_images(&[Transition::to_color_attachment(image, after_acquire)]);
+                ms.record_begin(rec);
+            }
+        }
     }
 
     /// Makes image `index` ready to present after drawing, copying it into

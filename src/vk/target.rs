@@ -5,9 +5,9 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use super::commands::Recorder;
-use super::device::Device;
+use super::device::{sample_count_flag, Device};
 use super::error::{Result, VkError};
-use super::memory::{Buffer, BufferDesc, Image, ImageDesc, Transition};
+use super::memory::{Buffer, BufferDesc, Image, ImageDesc, Transition, DEPTH_WRITTEN};
 
 /// Colour format of offscreen targets: sRGB, like a swapchain, so shaders
 /// write linear values and the PNG holds encoded ones.
@@ -16,13 +16,120 @@ pub const OFFSCREEN_COLOR_FORMAT: vk::Format = vk::Format::R8G8B8A8_SRGB;
 pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 
 /// The images a frame is drawn into, in COLOR_ATTACHMENT_OPTIMAL and
-/// DEPTH_ATTACHMENT_OPTIMAL when the renderer records.
+/// DEPTH_ATTACHMENT_OPTIMAL when the renderer records. With more than one
+/// sample per pixel, the frame is drawn into multisampled images and
+/// resolved at the end of rendering: colour by averaging the samples into
+/// the target's colour image, depth (where the target keeps it) by taking
+/// sample 0, the depth of the pixel's centre.
 #[derive(Clone, Copy, Debug)]
 pub struct TargetViews {
     pub extent: vk::Extent2D,
     pub color_format: vk::Format,
+    pub samples: vk::SampleCountFlags,
     pub(super) color_view: vk::ImageView,
     pub(super) depth_view: vk::ImageView,
+    pub(super) color_resolve: Option<vk::ImageView>,
+    pub(super) depth_resolve: Option<vk::ImageView>,
+}
+
+/// The multisampled colour and depth images a target draws into before
+/// resolving, when it has more than one sample per pixel.
+pub(super) struct Multisampled {
+    pub(super) color: Image,
+    pub(super) depth: Image,
+}
+
+impl Multisampled {
+    /// None for one sample per pixel.
+    pub(super) fn new(
+        device: &Device,
+        extent: vk::Extent2D,
+        color_format: vk::Format,
+        samples: u32,
+        name: &str,
+    ) -> Result<Option<Self>> {
+        if samples == 1 {
+            return Ok(None);
+        }
+        if !device.caps.supports_samples(samples) {
+            return Err(VkError::Unsupported(format!(
+                "{} cannot draw {samples} samples per pixel (it can draw {})",
+                device.caps.device_name,
+                sample_count_list(&device.caps.sample_counts)
+            )));
+        }
+        let flag = sample_count_flag(samples);
+        let image = |format, usage, aspect, what| {
+            device.create_image(
+                ImageDesc {
+                    extent,
+                    format,
+                    usage,
+                    aspect,
+                    samples: flag,
+                },
+                &format!("{name}.{what}"),
+            )
+        };
+        Ok(Some(Multisampled {
+            color: image(
+                color_format,
+                vk::ImageUsageFlags::COLOR_ATTACHMENT,
+                vk::ImageAspectFlags::COLOR,
+                "multisampled_color",
+            )?,
+            depth: image(
+                DEPTH_FORMAT,
+                vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                vk::ImageAspectFlags::DEPTH,
+                "multisampled_depth",
+            )?,
+        }))
+    }
+
+    /// Makes both images attachments, their old contents discarded, after
+    /// the previous frame's writes to them (targets share them between
+    /// frames in flight).
+    pub(super) fn record_begin(&self, rec: &Recorder) {
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        rec.transition_images(&Transition::to_attachments(
+            self.color.raw(),
+            (S::COLOR_ATTACHMENT_OUTPUT, A::COLOR_ATTACHMENT_WRITE),
+            self.depth.raw(),
+            (
+                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+            ),
+        ));
+    }
+
+    /// The views of a target whose own images are `color` and (when it
+    /// keeps depth) `depth`: drawn into these, resolved into those.
+    pub(super) fn views(
+        &self,
+        extent: vk::Extent2D,
+        color: vk::ImageView,
+        depth: Option<vk::ImageView>,
+    ) -> TargetViews {
+        TargetViews {
+            extent,
+            color_format: self.color.desc.format,
+            samples: self.color.desc.samples,
+            color_view: self.color.view(),
+            depth_view: self.depth.view(),
+            color_resolve: Some(color),
+            depth_resolve: depth,
+        }
+    }
+}
+
+/// "1, 4": the sample counts a device can draw.
+pub fn sample_count_list(counts: &[u32]) -> String {
+    counts
+        .iter()
+        .map(u32::to_string)
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// What a target read back: sRGB RGBA8 pixels and depth, row-major, top row
@@ -63,13 +170,16 @@ pub fn check_depth_format(device: &Device) -> Result<()> {
 
 pub struct OffscreenTarget {
     color: Image,
+    /// Single-sample depth: drawn into, or resolved into from `multisampled`.
     depth: Image,
+    multisampled: Option<Multisampled>,
     color_readback: Buffer,
     depth_readback: Buffer,
 }
 
 impl OffscreenTarget {
-    pub fn new(device: &Device, width: u32, height: u32) -> Result<Self> {
+    /// A `width` x `height` target of `samples` samples per pixel.
+    pub fn new(device: &Device, width: u32, height: u32, samples: u32) -> Result<Self> {
         if width == 0 || height == 0 {
             return Err(VkError::Unsupported(format!(
                 "target size {width}x{height} has no pixels"
@@ -95,6 +205,7 @@ impl OffscreenTarget {
                 format: OFFSCREEN_COLOR_FORMAT,
                 usage: vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
                 aspect: vk::ImageAspectFlags::COLOR,
+                samples: vk::SampleCountFlags::TYPE_1,
             },
             "offscreen.color",
         )?;
@@ -105,9 +216,12 @@ impl OffscreenTarget {
                 usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT
                     | vk::ImageUsageFlags::TRANSFER_SRC,
                 aspect: vk::ImageAspectFlags::DEPTH,
+                samples: vk::SampleCountFlags::TYPE_1,
             },
             "offscreen.depth",
         )?;
+        let multisampled =
+            Multisampled::new(device, extent, OFFSCREEN_COLOR_FORMAT, samples, "offscreen")?;
         let pixels = u64::from(width) * u64::from(height);
         let readback = |name: &str| {
             device.create_buffer(
@@ -122,17 +236,25 @@ impl OffscreenTarget {
         Ok(OffscreenTarget {
             color,
             depth,
+            multisampled,
             color_readback: readback("offscreen.color_readback")?,
             depth_readback: readback("offscreen.depth_readback")?,
         })
     }
 
     pub fn views(&self) -> TargetViews {
-        TargetViews {
-            extent: self.color.desc.extent,
-            color_view: self.color.view(),
-            color_format: self.color.desc.format,
-            depth_view: self.depth.view(),
+        let extent = self.color.desc.extent;
+        match &self.multisampled {
+            Some(ms) => ms.views(extent, self.color.view(), Some(self.depth.view())),
+            None => TargetViews {
+                extent,
+                color_view: self.color.view(),
+                color_format: self.color.desc.format,
+                samples: vk::SampleCountFlags::TYPE_1,
+                depth_view: self.depth.view(),
+                color_resolve: None,
+                depth_resolve: None,
+            },
         }
     }
 
@@ -146,6 +268,9 @@ impl OffscreenTarget {
             self.depth.raw(),
             (S::COPY, A::NONE),
         ));
+        if let Some(ms) = &self.multisampled {
+            ms.record_begin(rec);
+        }
     }
 
     /// Copies both images into host-visible buffers after drawing.
@@ -156,11 +281,7 @@ impl OffscreenTarget {
             Transition {
                 image: self.depth.raw(),
                 aspect: vk::ImageAspectFlags::DEPTH,
-                from: (
-                    L::DEPTH_ATTACHMENT_OPTIMAL,
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
+                from: DEPTH_WRITTEN,
                 to: (L::TRANSFER_SRC_OPTIMAL, S::COPY, A::TRANSFER_READ),
             },
         ]);

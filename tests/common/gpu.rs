@@ -80,22 +80,38 @@ impl GpuScene {
         wireframe: bool,
     ) -> Self {
         let gpu = open_gpu(None);
-        Self::on(gpu, terrain, appearance, (width, height, wireframe))
+        Self::on(gpu, terrain, appearance, (width, height, wireframe, 1))
     }
 
     /// As `with_appearance`, on the device golden images were made on.
     pub fn for_golden(terrain: Terrain, appearance: &Appearance, width: u32, height: u32) -> Self {
+        Self::for_golden_samples(terrain, appearance, (width, height), 1)
+    }
+
+    /// As `for_golden`, drawn with `samples` samples per pixel.
+    pub fn for_golden_samples(
+        terrain: Terrain,
+        appearance: &Appearance,
+        (width, height): (u32, u32),
+        samples: u32,
+    ) -> Self {
         let gpu = open_gpu(Some(GOLDEN_DEVICE));
-        Self::on(gpu, terrain, appearance, (width, height, false))
+        Self::on(gpu, terrain, appearance, (width, height, false, samples))
     }
 
     /// Every path's renderer and a target of (width, height), with line
-    /// pipelines when `wireframe`.
-    fn on(gpu: Gpu, terrain: Terrain, appearance: &Appearance, target: (u32, u32, bool)) -> Self {
-        let (width, height, wireframe) = target;
+    /// pipelines when `wireframe`, of `samples` samples per pixel.
+    fn on(
+        gpu: Gpu,
+        terrain: Terrain,
+        appearance: &Appearance,
+        target: (u32, u32, bool, u32),
+    ) -> Self {
+        let (width, height, wireframe, samples) = target;
         let options = RendererOptions {
             paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
             wireframe,
+            samples,
         };
         let (renderer, headless) = offscreen(&gpu, &terrain, appearance, &options, (width, height))
             .expect("renderer and offscreen target");

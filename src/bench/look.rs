@@ -1,0 +1,115 @@
+//! What the picture costs: a scene's own view drawn with and without each
+//! addition to the terrain's shading (triplanar projection of steep
+//! ground, the sky, multisample anti-aliasing), GPU time side by side in
+//! one run.
+
+use serde::{Deserialize, Serialize};
+
+use super::run::median;
+use crate::material::Appearance;
+use crate::render::{offscreen, RenderSettings, RendererOptions, DEFAULT_SAMPLES};
+use crate::scene::Scene;
+use crate::terrain::Terrain;
+use crate::vk::Gpu;
+
+/// One way of drawing the scene's view, and what it cost.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct LookRow {
+    pub scene: String,
+    pub device: String,
+    pub driver: String,
+    pub width: u32,
+    pub height: u32,
+    /// "plain", "+ triplanar", "+ sky", "+ 4x MSAA" or "all".
+    pub config: String,
+    pub triplanar: bool,
+    pub sky: bool,
+    pub samples: u32,
+    /// Frames timed (after one untimed).
+    pub frames: usize,
+    /// Median GPU time; null without timestamps.
+    pub gpu_ms: Option<f64>,
+}
+
+/// The looks measured: none of the additions, each alone, and all.
+fn looks(samples: u32) -> Vec<(String, bool, bool, u32)> {
+    let msaa = format!("+ {samples}x MSAA");
+    vec![
+        ("plain".into(), false, false, 1),
+        ("+ triplanar".into(), true, false, 1),
+        ("+ sky".into(), false, true, 1),
+        (msaa, false, false, samples),
+        ("all".into(), true, true, samples),
+    ]
+}
+
+/// Draws `scene` from its camera with the tess path and its own LOD, at
+/// `width` x `height`, once untimed and `frames` times timed, in every
+/// look. Multisampling uses `DEFAULT_SAMPLES`, or is left out where the
+/// device cannot draw them.
+pub fn measure(
+    gpu: &Gpu,
+    scene: &Scene,
+    name: &str,
+    (width, height): (u32, u32),
+    frames: usize,
+) -> anyhow::Result<Vec<LookRow>> {
+    let caps = &gpu.device.caps;
+    let info = scene.terrain_info()?;
+    let mut rows = Vec::new();
+    for (config, triplanar, sky, samples) in looks(DEFAULT_SAMPLES) {
+        if !caps.supports_samples(samples) {
+            continue;
+        }
+        let mut scene = scene.clone();
+        if let Some(m) = scene.material.as_mut() {
+            m.triplanar = triplanar;
+        }
+        let appearance = Appearance::load(&scene, &info)?;
+        let terrain = Terrain::new(info.clone(), appearance.y_margin())?;
+        let camera = scene.camera_for(terrain.info());
+        let settings = RenderSettings {
+            sky,
+            ..RenderSettings::for_scene(&scene, terrain.info())
+        };
+        let path = crate::render::with_fallback(settings, caps, &mut Vec::new()).path;
+        let options = RendererOptions {
+            paths: vec![path],
+            wireframe: false,
+            samples,
+        };
+        let (mut renderer, mut headless) =
+            offscreen(gpu, &terrain, &appearance, &options, (width, height))?;
+        let settings = RenderSettings { path, ..settings };
+        let mut times = Vec::new();
+        for i in 0..=frames {
+            let frame = headless.render(&mut renderer, &terrain, &camera, &settings)?;
+            if i > 0 {
+                times.extend(frame.measurements.gpu_ms);
+            }
+        }
+        rows.push(LookRow {
+            scene: name.to_string(),
+            device: caps.device_name.clone(),
+            driver: format!("{} ({})", caps.driver_name, caps.driver_info),
+            width,
+            height,
+            config,
+            triplanar,
+            sky,
+            samples,
+            frames,
+            gpu_ms: median(&mut times),
+        });
+    }
+    Ok(rows)
+}
+
+/// Each row's GPU time over the same scene and device's plain row, as a
+/// percentage more (0 for the plain row); None without times.
+pub fn extra_percent(rows: &[LookRow], row: &LookRow) -> Option<f64> {
+    let plain = rows
+        .iter()
+        .find(|r| r.scene == row.scene && r.device == row.device && r.config == "plain")?;
+    Some(100.0 * (row.gpu_ms? / plain.gpu_ms? - 1.0))
+}
