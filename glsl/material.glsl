@@ -86,7 +86,8 @@ vec2 layer_uv(int i, vec2 q) {
 }
 
 // Projections of the layers' maps, by the axis they look along: 0 along
-// x, 1 from above (along y), 2 along z. Every layer maps the plane
+// x, 1 from above (along y), 2 along z. Without TRIPLANAR only the one
+// from above is used. Every layer maps the plane
 // coordinates of each through its own tile matrix, so a texture keeps
 // its scale on every face.
 const int PROJECT_X = 0;
@@ -111,22 +112,38 @@ vec3 lifted(int a, vec2 d, vec3 n) {
 }
 
 #ifdef TRIPLANAR
-// Where the side projections start: an axis takes part once the normal's
-// component along it passes this. Ground under about 33 degrees of slope
-// is projected from above alone, ground over about 57 degrees from the
-// sides alone, and every unit normal has a component past it (at least
-// 1 / sqrt(3)).
-const float TRIPLANAR_START = 0.55;
+// Where a projection starts to take part: once the normal's component
+// along its axis passes this. Ground under about 35 degrees of slope is
+// projected from above alone, ground over about 55 degrees from the sides
+// alone. It is just over 1 / sqrt(3), so the smallest component never
+// passes it: two projections are enough (biplanar), and the two kept
+// change places only where the one that leaves has weight 0.
+const float TRIPLANAR_START = 0.58;
+const int PROJECTIONS = 2;
 
-// Weight of each projection (x, y, z) at unit normal n, summing to 1.
-vec3 projection_weights(vec3 n) {
-    vec3 w = max(abs(n) - TRIPLANAR_START, 0.0);
+// The two projections to sample at unit normal n and their weights
+// (summing to 1): the axes of its largest and middle components, each
+// weighted by its component past TRIPLANAR_START, squared. Within a hair
+// of the cube's diagonal, where neither passes, the largest alone.
+void projections(vec3 n, out ivec2 axes, out vec2 weights) {
+    vec3 m = abs(n);
+    int major = m.x >= m.y ? (m.x >= m.z ? PROJECT_X : PROJECT_Z)
+                           : (m.y >= m.z ? PROJECT_Y : PROJECT_Z);
+    int p = major == PROJECT_X ? PROJECT_Y : PROJECT_X;
+    int q = major == PROJECT_Z ? PROJECT_Y : PROJECT_Z;
+    int median = m[p] >= m[q] ? p : q;
+    vec2 w = max(vec2(m[major], m[median]) - TRIPLANAR_START, 0.0);
     w *= w;
-    return w / (w.x + w.y + w.z);
+    float sum = w.x + w.y;
+    axes = ivec2(major, median);
+    weights = sum > 0.0 ? w / sum : vec2(1.0, 0.0);
 }
 #else
-vec3 projection_weights(vec3 n) {
-    return vec3(0.0, 1.0, 0.0);
+const int PROJECTIONS = 1;
+
+void projections(vec3 n, out ivec2 axes, out vec2 weights) {
+    axes = ivec2(PROJECT_Y);
+    weights = vec2(1.0, 0.0);
 }
 #endif
 
@@ -152,16 +169,18 @@ float layer_displacement(vec2 g, float h) {
     vec3 p = vec3(xz.x, h, xz.y);
     // Projected like the colour and normal maps, so the displaced surface
     // and its shading agree.
-    vec3 pw = projection_weights(gradient_normal(height_gradient(g)));
+    ivec2 axes;
+    vec2 pw;
+    projections(gradient_normal(height_gradient(g)), axes, pw);
     float d = 0.0;
     for (int i = 0; i < int(LAYER_COUNT); ++i) {
         int layer = int(material.layers[i].band.x);
         if (layer >= 0 && w[i] > 0.0) {
             float s = 0.0;
-            for (int a = 0; a < 3; ++a) {
-                if (pw[a] > 0.0) {
-                    s += pw[a] * textureLod(height_maps,
-                        vec3(layer_uv(i, projected(a, p)), float(layer)),
+            for (int k = 0; k < PROJECTIONS; ++k) {
+                if (pw[k] > 0.0) {
+                    s += pw[k] * textureLod(height_maps,
+                        vec3(layer_uv(i, projected(axes[k], p)), float(layer)),
                         material.layers[i].band.w).r;
                 }
             }

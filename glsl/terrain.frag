@@ -30,10 +30,13 @@ vec3 height_color(float t) {
     return t < 0.6 ? mix(low, mid, t / 0.6) : mix(mid, high, (t - 0.6) / 0.4);
 }
 
-// One hue per power of two: 1 blue ... 64 red.
+// One hue per power of two, from blue (1) through cyan, green and yellow
+// to red (64, full resolution): two thirds of the hue circle, so the ends
+// never meet.
 vec3 lod_color(float factor) {
     float t = clamp(log2(max(factor, 1.0)) / MAX_TESS_EXPONENT, 0.0, 1.0);
-    return clamp(vec3(abs(t * 6.0 - 3.0) - 1.0, 2.0 - abs(t * 6.0 - 2.0), 2.0 - abs(t * 6.0 - 4.0)), 0.0, 1.0).bgr;
+    float hue = 4.0 * (1.0 - t);
+    return clamp(abs(mod(hue + vec3(0.0, 4.0, 2.0), 6.0) - 3.0) - 1.0, 0.0, 1.0);
 }
 
 // Ambient plus every directional light; the first is dimmed by the baked
@@ -55,7 +58,7 @@ vec3 lighting(vec3 n) {
 
 #ifdef MATERIAL
 // Blended colour and normal of the layers at this fragment, each layer's
-// maps projected as `projection_weights` says (from above alone but with
+// maps projected as `projections` says (from above alone but with
 // TRIPLANAR). A projection's tangent frame follows the layer's texture
 // axes in its plane: u and v run along the rows of the tile matrix,
 // lifted onto the surface along the projection's axis.
@@ -77,7 +80,9 @@ void layered(vec3 n, out vec3 albedo, out vec3 normal) {
     // selection.
     vec3 dx = dFdx(p);
     vec3 dy = dFdy(p);
-    vec3 pw = projection_weights(n);
+    ivec2 axes;
+    vec2 pw;
+    projections(n, axes, pw);
     albedo = vec3(0.0);
     normal = vec3(0.0);
     for (int i = 0; i < int(LAYER_COUNT); ++i) {
@@ -85,11 +90,12 @@ void layered(vec3 n, out vec3 albedo, out vec3 normal) {
             continue;
         }
         vec4 m = material.layers[i].tile;
-        for (int a = 0; a < 3; ++a) {
-            if (pw[a] <= 0.0) {
+        for (int k = 0; k < PROJECTIONS; ++k) {
+            if (pw[k] <= 0.0) {
                 continue;
             }
-            float weight = w[i] * pw[a];
+            int a = axes[k];
+            float weight = w[i] * pw[k];
             vec2 uv = layer_uv(i, projected(a, p));
             vec2 qx = projected(a, dx);
             vec2 qy = projected(a, dy);

@@ -25,7 +25,7 @@ pub struct LookRow {
     pub triplanar: bool,
     pub sky: bool,
     pub samples: u32,
-    /// Frames timed (after one untimed).
+    /// Frames timed (after one untimed), in turn with the other looks.
     pub frames: usize,
     /// Median GPU time; null without timestamps.
     pub gpu_ms: Option<f64>,
@@ -44,9 +44,10 @@ fn looks(samples: u32) -> Vec<(String, bool, bool, u32)> {
 }
 
 /// Draws `scene` from its camera with the tess path and its own LOD, at
-/// `width` x `height`, once untimed and `frames` times timed, in every
-/// look. Multisampling uses `DEFAULT_SAMPLES`, or is left out where the
-/// device cannot draw them.
+/// `width` x `height`, in every look: once each untimed, then `frames`
+/// rounds of one frame of each look in turn, so that drift in the
+/// machine's speed falls on every look alike. Multisampling uses
+/// `DEFAULT_SAMPLES`, or is left out where the device cannot draw them.
 pub fn measure(
     gpu: &Gpu,
     scene: &Scene,
@@ -56,7 +57,7 @@ pub fn measure(
 ) -> anyhow::Result<Vec<LookRow>> {
     let caps = &gpu.device.caps;
     let info = scene.terrain_info()?;
-    let mut rows = Vec::new();
+    let mut looks_built = Vec::new();
     for (config, triplanar, sky, samples) in looks(DEFAULT_SAMPLES) {
         if !caps.supports_samples(samples) {
             continue;
@@ -72,23 +73,15 @@ pub fn measure(
             sky,
             ..RenderSettings::for_scene(&scene, terrain.info())
         };
-        let path = crate::render::with_fallback(settings, caps, &mut Vec::new()).path;
+        let settings = crate::render::with_fallback(settings, caps, &mut Vec::new());
         let options = RendererOptions {
-            paths: vec![path],
+            paths: vec![settings.path],
             wireframe: false,
             samples,
         };
-        let (mut renderer, mut headless) =
+        let (renderer, headless) =
             offscreen(gpu, &terrain, &appearance, &options, (width, height))?;
-        let settings = RenderSettings { path, ..settings };
-        let mut times = Vec::new();
-        for i in 0..=frames {
-            let frame = headless.render(&mut renderer, &terrain, &camera, &settings)?;
-            if i > 0 {
-                times.extend(frame.measurements.gpu_ms);
-            }
-        }
-        rows.push(LookRow {
+        let row = LookRow {
             scene: name.to_string(),
             device: caps.device_name.clone(),
             driver: format!("{} ({})", caps.driver_name, caps.driver_info),
@@ -99,10 +92,33 @@ pub fn measure(
             sky,
             samples,
             frames,
-            gpu_ms: median(&mut times),
-        });
+            gpu_ms: None,
+        };
+        looks_built.push((
+            row,
+            terrain,
+            camera,
+            settings,
+            renderer,
+            headless,
+            Vec::new(),
+        ));
     }
-    Ok(rows)
+    for round in 0..=frames {
+        for (_, terrain, camera, settings, renderer, headless, times) in &mut looks_built {
+            let frame = headless.render(renderer, terrain, camera, settings)?;
+            if round > 0 {
+                times.extend(frame.measurements.gpu_ms);
+            }
+        }
+    }
+    Ok(looks_built
+        .into_iter()
+        .map(|(row, .., mut times)| LookRow {
+            gpu_ms: median(&mut times),
+            ..row
+        })
+        .collect())
 }
 
 /// Each row's GPU time over the same scene and device's plain row, as a

@@ -327,14 +327,17 @@ fn look_section(w: &mut String, look: &[LookRow]) {
     if look.is_empty() {
         return;
     }
+    let _ = writeln!(w, "## What the picture costs\n");
     let _ = writeln!(
         w,
-        "## What the picture costs
-"
-    );
-    let _ = writeln!(
-        w,
-        "`vkterrain bench --look`: the scene's own view, the tess path with the scene's LOD and          material, drawn plain (layers projected from above, one sample per pixel, a flat          background) and with each addition: triplanar projection of steep ground, the sky,          multisample anti-aliasing, and all three. Median GPU time of the timed frames after one          untimed; the last column is the time over the plain row's. The error rows above are          drawn plain, with one sample per pixel, so their figures keep their meaning.\n"
+        "`vkterrain bench --look`: the scene's own view, the tess path with the scene's \
+         LOD and material, drawn plain (layers projected from above, one sample per \
+         pixel, a flat background) and with each addition: triplanar projection of steep \
+         ground, the sky, multisample anti-aliasing, and all three. Each look is drawn \
+         once untimed, then once a round in turn with the others; the GPU time is the \
+         median over the rounds, and the last column the time over the plain row's. The \
+         error rows above are drawn plain, with one sample per pixel, so their figures \
+         keep their meaning.\n"
     );
     let keys = first_seen(look, |r| (r.scene.clone(), r.device.clone()));
     for (scene, device) in keys {

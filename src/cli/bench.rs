@@ -164,7 +164,9 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
             let look = match cmd.look {
                 false => Vec::new(),
                 true => {
-                    let frames = if cmd.quick || cmd.single_frame { 2 } else { 5 };
+                    // A handful of frames whatever the run: one look is
+                    // a few seconds even on lavapipe.
+                    let frames = 7;
                     crate::bench::look::measure(
                         gpu,
                         &scene,
