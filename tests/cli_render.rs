@@ -66,6 +66,19 @@ fn render_writes_the_png_and_its_stats() {
     // The heightmap alone is 1025 * 1025 floats.
     assert!(s["gpu_memory"]["terrain.heightmap"].as_u64().unwrap() >= 1025 * 1025 * 4);
     assert!(s["gpu_memory_bytes"].as_u64().unwrap() >= 1025 * 1025 * 4);
+    // 4 samples per pixel by default: Vulkan requires every device to
+    // draw them. The multisampled images hold 4 samples of each pixel.
+    assert_eq!(s["samples"], 4);
+    for (name, bytes_per_sample) in [
+        ("offscreen.multisampled_color", 4),
+        ("offscreen.multisampled_depth", 4),
+    ] {
+        let bytes = s["gpu_memory"][name].as_u64().unwrap_or(0);
+        assert!(
+            bytes >= 320 * 180 * 4 * bytes_per_sample,
+            "{name}: {bytes} bytes"
+        );
+    }
     assert_eq!(s["validation_enabled"], true);
     assert_eq!(s["validation_messages"], 0);
     assert!(!dir.path().join(".f.png.partial").exists());
