@@ -155,6 +155,9 @@ layout(set = 0, binding = BINDING_HEIGHT_MAPS) uniform sampler2DArray height_map
 // weighted. A function of g alone, so patches that share a vertex move it
 // alike. Mirror: terrain::shading::max_displacement bounds it.
 float layer_displacement(vec2 g, float h) {
+    // The undisplaced surface's normal: for the rules' slope and the
+    // projections.
+    vec3 n = gradient_normal(height_gradient(g));
     float w[MAX_LAYERS];
 #ifdef BLEND_MAPS
     vec2 size = vec2(textureSize(blend_maps, 0).xy);
@@ -163,7 +166,7 @@ float layer_displacement(vec2 g, float h) {
     vec4 b1 = BLEND_MAP_COUNT > 1u ? textureLod(blend_maps, vec3(uv, 1.0), 0.0) : vec4(0.0);
     blend_weights(b0, b1, w);
 #else
-    rule_weights(normalised_height(h), gradient_normal(height_gradient(g)).y, w);
+    rule_weights(normalised_height(h), n.y, w);
 #endif
     vec2 xz = grid_to_local(g);
     vec3 p = vec3(xz.x, h, xz.y);
@@ -171,7 +174,7 @@ float layer_displacement(vec2 g, float h) {
     // and its shading agree.
     ivec2 axes;
     vec2 pw;
-    projections(gradient_normal(height_gradient(g)), axes, pw);
+    projections(n, axes, pw);
     float d = 0.0;
     for (int i = 0; i < int(LAYER_COUNT); ++i) {
         int layer = int(material.layers[i].band.x);

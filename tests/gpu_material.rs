@@ -383,22 +383,9 @@ fn a_textured_scene_draws_on_a_terrain_that_is_not_2n_plus_1() {
 #[test]
 fn anisotropy_follows_the_scene_within_the_device() {
     let caps = |kind: &str, has: bool| Capabilities {
-        device_name: "test".into(),
         device_type: kind.into(),
-        driver_name: String::new(),
-        driver_info: String::new(),
-        api_version: "1.3.0".into(),
-        tessellation_shader: true,
-        fill_mode_non_solid: true,
-        pipeline_statistics_query: true,
         sampler_anisotropy: has,
-        timestamp_period_ns: None,
-        timestamp_valid_bits: 0,
-        max_tessellation_level: 64,
-        max_image_dimension_2d: 4096,
-        max_image_array_layers: 256,
-        max_sampler_anisotropy: 16.0,
-        sample_counts: vec![1, 4],
+        ..test_capabilities()
     };
     use vkterrain::render::material::anisotropy_for;
     let gpu = caps("discrete GPU", true);

@@ -290,22 +290,8 @@ fn sample_counts_the_device_cannot_draw_are_refused_by_name() {
 fn the_default_sample_count_falls_back_where_a_device_lacks_it() {
     use vkterrain::render::sample_count;
     let caps = |counts: Vec<u32>| vkterrain::vk::Capabilities {
-        device_name: "test".into(),
-        device_type: "cpu".into(),
-        driver_name: String::new(),
-        driver_info: String::new(),
-        api_version: "1.3.0".into(),
-        tessellation_shader: true,
-        fill_mode_non_solid: true,
-        pipeline_statistics_query: true,
-        sampler_anisotropy: false,
-        timestamp_period_ns: None,
-        timestamp_valid_bits: 0,
-        max_tessellation_level: 64,
-        max_image_dimension_2d: 4096,
-        max_image_array_layers: 256,
-        max_sampler_anisotropy: 1.0,
         sample_counts: counts,
+        ..test_capabilities()
     };
     let mut notes = Vec::new();
     let full = caps(vec![1, 2, 4, 8]);

@@ -57,21 +57,24 @@ pub fn measure(
 ) -> anyhow::Result<Vec<LookRow>> {
     let caps = &gpu.device.caps;
     let info = scene.terrain_info()?;
+    // Loaded once: the looks differ only in what the renderer and its
+    // shader variants make of it.
+    let loaded = Appearance::load(scene, &info)?;
+    let terrain = Terrain::new(info, loaded.y_margin())?;
+    let camera = scene.camera_for(terrain.info());
+    let scene_settings = RenderSettings::for_scene(scene, terrain.info());
     let mut looks_built = Vec::new();
     for (config, triplanar, sky, samples) in looks(DEFAULT_SAMPLES) {
         if !caps.supports_samples(samples) {
             continue;
         }
-        let mut scene = scene.clone();
-        if let Some(m) = scene.material.as_mut() {
+        let mut appearance = loaded.clone();
+        if let Some(m) = appearance.material.as_mut() {
             m.triplanar = triplanar;
         }
-        let appearance = Appearance::load(&scene, &info)?;
-        let terrain = Terrain::new(info.clone(), appearance.y_margin())?;
-        let camera = scene.camera_for(terrain.info());
         let settings = RenderSettings {
             sky,
-            ..RenderSettings::for_scene(&scene, terrain.info())
+            ..scene_settings
         };
         let settings = crate::render::with_fallback(settings, caps, &mut Vec::new());
         let options = RendererOptions {
@@ -94,19 +97,11 @@ pub fn measure(
             frames,
             gpu_ms: None,
         };
-        looks_built.push((
-            row,
-            terrain,
-            camera,
-            settings,
-            renderer,
-            headless,
-            Vec::new(),
-        ));
+        looks_built.push((row, settings, renderer, headless, Vec::new()));
     }
     for round in 0..=frames {
-        for (_, terrain, camera, settings, renderer, headless, times) in &mut looks_built {
-            let frame = headless.render(renderer, terrain, camera, settings)?;
+        for (_, settings, renderer, headless, times) in &mut looks_built {
+            let frame = headless.render(renderer, &terrain, &camera, settings)?;
             if round > 0 {
                 times.extend(frame.measurements.gpu_ms);
             }

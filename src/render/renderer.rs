@@ -39,7 +39,7 @@ use crate::vk::memory::{Buffer, Image};
 use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::pipeline::GraphicsPipelineDesc;
 use crate::vk::queries::{FrameQueries, PipelineStatistics};
-use crate::vk::target::{sample_count_list, TargetViews, DEPTH_FORMAT};
+use crate::vk::target::{TargetViews, DEPTH_FORMAT};
 use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
 /// Per-frame-in-flight resources: the uniform block is rewritten each frame,
@@ -656,14 +656,7 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
             device.caps.device_name
         )));
     }
-    if !device.caps.supports_samples(options.samples) {
-        return Err(VkError::Unsupported(format!(
-            "{} cannot draw {} samples per pixel (it can draw {})",
-            device.caps.device_name,
-            options.samples,
-            sample_count_list(&device.caps.sample_counts)
-        )));
-    }
+    device.caps.check_samples(options.samples)?;
     for &path in &options.paths {
         check_path(device, terrain, path, options.wireframe)?;
     }

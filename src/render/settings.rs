@@ -60,20 +60,19 @@ pub fn sample_count(
     caps: &crate::vk::Capabilities,
     notes: &mut Vec<String>,
 ) -> crate::vk::Result<u32> {
-    let list = || crate::vk::target::sample_count_list(&caps.sample_counts);
     match requested {
         Some(n) if caps.supports_samples(n) => Ok(n),
         Some(n) => Err(crate::vk::VkError::Unsupported(format!(
             "{} cannot draw {n} samples per pixel (--samples {})",
             caps.device_name,
-            list()
+            caps.sample_count_list()
         ))),
         None if caps.supports_samples(DEFAULT_SAMPLES) => Ok(DEFAULT_SAMPLES),
         None => {
             notes.push(format!(
                 "{}: {DEFAULT_SAMPLES} samples per pixel are unavailable (it can draw {}), drawing without anti-aliasing",
                 caps.device_name,
-                list()
+                caps.sample_count_list()
             ));
             Ok(1)
         }

@@ -45,6 +45,28 @@ impl Capabilities {
     pub fn supports_samples(&self, samples: u32) -> bool {
         self.sample_counts.contains(&samples)
     }
+
+    /// "1, 4": the sample counts the device can draw.
+    pub fn sample_count_list(&self) -> String {
+        self.sample_counts
+            .iter()
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// Refuses `samples` samples per pixel where the device cannot draw
+    /// them, naming the counts it can.
+    pub fn check_samples(&self, samples: u32) -> Result<()> {
+        if self.supports_samples(samples) {
+            return Ok(());
+        }
+        Err(VkError::Unsupported(format!(
+            "{} cannot draw {samples} samples per pixel (it can draw {})",
+            self.device_name,
+            self.sample_count_list()
+        )))
+    }
 }
 
 /// How the renderer must work around a driver's faults: kept apart from

@@ -51,13 +51,7 @@ impl Multisampled {
         if samples == 1 {
             return Ok(None);
         }
-        if !device.caps.supports_samples(samples) {
-            return Err(VkError::Unsupported(format!(
-                "{} cannot draw {samples} samples per pixel (it can draw {})",
-                device.caps.device_name,
-                sample_count_list(&device.caps.sample_counts)
-            )));
-        }
+        device.caps.check_samples(samples)?;
         let flag = sample_count_flag(samples);
         let image = |format, usage, aspect, what| {
             device.create_image(
@@ -121,15 +115,6 @@ impl Multisampled {
             depth_resolve: depth,
         }
     }
-}
-
-/// "1, 4": the sample counts a device can draw.
-pub fn sample_count_list(counts: &[u32]) -> String {
-    counts
-        .iter()
-        .map(u32::to_string)
-        .collect::<Vec<_>>()
-        .join(", ")
 }
 
 /// What a target read back: sRGB RGBA8 pixels and depth, row-major, top row

@@ -71,6 +71,29 @@ pub fn cliff_map(width: usize, depth: usize, height: f32) -> Heightmap {
 }
 
 /// Writes bytes to a fresh file named `name` in a temporary directory.
+/// Capabilities of a made-up device, for policies tested without one:
+/// everything optional present, 1 or 4 samples per pixel.
+pub fn test_capabilities() -> vkterrain::vk::Capabilities {
+    vkterrain::vk::Capabilities {
+        device_name: "test".into(),
+        device_type: "discrete GPU".into(),
+        driver_name: String::new(),
+        driver_info: String::new(),
+        api_version: "1.3.0".into(),
+        tessellation_shader: true,
+        fill_mode_non_solid: true,
+        pipeline_statistics_query: true,
+        sampler_anisotropy: true,
+        timestamp_period_ns: None,
+        timestamp_valid_bits: 0,
+        max_tessellation_level: 64,
+        max_image_dimension_2d: 4096,
+        max_image_array_layers: 256,
+        max_sampler_anisotropy: 16.0,
+        sample_counts: vec![1, 4],
+    }
+}
+
 pub fn temp_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
     let path = dir.path().join(name);
     std::fs::write(&path, bytes).expect("temp file written");
