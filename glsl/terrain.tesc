@@ -1,6 +1,7 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
+#include "occlusion.glsl"
 
 // One quad patch: control points 0 upper-left, 1 upper-right, 2 lower-left,
 // 3 lower-right.
@@ -26,6 +27,11 @@ bool is_full_resolution(int patch_index) {
     return (full_resolution[patch_index >> 5] & (1u << uint(patch_index & 31))) != 0u;
 }
 
+// Which patches this draw keeps (OCCLUSION_PHASE_*).
+layout(push_constant) uniform Draw {
+    uint occlusion_phase;
+} draw;
+
 void cull_patch() {
     gl_TessLevelOuter[0] = 0.0;
     gl_TessLevelOuter[1] = 0.0;
@@ -50,7 +56,11 @@ void main() {
     vec3 box_max = vec3(in_rel[1].x, in_bounds_y[0].y - frame.eye_local.y, in_rel[1].z);
     vec3 center = 0.5 * (box_min + box_max);
     vec3 extents = 0.5 * (box_max - box_min);
-    if (frame.cull != 0u && aabb_outside_frustum(center, extents)) {
+    ivec2 grid_size = ivec2(frame.error_lod.zw);
+    ivec2 here = ivec2(in_grid[0]) / int(frame.cells_per_patch);
+    int p = here.y * grid_size.x + here.x;
+    if ((frame.cull != 0u && aabb_outside_frustum(center, extents))
+        || !drawn_in_phase(draw.occlusion_phase, p)) {
         cull_patch();
         out_inside_factor = 0.0;
         return;
@@ -79,9 +89,6 @@ void main() {
         // for an edge, the strip on it between the terrain's lowest and
         // highest heights (what both patches know alike); for the inside,
         // the patch's box. Mirror: terrain::lod::patch_error_factors.
-        ivec2 grid_size = ivec2(frame.error_lod.zw);
-        ivec2 here = ivec2(in_grid[0]) / int(frame.cells_per_patch);
-        int p = here.y * grid_size.x + here.x;
         if (is_full_resolution(p)) {
             cull_patch();
             out_inside_factor = 0.0;

@@ -13,6 +13,34 @@ pub const BINDING_ERROR_TABLE: u32 = 4;
 /// Storage buffer of this frame's full-resolution patches, one bit each
 /// (tess path, error LOD).
 pub const BINDING_FULL_RESOLUTION: u32 = 11;
+/// Storage buffer of the occlusion state, one word per patch
+/// (`OCCLUSION_*_BIT`), kept from frame to frame.
+pub const BINDING_VISIBILITY: u32 = 12;
+/// The depth the occlusion pyramid is reduced from (compute).
+pub const BINDING_HIZ_DEPTH: u32 = 13;
+/// Storage buffer of the occlusion pyramid, every level one after another.
+pub const BINDING_HIZ_PYRAMID: u32 = 14;
+/// The control points (x, z, Y bounds), read by the occlusion test.
+pub const BINDING_CONTROL_POINTS: u32 = 15;
+/// Storage buffer counting the patches the occlusion test culled.
+pub const BINDING_OCCLUSION_COUNT: u32 = 16;
+/// Occlusion state bit: the patch passed this frame's test (drawn first
+/// next frame).
+pub const OCCLUSION_VISIBLE_BIT: u32 = 1;
+/// Occlusion state bit: the patch passed the test but was not drawn
+/// first, so the second pass draws it.
+pub const OCCLUSION_NEWLY_VISIBLE_BIT: u32 = 2;
+/// Occlusion state bit: in the frustum, not drawn first, and hidden: not
+/// drawn at all.
+pub const OCCLUSION_CULLED_BIT: u32 = 4;
+/// Draw phase: every patch the frustum keeps (occlusion off).
+pub const OCCLUSION_PHASE_ALL: u32 = 0;
+/// Draw phase: the patches with `OCCLUSION_VISIBLE_BIT` from last frame.
+pub const OCCLUSION_PHASE_FIRST: u32 = 1;
+/// Draw phase: the patches with `OCCLUSION_NEWLY_VISIBLE_BIT`.
+pub const OCCLUSION_PHASE_SECOND: u32 = 2;
+/// Draw phase: the patches with `OCCLUSION_CULLED_BIT` (shown culled).
+pub const OCCLUSION_PHASE_CULLED: u32 = 3;
 /// Levels per patch in the error table (factors 1, 2, ..., 64).
 pub const ERROR_LEVEL_COUNT: u32 = 7;
 /// LOD metric: distance.
@@ -84,6 +112,24 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
             BINDING_FULL_RESOLUTION.to_string(),
         ),
         ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
+        ("BINDING_VISIBILITY", BINDING_VISIBILITY.to_string()),
+        ("BINDING_HIZ_DEPTH", BINDING_HIZ_DEPTH.to_string()),
+        ("BINDING_HIZ_PYRAMID", BINDING_HIZ_PYRAMID.to_string()),
+        ("BINDING_CONTROL_POINTS", BINDING_CONTROL_POINTS.to_string()),
+        (
+            "BINDING_OCCLUSION_COUNT",
+            BINDING_OCCLUSION_COUNT.to_string(),
+        ),
+        ("OCCLUSION_VISIBLE_BIT", uint(OCCLUSION_VISIBLE_BIT)),
+        (
+            "OCCLUSION_NEWLY_VISIBLE_BIT",
+            uint(OCCLUSION_NEWLY_VISIBLE_BIT),
+        ),
+        ("OCCLUSION_CULLED_BIT", uint(OCCLUSION_CULLED_BIT)),
+        ("OCCLUSION_PHASE_ALL", uint(OCCLUSION_PHASE_ALL)),
+        ("OCCLUSION_PHASE_FIRST", uint(OCCLUSION_PHASE_FIRST)),
+        ("OCCLUSION_PHASE_SECOND", uint(OCCLUSION_PHASE_SECOND)),
+        ("OCCLUSION_PHASE_CULLED", uint(OCCLUSION_PHASE_CULLED)),
         ("LOD_METRIC_DISTANCE", uint(LOD_METRIC_DISTANCE)),
         ("LOD_METRIC_ERROR", uint(LOD_METRIC_ERROR)),
         ("LOD_METRIC_SPHERE", uint(LOD_METRIC_SPHERE)),

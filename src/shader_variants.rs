@@ -121,6 +121,25 @@ impl Shading {
     }
 }
 
+/// What a level of the occlusion pyramid is reduced from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum HizSource {
+    /// A single-sample depth attachment.
+    Depth,
+    /// A multisampled depth attachment: every sample of a pixel.
+    DepthMultisampled,
+    /// The pyramid's level below.
+    Pyramid,
+}
+
+impl HizSource {
+    pub const ALL: [HizSource; 3] = [
+        HizSource::Depth,
+        HizSource::DepthMultisampled,
+        HizSource::Pyramid,
+    ];
+}
+
 /// One compiled shader: a stage of glsl/ with its features.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Shader {
@@ -138,6 +157,12 @@ pub enum Shader {
     SkyVert,
     SkyFrag,
     MirrorCheckComp,
+    /// One level of the occlusion pyramid.
+    HizComp(HizSource),
+    /// The occlusion test of every patch.
+    OcclusionComp,
+    /// The occlusion-culled patches in one colour.
+    CulledFrag,
 }
 
 impl Shader {
@@ -161,6 +186,11 @@ impl Shader {
         all.push(Shader::SkyVert);
         all.push(Shader::SkyFrag);
         all.push(Shader::MirrorCheckComp);
+        for source in HizSource::ALL {
+            all.push(Shader::HizComp(source));
+        }
+        all.push(Shader::OcclusionComp);
+        all.push(Shader::CulledFrag);
         all
     }
 
@@ -176,6 +206,9 @@ impl Shader {
             Shader::SkyVert => "sky.vert",
             Shader::SkyFrag => "sky.frag",
             Shader::MirrorCheckComp => "mirror_check.comp",
+            Shader::HizComp(_) => "hiz.comp",
+            Shader::OcclusionComp => "occlusion.comp",
+            Shader::CulledFrag => "culled.frag",
         }
     }
 
@@ -194,11 +227,16 @@ impl Shader {
             }
             Shader::GeomipVert(placing) | Shader::BruteVert(placing) => placing.defines(),
             Shader::TerrainFrag(shading) => shading.defines(),
+            Shader::HizComp(HizSource::Depth) => vec!["FROM_DEPTH"],
+            Shader::HizComp(HizSource::DepthMultisampled) => vec!["FROM_DEPTH_MS"],
+            Shader::HizComp(HizSource::Pyramid) => Vec::new(),
             Shader::TerrainVert
             | Shader::TerrainTesc
             | Shader::SkyVert
             | Shader::SkyFrag
-            | Shader::MirrorCheckComp => Vec::new(),
+            | Shader::MirrorCheckComp
+            | Shader::OcclusionComp
+            | Shader::CulledFrag => Vec::new(),
         }
     }
 

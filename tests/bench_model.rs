@@ -247,6 +247,11 @@ fn row(
         mean_px: 0.1 * p99,
         error_pixels: 1000,
         mismatched_pixels: 3,
+        occlusion: false,
+        patches_occluded: None,
+        patches_drawn_hidden: None,
+        culling_gpu_ms: None,
+        differing_pixels: None,
     }
 }
 

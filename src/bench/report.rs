@@ -92,7 +92,8 @@ pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
          triangles,tes_invocations,gpu_memory_bytes,predicted_max_px,max_px,p99_px,mean_px,error_pixels,\
-         mismatched_pixels\n",
+         mismatched_pixels,occlusion,patches_occluded,patches_drawn_hidden,culling_gpu_ms,\
+         differing_pixels\n",
     );
     for r in rows {
         let fields = [
@@ -118,6 +119,11 @@ pub fn csv(rows: &[Row]) -> String {
             format!("{:.4}", r.mean_px),
             r.error_pixels.to_string(),
             r.mismatched_pixels.to_string(),
+            r.occlusion.to_string(),
+            opt(r.patches_occluded),
+            opt(r.patches_drawn_hidden),
+            opt(r.culling_gpu_ms.map(|v| format!("{v:.3}"))),
+            opt(r.differing_pixels),
         ];
         out.push_str(&fields.join(","));
         out.push('\n');
@@ -241,7 +247,9 @@ pub struct TargetCheck {
 pub fn check_targets(rows: &[&Row]) -> TargetCheck {
     let find = |path: RowPath, tau: f32| {
         rows.iter()
-            .find(|r| r.path == path && r.lod == Some(RowLod::Error) && r.tau == Some(tau))
+            .find(|r| {
+                r.path == path && r.lod == Some(RowLod::Error) && r.tau == Some(tau) && !r.occlusion
+            })
             .copied()
     };
     let brute = rows.iter().find(|r| r.path == RowPath::Brute).copied();
@@ -253,7 +261,7 @@ pub fn check_targets(rows: &[&Row]) -> TargetCheck {
     let tris = |r: Option<&Row>| r.and_then(|r| r.triangles).map(|t| t as f64);
     let best = rows
         .iter()
-        .filter(|r| r.p99_px <= 1.0 && r.triangles.is_some())
+        .filter(|r| r.p99_px <= 1.0 && r.triangles.is_some() && !r.occlusion)
         .min_by_key(|r| r.triangles);
     TargetCheck {
         tess_p99: TARGET_TAUS.map(|t| find(RowPath::Tess, t).map(|r| r.p99_px)),
@@ -314,6 +322,7 @@ pub fn markdown(results: &Results, notes: &str, pareto_link: &str) -> String {
     let _ = writeln!(w, "{}", definitions());
     targets_section(w, rows);
     predicted_section(w, rows);
+    occlusion_section(w, rows);
     if !notes.trim().is_empty() {
         let _ = writeln!(w, "{}\n", notes.trim());
     }
@@ -430,7 +439,12 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
         let cell = |path: RowPath| {
             group
                 .iter()
-                .find(|r| r.path == path && r.lod == Some(RowLod::Error) && r.tau == Some(1.0))
+                .find(|r| {
+                    r.path == path
+                        && r.lod == Some(RowLod::Error)
+                        && r.tau == Some(1.0)
+                        && !r.occlusion
+                })
                 .map_or("n/a".to_string(), |r| {
                     format!(
                         "{} / {:.2} / {:.3}",
@@ -447,6 +461,71 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
             cell(RowPath::Tess),
             cell(RowPath::Geomip)
         );
+    }
+    let _ = writeln!(w);
+}
+
+/// Each error mode at tau = 1 px with occlusion culling beside without it,
+/// and the oracle's triangles.
+fn occlusion_section(w: &mut String, rows: &[Row]) {
+    let _ = writeln!(
+        w,
+        "## Occlusion culling
+"
+    );
+    let _ = writeln!(
+        w,
+        "Error mode at tau = 1 px with occlusion culling (\"+ occlusion\") beside the same mode \
+         without it, and the oracle at 1 px, which charges hidden patches nothing. Triangles and \
+         GPU ms are per frame; \"culling\" is the depth pyramid and the patch test, part of the \
+         frame; \"occluded\" the patches it hid; \"drawn hidden\" the patches it drew though the \
+         reference shows none of their pixels; \"differing\" the pixels, over all frames, whose \
+         colour differs from the render without occlusion culling (the target is 0).\n"
+    );
+    let _ = writeln!(
+        w,
+        "| scene | device | camera | path | triangles off / on / oracle | fewer | GPU ms off / on | culling ms (share) | occluded | drawn hidden | differing |"
+    );
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|");
+    for ((scene, device, camera), group) in groups(rows) {
+        let oracle = group
+            .iter()
+            .find(|r| r.path == RowPath::Oracle && r.tau == Some(1.0));
+        for path in [RowPath::Tess, RowPath::Geomip] {
+            let find = |occlusion: bool| {
+                group.iter().find(|r| {
+                    r.path == path
+                        && r.lod == Some(RowLod::Error)
+                        && r.tau == Some(1.0)
+                        && r.occlusion == occlusion
+                })
+            };
+            let (Some(off), Some(on)) = (find(false), find(true)) else {
+                continue;
+            };
+            let fewer = match (off.triangles, on.triangles) {
+                (Some(a), Some(b)) if b > 0 => format!("{:.2}x", a as f64 / b as f64),
+                _ => "n/a".into(),
+            };
+            let ms = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.1}"));
+            let share = match (on.culling_gpu_ms, on.gpu_ms) {
+                (Some(c), Some(f)) if f > 0.0 => format!("{c:.1} ({:.1} %)", 100.0 * c / f),
+                _ => "n/a".into(),
+            };
+            let _ = writeln!(
+                w,
+                "| {scene} | {device} | {camera} | {} | {} / {} / {} | {fewer} | {} / {} | {share} | {} | {} | {} |",
+                path.name(),
+                opt(off.triangles),
+                opt(on.triangles),
+                opt(oracle.and_then(|o| o.triangles)),
+                ms(off.gpu_ms),
+                ms(on.gpu_ms),
+                opt(on.patches_occluded),
+                opt(on.patches_drawn_hidden),
+                opt(on.differing_pixels),
+            );
+        }
     }
     let _ = writeln!(w);
 }

@@ -21,6 +21,9 @@ use crate::vk::Gpu;
 pub const TAUS: [f32; 6] = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
 /// `--quick`'s shorter list.
 pub const QUICK_TAUS: [f32; 3] = [0.5, 1.0, 2.0];
+/// The tolerance of the error modes run with occlusion culling (its
+/// counterparts without are in both tau lists).
+pub const OCCLUSION_TAU: f32 = 1.0;
 /// Frames timed per named view, after `WARM_UP` untimed ones.
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
@@ -48,6 +51,10 @@ pub enum Config {
     /// Per patch, the coarsest uniform level whose measured error is within
     /// tau pixels (see `oracle_levels`).
     Oracle(f32),
+    /// `TessError` with occlusion culling.
+    TessErrorOccluded(f32),
+    /// `GeomipError` with occlusion culling.
+    GeomipErrorOccluded(f32),
 }
 
 /// How a row was drawn: a render path, or the oracle (geomip levels from
@@ -100,8 +107,13 @@ impl Config {
     pub fn path(&self) -> RowPath {
         match self {
             Config::Brute => RowPath::Brute,
-            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => RowPath::Tess,
-            Config::GeomipDistance(_) | Config::GeomipError(_) => RowPath::Geomip,
+            Config::TessDistance(_)
+            | Config::TessError(_)
+            | Config::TessPeer(_)
+            | Config::TessErrorOccluded(_) => RowPath::Tess,
+            Config::GeomipDistance(_) | Config::GeomipError(_) | Config::GeomipErrorOccluded(_) => {
+                RowPath::Geomip
+            }
             Config::Oracle(_) => RowPath::Oracle,
         }
     }
@@ -110,7 +122,10 @@ impl Config {
         match self {
             Config::Brute | Config::Oracle(_) => None,
             Config::TessDistance(_) | Config::GeomipDistance(_) => Some(RowLod::Distance),
-            Config::TessError(_) | Config::GeomipError(_) => Some(RowLod::Error),
+            Config::TessError(_)
+            | Config::GeomipError(_)
+            | Config::TessErrorOccluded(_)
+            | Config::GeomipErrorOccluded(_) => Some(RowLod::Error),
             Config::TessPeer(PeerPolicy::Sphere) => Some(RowLod::Sphere),
             Config::TessPeer(PeerPolicy::EdgeLength) => Some(RowLod::EdgeLength),
             Config::TessPeer(PeerPolicy::Cdlod) => Some(RowLod::Cdlod),
@@ -119,7 +134,29 @@ impl Config {
 
     pub fn tau(&self) -> Option<f32> {
         match *self {
-            Config::TessError(t) | Config::GeomipError(t) | Config::Oracle(t) => Some(t),
+            Config::TessError(t)
+            | Config::GeomipError(t)
+            | Config::Oracle(t)
+            | Config::TessErrorOccluded(t)
+            | Config::GeomipErrorOccluded(t) => Some(t),
+            _ => None,
+        }
+    }
+
+    /// Whether the row is drawn with occlusion culling.
+    pub fn occlusion(&self) -> bool {
+        matches!(
+            self,
+            Config::TessErrorOccluded(_) | Config::GeomipErrorOccluded(_)
+        )
+    }
+
+    /// The same configuration without occlusion culling (for an occluded
+    /// one), whose image it must equal.
+    pub fn unoccluded(&self) -> Option<Config> {
+        match *self {
+            Config::TessErrorOccluded(t) => Some(Config::TessError(t)),
+            Config::GeomipErrorOccluded(t) => Some(Config::GeomipError(t)),
             _ => None,
         }
     }
@@ -147,15 +184,18 @@ impl Config {
             Config::GeomipDistance(d) => format!("geomip distance {d} m"),
             Config::GeomipError(t) => format!("geomip error {t} px"),
             Config::Oracle(t) => format!("oracle {t} px"),
+            Config::TessErrorOccluded(t) => format!("tess error {t} px + occlusion"),
+            Config::GeomipErrorOccluded(t) => format!("geomip error {t} px + occlusion"),
         }
     }
 
     fn render_path(&self) -> RenderPath {
         match self {
             Config::Brute => RenderPath::Brute,
-            Config::TessDistance(_) | Config::TessError(_) | Config::TessPeer(_) => {
-                RenderPath::Tess
-            }
+            Config::TessDistance(_)
+            | Config::TessError(_)
+            | Config::TessPeer(_)
+            | Config::TessErrorOccluded(_) => RenderPath::Tess,
             _ => RenderPath::Geomip,
         }
     }
@@ -167,12 +207,16 @@ impl Config {
             shading: Shading::Lit,
             geomorph: true,
             cull: true,
+            occlusion: self.occlusion(),
             ..RenderSettings::default()
         };
         match *self {
             Config::Brute => base,
             Config::TessDistance(lod) => RenderSettings { lod, ..base },
-            Config::TessError(t) | Config::GeomipError(t) => RenderSettings {
+            Config::TessError(t)
+            | Config::GeomipError(t)
+            | Config::TessErrorOccluded(t)
+            | Config::GeomipErrorOccluded(t) => RenderSettings {
                 lod_metric: LodMetric::Error(t),
                 ..base
             },
@@ -226,6 +270,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
         }));
         configs.extend(taus.iter().map(|&t| Config::TessError(t)));
         configs.extend(PeerPolicy::ALL.map(Config::TessPeer));
+        configs.push(Config::TessErrorOccluded(OCCLUSION_TAU));
     }
     let geomip_scales: &[f32] = if quick { &[1.0] } else { &[0.5, 1.0, 2.0, 4.0] };
     configs.extend(
@@ -235,6 +280,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
     );
     configs.extend(taus.iter().map(|&t| Config::GeomipError(t)));
     configs.extend(taus.iter().map(|&t| Config::Oracle(t)));
+    configs.push(Config::GeomipErrorOccluded(OCCLUSION_TAU));
     configs
 }
 
@@ -290,6 +336,24 @@ pub struct Row {
     pub error_pixels: usize,
     /// Of those, terrain in one render and sky in the other.
     pub mismatched_pixels: usize,
+    /// Drawn with occlusion culling.
+    #[serde(default)]
+    pub occlusion: bool,
+    /// Patches occlusion culling hid (mean per frame; null without it).
+    #[serde(default)]
+    pub patches_occluded: Option<u64>,
+    /// Patches drawn though the reference shows none of their pixels
+    /// (mean per frame; with occlusion culling only).
+    #[serde(default)]
+    pub patches_drawn_hidden: Option<u64>,
+    /// GPU milliseconds of the depth pyramid and the patch test (median;
+    /// null without occlusion culling), part of `gpu_ms`.
+    #[serde(default)]
+    pub culling_gpu_ms: Option<f64>,
+    /// Pixels, over all frames, whose colour differs from the same
+    /// configuration's without occlusion culling (null without it).
+    #[serde(default)]
+    pub differing_pixels: Option<usize>,
 }
 
 /// Progress reports: renders done of the total, and what runs now.
@@ -307,6 +371,10 @@ struct Gathered {
     tes_invocations: Vec<u64>,
     predicted_max_px: Option<f64>,
     errors: ErrorHistogram,
+    patches_occluded: Vec<u64>,
+    patches_drawn_hidden: Vec<u64>,
+    culling_ms: Vec<f64>,
+    differing_pixels: Option<usize>,
 }
 
 /// The median; None for no values.
@@ -328,9 +396,12 @@ fn mean_count(values: &[u64]) -> Option<u64> {
         .then(|| (values.iter().sum::<u64>() as f64 / values.len() as f64).round() as u64)
 }
 
-/// A renderer of one path and the device memory it holds.
+/// A renderer of one path, with or without occlusion culling (each keeps
+/// its own visibility state from frame to frame), and the device memory it
+/// holds.
 struct PathRenderer {
     path: RenderPath,
+    occlusion: bool,
     renderer: TerrainRenderer,
     bytes: u64,
 }
@@ -371,8 +442,17 @@ impl<'a> Bench<'a> {
             renderers: Vec::new(),
             warm_up: WARM_UP,
         };
-        for path in [RenderPath::Brute, RenderPath::Tess, RenderPath::Geomip] {
-            if !configs.iter().any(|c| c.render_path() == path) {
+        for (path, occlusion) in [
+            (RenderPath::Brute, false),
+            (RenderPath::Tess, false),
+            (RenderPath::Geomip, false),
+            (RenderPath::Tess, true),
+            (RenderPath::Geomip, true),
+        ] {
+            if !configs
+                .iter()
+                .any(|c| c.render_path() == path && c.occlusion() == occlusion)
+            {
                 continue;
             }
             let before = gpu.device.memory_in_use();
@@ -385,6 +465,7 @@ impl<'a> Bench<'a> {
             )?;
             bench.renderers.push(PathRenderer {
                 path,
+                occlusion,
                 renderer,
                 bytes: gpu.device.memory_in_use() - before,
             });
@@ -400,7 +481,7 @@ impl<'a> Bench<'a> {
     ) -> anyhow::Result<HeadlessFrame> {
         let terrain = self.terrain;
         let settings = config.settings(self.scene_lod);
-        let target = renderer_for(&mut self.renderers, settings.path);
+        let target = renderer_for(&mut self.renderers, config);
         if settings.path == RenderPath::Geomip {
             target.renderer.set_geomip_levels(terrain, levels)?;
         }
@@ -427,7 +508,7 @@ impl<'a> Bench<'a> {
         for r in 0..repeats {
             let frame = self.render(camera, config, levels)?;
             progress.advance(message);
-            let renderer = &renderer_for(&mut self.renderers, config.render_path()).renderer;
+            let renderer = &renderer_for(&mut self.renderers, config).renderer;
             if let Some(px) = renderer.predicted_max_px() {
                 let px = f64::from(px);
                 gathered.predicted_max_px =
@@ -436,6 +517,8 @@ impl<'a> Bench<'a> {
             if first_sample + r >= self.warm_up {
                 gathered.gpu_ms.extend(frame.measurements.gpu_ms);
                 gathered.cpu_ms.push(frame.cpu_ms);
+                let culling = frame.measurements.occlusion.and_then(|o| o.culling_ms);
+                gathered.culling_ms.extend(culling);
             }
             last = Some(frame);
         }
@@ -443,6 +526,11 @@ impl<'a> Bench<'a> {
         if let Some(s) = frame.measurements.statistics {
             gathered.triangles.push(s.clipping_primitives);
             gathered.tes_invocations.push(s.tes_invocations);
+        }
+        if let Some(o) = frame.measurements.occlusion {
+            gathered
+                .patches_occluded
+                .push(u64::from(o.patches_occluded));
         }
         Ok(frame)
     }
@@ -561,6 +649,17 @@ impl<'a> Bench<'a> {
             } else {
                 self.oracle_levels(camera, &reference, &oracle_taus, progress, &message)?
             };
+            // The last image of each configuration an occluded one must
+            // equal, from this camera.
+            let mut unoccluded: Vec<(Config, Vec<u8>)> = Vec::new();
+            let visible_patches = {
+                let patches = pixel_patches(self.terrain, camera, &reference_view);
+                let mut seen = vec![false; self.terrain.grid().patch_count()];
+                for p in patches.into_iter().flatten() {
+                    seen[p] = true;
+                }
+                seen.iter().filter(|&&s| s).count() as u64
+            };
             for (config, g) in gathered.iter_mut() {
                 let levels = match config {
                     Config::Brute => continue,
@@ -582,6 +681,26 @@ impl<'a> Bench<'a> {
                 )?;
                 g.errors
                     .add(&pixel_errors(&DepthView::of(&frame), &reference_view, k));
+                let rgba = &frame.readback.rgba;
+                if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
+                    unoccluded.push((*config, rgba.clone()));
+                }
+                if let Some(off) = config.unoccluded() {
+                    let Some((_, image)) = unoccluded.iter().find(|(c, _)| *c == off) else {
+                        anyhow::bail!("{} runs without {}", config.label(), off.label());
+                    };
+                    let differing = rgba
+                        .chunks_exact(4)
+                        .zip(image.chunks_exact(4))
+                        .filter(|(a, b)| a != b)
+                        .count();
+                    *g.differing_pixels.get_or_insert(0) += differing;
+                }
+                if let Some(o) = frame.measurements.occlusion {
+                    let drawn = frame.patches_in_frustum as u64 - u64::from(o.patches_occluded);
+                    g.patches_drawn_hidden
+                        .push(drawn.saturating_sub(visible_patches));
+                }
             }
         }
         Ok(gathered)
@@ -640,8 +759,7 @@ impl<'a> Bench<'a> {
         for (name, cameras, repeats) in &views {
             for (config, mut g) in self.sequence(name, cameras, *repeats, configs, progress)? {
                 let stats = g.errors.stats();
-                let bytes = renderer_for(&mut self.renderers, config.render_path()).bytes
-                    + self.target_bytes;
+                let bytes = renderer_for(&mut self.renderers, &config).bytes + self.target_bytes;
                 rows.push(Row {
                     scene: scene.to_string(),
                     device: device.clone(),
@@ -665,6 +783,11 @@ impl<'a> Bench<'a> {
                     mean_px: stats.mean_px,
                     error_pixels: stats.pixels,
                     mismatched_pixels: stats.mismatched,
+                    occlusion: config.occlusion(),
+                    patches_occluded: mean_count(&g.patches_occluded),
+                    patches_drawn_hidden: mean_count(&g.patches_drawn_hidden),
+                    culling_gpu_ms: median(&mut g.culling_ms),
+                    differing_pixels: g.differing_pixels,
                 });
             }
         }
@@ -672,10 +795,11 @@ impl<'a> Bench<'a> {
     }
 }
 
-fn renderer_for(renderers: &mut [PathRenderer], path: RenderPath) -> &mut PathRenderer {
+fn renderer_for<'r>(renderers: &'r mut [PathRenderer], config: &Config) -> &'r mut PathRenderer {
+    let (path, occlusion) = (config.render_path(), config.occlusion());
     renderers
         .iter_mut()
-        .find(|r| r.path == path)
+        .find(|r| r.path == path && r.occlusion == occlusion)
         .expect("a renderer is built for every configuration's path")
 }
 

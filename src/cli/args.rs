@@ -258,6 +258,8 @@ pub enum Feature {
     SamplerAnisotropy,
     /// Timestamp queries: GPU time is unavailable.
     Timestamps,
+    /// Sampled depth attachments: no occlusion culling.
+    SampledDepth,
 }
 
 /// Features to treat as missing, to run the fallbacks on any device.
@@ -358,6 +360,7 @@ impl FeatureArgs {
             pipeline_statistics_query: off(Feature::PipelineStatistics),
             sampler_anisotropy: off(Feature::SamplerAnisotropy),
             timestamps: off(Feature::Timestamps),
+            sampled_depth: off(Feature::SampledDepth),
         }
     }
 }

@@ -169,8 +169,21 @@ pub struct ViewArgs {
     #[arg(long)]
     pub no_morph: bool,
 
+    /// Occlusion culling of patches hidden behind nearer terrain (tess and
+    /// geomip paths): on where the device can sample depth attachments.
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub occlusion: Switch,
+
     #[command(flatten)]
     pub features: FeatureArgs,
+}
+
+/// An option turned on or off.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum Switch {
+    #[default]
+    On,
+    Off,
 }
 
 impl ViewArgs {
@@ -250,6 +263,7 @@ impl ViewArgs {
             // background.
             sky: base.sky && !self.no_sky && !self.flat && self.clear_color.is_none(),
             cull: !self.no_cull,
+            occlusion: self.occlusion == Switch::On,
             geomorph: !self.no_morph,
             lod_metric,
             lod: self.distance_overrides(base.lod),
@@ -329,6 +343,13 @@ pub struct FrameStats {
     pub vertex_invocations: Option<u64>,
     pub clipping_invocations: Option<u64>,
     pub gpu_ms: Option<f64>,
+    /// Whether the frame was drawn with occlusion culling (two passes).
+    pub occlusion: bool,
+    /// Patches in view that occlusion culling hid (null without it).
+    pub patches_occluded: Option<u32>,
+    /// GPU milliseconds of building the depth pyramid and testing the
+    /// patches, part of `gpu_ms` (null without occlusion culling).
+    pub culling_gpu_ms: Option<f64>,
     /// The largest error the error LOD's choice expects on screen, in
     /// pixels; null for the distance LOD and brute.
     pub predicted_max_px: Option<f32>,
@@ -454,6 +475,9 @@ pub fn render_scene(
             vertex_invocations: statistics.map(|s| s.vertex_invocations),
             clipping_invocations: statistics.map(|s| s.clipping_invocations),
             gpu_ms: frame.measurements.gpu_ms,
+            occlusion: frame.measurements.occlusion.is_some(),
+            patches_occluded: frame.measurements.occlusion.map(|o| o.patches_occluded),
+            culling_gpu_ms: frame.measurements.occlusion.and_then(|o| o.culling_ms),
             predicted_max_px: renderer.predicted_max_px(),
             cpu_ms: frame.cpu_ms,
             gpu_memory_bytes: gpu_memory.values().sum(),

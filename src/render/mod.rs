@@ -4,6 +4,7 @@
 pub mod headless;
 pub mod material;
 pub mod mirror;
+pub mod occlusion;
 pub mod renderer;
 pub mod settings;
 pub mod shaders;

@@ -16,12 +16,17 @@
 //! - **brute**: every sample a vertex, with `height_at`'s triangle split and
 //!   no buffers at all (the vertex shader derives each sample from its
 //!   index); the reference that error is measured against.
+//!
+//! The tess and geomip paths cull hidden patches with a depth pyramid, in
+//! two passes per frame (see `occlusion`), where the device can read its
+//! depth attachments and the frame's settings ask for it.
 
 use std::mem::size_of;
 
 use ash::vk;
 
 use super::material::{GpuAppearance, ShaderVariant};
+use super::occlusion::Occlusion;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
 use super::uniforms::FrameUniforms;
@@ -29,16 +34,18 @@ use super::view::FrameView;
 use crate::material::Appearance;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP,
+    BINDING_VISIBILITY, OCCLUSION_PHASE_ALL, OCCLUSION_PHASE_CULLED, OCCLUSION_PHASE_FIRST,
+    OCCLUSION_PHASE_SECOND,
 };
 use crate::shader_variants::Shader;
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
 use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
-use crate::vk::commands::Recorder;
+use crate::vk::commands::{Recorder, RenderingPart};
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
 use crate::vk::memory::{Buffer, Image};
 use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::pipeline::GraphicsPipelineDesc;
-use crate::vk::queries::{FrameQueries, PipelineStatistics};
+use crate::vk::queries::{FrameQueries, PipelineStatistics, COUNTED_PARTS};
 use crate::vk::target::{TargetViews, DEPTH_FORMAT};
 use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
@@ -52,6 +59,9 @@ struct FrameSlot {
     full_resolution: Option<Buffer>,
     /// What `prepare` set this slot's frame up for; `record` draws it.
     settings: Option<RenderSettings>,
+    /// Whether the slot's last recorded frame was drawn in two passes
+    /// with occlusion culling between them.
+    culled: bool,
 }
 
 /// What a renderer builds up front. A frame asking for anything else
@@ -130,6 +140,14 @@ struct GeomipGeometry {
     given: Option<geomip::PatchLevels>,
 }
 
+/// The show-culled overlay's pipelines: the tess path's stages with a
+/// one-colour fragment shader, no depth test, lines where the device has
+/// them; fractional even and equal spacing.
+struct CulledPipelines {
+    fractional: Pipeline,
+    equal: Pipeline,
+}
+
 /// One patch of the geomip path: its index list and push constants.
 #[derive(Clone, Copy, Debug)]
 struct GeomipDraw {
@@ -146,9 +164,12 @@ pub struct GeomipConstants {
     pub level: i32,
     pub interior: f32,
     pub sides: [f32; 4],
+    /// Which patches the draw keeps (`OCCLUSION_PHASE_*`).
+    pub occlusion_phase: u32,
 }
-const _: () = assert!(size_of::<GeomipConstants>() == 32);
+const _: () = assert!(size_of::<GeomipConstants>() == 36);
 const _: () = assert!(std::mem::offset_of!(GeomipConstants, sides) == 16);
+const _: () = assert!(std::mem::offset_of!(GeomipConstants, occlusion_phase) == 32);
 
 struct BruteGeometry {
     vertex_count: u32,
@@ -167,6 +188,10 @@ pub struct TerrainRenderer {
     brute: Option<BruteGeometry>,
     /// Per-patch errors for the tess path's error-bounded factors.
     error_table: Option<Buffer>,
+    /// The patches' occlusion state and culling (built in `new`).
+    occlusion: Option<Occlusion>,
+    /// Built when a frame first shows culled patches.
+    culled_pipelines: Option<CulledPipelines>,
     sets: DescriptorSets,
     pipeline_layout: PipelineLayout,
     set_layout: DescriptorSetLayout,
@@ -193,6 +218,17 @@ pub struct TerrainRenderer {
 pub struct FrameMeasurements {
     pub gpu_ms: Option<f64>,
     pub statistics: Option<PipelineStatistics>,
+    /// What occlusion culling did, for a frame drawn with it.
+    pub occlusion: Option<OcclusionMeasurements>,
+}
+
+/// One frame's occlusion culling.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OcclusionMeasurements {
+    /// Patches in the view that the test found hidden and nothing drew.
+    pub patches_occluded: u32,
+    /// GPU milliseconds of building the pyramid and testing the patches.
+    pub culling_ms: Option<f64>,
 }
 
 impl TerrainRenderer {
@@ -238,8 +274,17 @@ impl TerrainRenderer {
         let layout = DescriptorPlan::new(device.caps.tessellation_shader, &appearance);
         let set_layout =
             device.create_descriptor_set_layout(&layout.bindings, "terrain.set_layout")?;
-        let pipeline_layout =
-            device.create_pipeline_layout(&[&set_layout], "terrain.pipeline_layout")?;
+        // The tess path's control shader takes the draw's occlusion phase.
+        let pipeline_layout = device.create_pipeline_layout_with_push(
+            &[&set_layout],
+            vk::ShaderStageFlags::TESSELLATION_CONTROL,
+            if device.caps.tessellation_shader {
+                size_of::<u32>() as u32
+            } else {
+                0
+            },
+            "terrain.pipeline_layout",
+        )?;
         let sets = device.allocate_descriptor_sets(
             &set_layout,
             &layout.pool_sizes,
@@ -253,6 +298,8 @@ impl TerrainRenderer {
             geomip: None,
             brute: None,
             error_table: None,
+            occlusion: None,
+            culled_pipelines: None,
             sets,
             pipeline_layout,
             set_layout,
@@ -268,6 +315,23 @@ impl TerrainRenderer {
             predicted_max_px: None,
         };
         renderer.frames = renderer.build_frames()?;
+        let uniforms: Vec<&Buffer> = renderer.frames.iter().map(|f| &f.uniforms).collect();
+        let occlusion = Occlusion::new(
+            device,
+            terrain,
+            &uniforms,
+            device.caps.supports_occlusion(options.samples),
+        )?;
+        for frame in &renderer.frames {
+            device.write_buffer(
+                frame.set,
+                BINDING_VISIBILITY,
+                vk::DescriptorType::STORAGE_BUFFER,
+                &occlusion.visibility,
+                occlusion.visibility.desc.size,
+            );
+        }
+        renderer.occlusion = Some(occlusion);
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
         }
@@ -417,6 +481,7 @@ impl TerrainRenderer {
                 queries,
                 full_resolution: None,
                 settings: None,
+                culled: false,
             });
         }
         Ok(frames)
@@ -449,6 +514,12 @@ impl TerrainRenderer {
         settings: &RenderSettings,
     ) -> Result<()> {
         self.ensure(terrain, settings.path, settings.wireframe)?;
+        if settings.show_culled && self.culled_pipelines.is_none() && self.tess.is_some() {
+            self.culled_pipelines = Some(CulledPipelines {
+                fractional: create_culled_pipeline(self, false)?,
+                equal: create_culled_pipeline(self, true)?,
+            });
+        }
         self.frames[slot].settings = Some(*settings);
         let uniforms = FrameUniforms::new(terrain, view, settings);
         self.frames[slot]
@@ -539,29 +610,85 @@ impl TerrainRenderer {
 
     /// Records the frame `prepare` set slot `slot` up for into `target`
     /// (already in attachment layouts), timed and counted by the slot's
-    /// queries.
-    pub fn record(&self, rec: &Recorder, slot: usize, target: &TargetViews) -> Result<()> {
-        let settings = &self.frames[slot].settings.ok_or_else(|| {
+    /// queries: in one pass, or with occlusion culling in two.
+    pub fn record(&mut self, rec: &Recorder, slot: usize, target: &TargetViews) -> Result<()> {
+        let settings = self.frames[slot].settings.ok_or_else(|| {
             VkError::Unsupported(format!(
                 "frame slot {slot} was recorded before it was prepared"
             ))
         })?;
-        let not_built = || {
-            VkError::Unsupported(format!(
-                "the {:?} path was not built for this renderer",
-                settings.path
-            ))
-        };
         if target.samples != self.samples || target.color_format != self.color_format {
             return Err(VkError::Unsupported(format!(
                 "a target of {:?} with {:?} samples per pixel, for a renderer built for {:?} with {:?}",
                 target.color_format, target.samples, self.color_format, self.samples
             )));
         }
+        let cull = settings.occlusion
+            && settings.path != RenderPath::Brute
+            && target.depth_readable
+            && self.occlusion.as_ref().is_some_and(Occlusion::can_cull);
+        if cull {
+            let occlusion = self.occlusion.as_mut().ok_or_else(no_occlusion)?;
+            occlusion.prepare_target(&self.device, slot, target, &self.sampler)?;
+        }
+        self.frames[slot].culled = cull;
         let frame = &self.frames[slot];
+        let clear_color = settings.clear_color;
         frame.queries.reset(rec);
-        rec.begin_rendering(target, settings.clear_color);
-        frame.queries.begin(rec);
+        frame.queries.begin_timing(rec);
+        if cull {
+            let occlusion = self.occlusion.as_ref().ok_or_else(no_occlusion)?;
+            occlusion.record_start(rec, slot)?;
+            rec.begin_rendering(target, RenderingPart::First { clear_color });
+            frame.queries.begin_counting(rec, 0);
+            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_FIRST)?;
+            frame.queries.end_counting(rec, 0);
+            rec.end_rendering();
+            // The marks come before barriers: lavapipe takes a timestamp
+            // when it next flushes, and a barrier flushes.
+            frame.queries.mark_span_start(rec);
+            occlusion.record_cull(rec, slot, target)?;
+            frame.queries.mark_span_end(rec);
+            occlusion.record_resume(rec, target);
+            rec.begin_rendering(target, RenderingPart::Last);
+            frame.queries.begin_counting(rec, 1);
+            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_SECOND)?;
+            frame.queries.end_counting(rec, 1);
+            if settings.show_culled {
+                self.draw_culled(rec, frame, &settings)?;
+            }
+        } else {
+            rec.begin_rendering(target, RenderingPart::Whole { clear_color });
+            frame.queries.begin_counting(rec, 0);
+            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_ALL)?;
+            frame.queries.end_counting(rec, 0);
+        }
+        // The sky is timed with the terrain but not counted: the frame's
+        // triangle counts stay the terrain's.
+        if settings.sky {
+            rec.bind_graphics(&self.sky, &self.pipeline_layout, frame.set);
+            rec.draw(3);
+        }
+        frame.queries.end_timing(rec);
+        rec.end_rendering();
+        Ok(())
+    }
+
+    /// Draws the patches of `phase` (`OCCLUSION_PHASE_*`) by the frame's
+    /// path.
+    fn draw_terrain(
+        &self,
+        rec: &Recorder,
+        frame: &FrameSlot,
+        settings: &RenderSettings,
+        phase: u32,
+    ) -> Result<()> {
+        let not_built = || {
+            VkError::Unsupported(format!(
+                "the {:?} path was not built for this renderer",
+                settings.path
+            ))
+        };
         match settings.path {
             RenderPath::Tess => {
                 let tess = self.tess.as_ref().ok_or_else(not_built)?;
@@ -569,31 +696,21 @@ impl TerrainRenderer {
                     LodMetric::Error(_) => &tess.error_pipelines,
                     _ => &tess.pipelines,
                 };
-                rec.bind_graphics(
+                self.draw_patches(
+                    rec,
+                    frame,
+                    tess,
                     pipelines.select(settings.wireframe)?,
-                    &self.pipeline_layout,
-                    frame.set,
+                    phase,
                 );
-                rec.bind_geometry(&tess.control_points, &tess.indices);
-                // One draw, or batches where the driver needs them (see
-                // `Workarounds::max_patches_per_draw`).
-                let batch = self
-                    .max_patches_per_draw
-                    .map_or(tess.index_count, |n| n * 4);
-                let mut first = 0;
-                while first < tess.index_count {
-                    let count = (tess.index_count - first).min(batch);
-                    rec.draw_indexed(first, count);
-                    first += count;
-                }
                 if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
                     let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact)?;
+                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, phase)?;
                 }
             }
             RenderPath::Geomip => {
                 let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                geomip.draw(rec, frame.set, settings.wireframe, &geomip.draws)?;
+                geomip.draw(rec, frame.set, settings.wireframe, &geomip.draws, phase)?;
             }
             RenderPath::Brute => {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
@@ -605,26 +722,93 @@ impl TerrainRenderer {
                 rec.draw(brute.vertex_count);
             }
         }
-        // The sky is timed with the terrain but not counted: the frame's
-        // triangle counts stay the terrain's.
-        frame.queries.end_counting(rec);
-        if settings.sky {
-            rec.bind_graphics(&self.sky, &self.pipeline_layout, frame.set);
-            rec.draw(3);
+        Ok(())
+    }
+
+    /// Every patch of the tess path through `pipeline`, for `phase`: one
+    /// draw, or batches where the driver needs them (see
+    /// `Workarounds::max_patches_per_draw`).
+    fn draw_patches(
+        &self,
+        rec: &Recorder,
+        frame: &FrameSlot,
+        tess: &TessGeometry,
+        pipeline: &Pipeline,
+        phase: u32,
+    ) {
+        rec.bind_graphics(pipeline, &self.pipeline_layout, frame.set);
+        rec.push_constants(
+            &self.pipeline_layout,
+            vk::ShaderStageFlags::TESSELLATION_CONTROL,
+            bytemuck::bytes_of(&phase),
+        );
+        rec.bind_geometry(&tess.control_points, &tess.indices);
+        let batch = self
+            .max_patches_per_draw
+            .map_or(tess.index_count, |n| n * 4);
+        let mut first = 0;
+        while first < tess.index_count {
+            let count = (tess.index_count - first).min(batch);
+            rec.draw_indexed(first, count);
+            first += count;
         }
-        frame.queries.end_timing(rec);
-        rec.end_rendering();
+    }
+
+    /// The tess path's patches that occlusion culled, in one colour over
+    /// the frame (the full-resolution patches of the error LOD, drawn
+    /// near the eye, are not shown).
+    fn draw_culled(
+        &self,
+        rec: &Recorder,
+        frame: &FrameSlot,
+        settings: &RenderSettings,
+    ) -> Result<()> {
+        let (Some(tess), Some(culled)) = (self.tess.as_ref(), self.culled_pipelines.as_ref())
+        else {
+            return Ok(());
+        };
+        if settings.path != RenderPath::Tess {
+            return Ok(());
+        }
+        let pipeline = match settings.lod_metric {
+            LodMetric::Error(_) => &culled.equal,
+            _ => &culled.fractional,
+        };
+        self.draw_patches(rec, frame, tess, pipeline, OCCLUSION_PHASE_CULLED);
         Ok(())
     }
 
     /// What slot `slot`'s last frame measured; call after its fence.
     pub fn measurements(&self, slot: usize) -> Result<FrameMeasurements> {
-        let queries = &self.frames[slot].queries;
+        let frame = &self.frames[slot];
+        let occlusion = match frame.culled {
+            true => Some(OcclusionMeasurements {
+                patches_occluded: self
+                    .occlusion
+                    .as_ref()
+                    .ok_or_else(no_occlusion)?
+                    .culled(slot)?,
+                culling_ms: frame.queries.span_ms()?,
+            }),
+            false => None,
+        };
+        let parts = if frame.culled { COUNTED_PARTS } else { 1 };
         Ok(FrameMeasurements {
-            gpu_ms: queries.gpu_ms()?,
-            statistics: queries.statistics()?,
+            gpu_ms: frame.queries.gpu_ms()?,
+            statistics: frame.queries.statistics(parts)?,
+            occlusion,
         })
     }
+
+    /// Whether this renderer can cull hidden patches (the device reads its
+    /// depth attachments at the renderer's sample count).
+    pub fn can_cull_occluded(&self) -> bool {
+        self.occlusion.as_ref().is_some_and(Occlusion::can_cull)
+    }
+}
+
+fn no_occlusion() -> VkError {
+    VkError::Unsupported("the renderer's occlusion state was not built".into())
 }
 
 impl Drop for TerrainRenderer {
@@ -765,6 +949,15 @@ impl DescriptorPlan {
                 .push((vk::DescriptorType::STORAGE_BUFFER, 2));
         }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
+        // The occlusion state: the tess path's control shader and the
+        // geomip path's vertex shader read it.
+        plan.bindings.push((
+            BINDING_VISIBILITY,
+            vk::DescriptorType::STORAGE_BUFFER,
+            vertex_stages & !vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+        ));
+        plan.pool_sizes
+            .push((vk::DescriptorType::STORAGE_BUFFER, 1));
         for binding in appearance.bindings(vertex_stages) {
             plan.pool_sizes.push((binding.1, 1));
             plan.bindings.push(binding);
@@ -895,6 +1088,53 @@ fn create_pipeline(
         samples,
         layout,
         specialization: &variant.specialization(),
+    })
+}
+
+/// The show-culled overlay's pipeline for the tess path with `equal_spacing`
+/// (the error LOD) or fractional even spacing.
+fn create_culled_pipeline(renderer: &TerrainRenderer, equal_spacing: bool) -> Result<Pipeline> {
+    let device = &renderer.device;
+    let spacing = if equal_spacing { "equal" } else { "fractional" };
+    device.create_graphics_pipeline(&GraphicsPipelineDesc {
+        name: &format!("terrain.pipeline.culled.{spacing}"),
+        stages: &[
+            (
+                vk::ShaderStageFlags::VERTEX,
+                shaders::spirv(Shader::TerrainVert),
+            ),
+            (
+                vk::ShaderStageFlags::TESSELLATION_CONTROL,
+                shaders::spirv(Shader::TerrainTesc),
+            ),
+            (
+                vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+                shaders::spirv(Shader::TerrainTese {
+                    placing: renderer.appearance.variant.placing(),
+                    equal_spacing,
+                }),
+            ),
+            (
+                vk::ShaderStageFlags::FRAGMENT,
+                shaders::spirv(Shader::CulledFrag),
+            ),
+        ],
+        vertex_stride: size_of::<[f32; 4]>() as u32,
+        vertex_attributes: &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
+        topology: vk::PrimitiveTopology::PATCH_LIST,
+        patch_control_points: 4,
+        polygon_mode: if device.caps.fill_mode_non_solid {
+            vk::PolygonMode::LINE
+        } else {
+            vk::PolygonMode::FILL
+        },
+        color_format: renderer.color_format,
+        depth_format: DEPTH_FORMAT,
+        depth_compare: vk::CompareOp::ALWAYS,
+        depth_write: false,
+        samples: renderer.samples,
+        layout: &renderer.pipeline_layout,
+        specialization: &renderer.appearance.variant.specialization(),
     })
 }
 
@@ -1069,11 +1309,20 @@ impl GeomipGeometry {
         set: DescriptorSet,
         wireframe: bool,
         draws: &[GeomipDraw],
+        occlusion_phase: u32,
     ) -> Result<()> {
         rec.bind_graphics(self.pipelines.select(wireframe)?, &self.layout, set);
         rec.bind_geometry(&self.template, &self.indices);
         for draw in draws {
-            rec.push_vertex_constants(&self.layout, bytemuck::bytes_of(&draw.constants));
+            let constants = GeomipConstants {
+                occlusion_phase,
+                ..draw.constants
+            };
+            rec.push_constants(
+                &self.layout,
+                vk::ShaderStageFlags::VERTEX,
+                bytemuck::bytes_of(&constants),
+            );
             rec.draw_indexed(draw.first, draw.count);
         }
         Ok(())
@@ -1113,6 +1362,7 @@ impl GeomipGeometry {
                     level: level as i32,
                     interior,
                     sides,
+                    occlusion_phase: OCCLUSION_PHASE_ALL,
                 },
             });
         }
@@ -1156,6 +1406,7 @@ impl TessGeometry {
                     level: 0,
                     interior: 0.0,
                     sides: [0.0; 4],
+                    occlusion_phase: OCCLUSION_PHASE_ALL,
                 },
             });
         }

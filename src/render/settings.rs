@@ -35,6 +35,13 @@ pub fn with_fallback(
         ));
         settings.wireframe = false;
     }
+    if settings.occlusion && caps.occlusion_sample_counts.is_empty() {
+        notes.push(format!(
+            "{}: depth attachments cannot be sampled, drawing without occlusion culling",
+            caps.device_name
+        ));
+        settings.occlusion = false;
+    }
     if settings.path == RenderPath::Tess && !caps.tessellation_shader {
         notes.push(format!(
             "{}: tessellationShader is unavailable, falling back to the geomip path",
@@ -127,6 +134,12 @@ pub struct RenderSettings {
     pub sky: bool,
     /// GPU frustum culling of patches.
     pub cull: bool,
+    /// Occlusion culling of patches (tess and geomip paths), where the
+    /// device can read depth attachments.
+    pub occlusion: bool,
+    /// Draw the patches occlusion culled over the frame, in one colour
+    /// (tess path).
+    pub show_culled: bool,
     pub lighting: Lighting,
     pub fog: Option<Fog>,
     /// The peers' published parameters.
@@ -146,6 +159,8 @@ impl Default for RenderSettings {
             clear_color: [0.52, 0.68, 0.86],
             sky: false,
             cull: true,
+            occlusion: true,
+            show_culled: false,
             lighting: Lighting::default(),
             fog: None,
             peer: PeerLod::default(),

@@ -142,6 +142,17 @@ impl Drop for CommandSlots {
     }
 }
 
+/// Which part of a frame a rendering is (see `Recorder::begin_rendering`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RenderingPart {
+    /// The whole frame: cleared to the colour, resolved at its end.
+    Whole { clear_color: [f32; 3] },
+    /// The first of two: cleared, kept for the last.
+    First { clear_color: [f32; 3] },
+    /// The last of two: continues the first, resolved at its end.
+    Last,
+}
+
 /// A command buffer being recorded.
 pub struct Recorder<'a> {
     pub(super) device: &'a Device,
@@ -226,28 +237,39 @@ impl<'a> Recorder<'a> {
         };
     }
 
-    /// Starts dynamic rendering into `target`, clearing colour and depth
-    /// (to 0: reversed Z puts the far plane at 0), with a full-size viewport.
+    /// Starts dynamic rendering into `target` for `part` of a frame, with a
+    /// full-size viewport. A frame's first part clears colour and depth (to
+    /// 0: reversed Z puts the far plane at 0); its last part resolves
+    /// multisampled attachments and discards them, colour by the average of
+    /// its samples, depth by sample 0. A part before another keeps what it
+    /// drew for the next, which loads it.
     ///
     /// The clear is a `vkCmdClearAttachments` inside the rendering rather
     /// than a CLEAR load op: lavapipe (Mesa 22.3) re-applies a CLEAR load op
     /// each time it flushes a full tile scene in the middle of a large draw,
     /// wiping everything drawn before the flush. A clear command runs once.
-    pub fn begin_rendering(&self, target: &TargetViews, clear_color: [f32; 3]) {
-        // Multisampled attachments are resolved and then discarded: colour
-        // by the average of its samples, depth by sample 0.
+    pub fn begin_rendering(&self, target: &TargetViews, part: RenderingPart) {
+        let (clear_color, last) = match part {
+            RenderingPart::Whole { clear_color } => (Some(clear_color), true),
+            RenderingPart::First { clear_color } => (Some(clear_color), false),
+            RenderingPart::Last => (None, true),
+        };
+        let load_op = match clear_color {
+            Some(_) => vk::AttachmentLoadOp::DONT_CARE,
+            None => vk::AttachmentLoadOp::LOAD,
+        };
         let attachment = |view, layout, resolve: Option<vk::ImageView>, mode| {
             let info = vk::RenderingAttachmentInfo::default()
                 .image_view(view)
                 .image_layout(layout)
-                .load_op(vk::AttachmentLoadOp::DONT_CARE);
+                .load_op(load_op);
             match resolve {
-                Some(resolve) => info
+                Some(resolve) if last => info
                     .resolve_mode(mode)
                     .resolve_image_view(resolve)
                     .resolve_image_layout(layout)
                     .store_op(vk::AttachmentStoreOp::DONT_CARE),
-                None => info.store_op(vk::AttachmentStoreOp::STORE),
+                _ => info.store_op(vk::AttachmentStoreOp::STORE),
             }
         };
         let color = [attachment(
@@ -276,6 +298,7 @@ impl<'a> Recorder<'a> {
             min_depth: 0.0,
             max_depth: 1.0,
         };
+        let clear_color = clear_color.unwrap_or_default();
         let clears = [
             vk::ClearAttachment {
                 aspect_mask: vk::ImageAspectFlags::COLOR,
@@ -302,9 +325,11 @@ impl<'a> Recorder<'a> {
         // above (the target's owner transitions them).
         unsafe {
             self.device.ash().cmd_begin_rendering(self.cmd, &info);
-            self.device
-                .ash()
-                .cmd_clear_attachments(self.cmd, &clears, &rect);
+            if load_op != vk::AttachmentLoadOp::LOAD {
+                self.device
+                    .ash()
+                    .cmd_clear_attachments(self.cmd, &clears, &rect);
+            }
             self.device.ash().cmd_set_viewport(self.cmd, 0, &[viewport]);
             self.device.ash().cmd_set_scissor(self.cmd, 0, &[area]);
         }
@@ -430,18 +455,118 @@ impl<'a> Recorder<'a> {
         }
     }
 
-    /// Sets vertex-stage push constants from offset 0.
-    pub fn push_vertex_constants(&self, layout: &PipelineLayout, bytes: &[u8]) {
-        // SAFETY: `layout` has a vertex push-constant range covering `bytes`.
+    /// Sets push constants of `stages` from offset 0.
+    pub fn push_constants(
+        &self,
+        layout: &PipelineLayout,
+        stages: vk::ShaderStageFlags,
+        bytes: &[u8],
+    ) {
+        // SAFETY: `layout` has a push-constant range of `stages` covering
+        // `bytes`.
         unsafe {
-            self.device.ash().cmd_push_constants(
+            self.device
+                .ash()
+                .cmd_push_constants(self.cmd, layout.raw(), stages, 0, bytes)
+        };
+    }
+
+    pub fn bind_compute(&self, pipeline: &Pipeline, layout: &PipelineLayout, set: DescriptorSet) {
+        // SAFETY: pipeline, layout and set are compatible objects of this device.
+        unsafe {
+            self.device.ash().cmd_bind_pipeline(
                 self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
+                pipeline.raw(),
+            );
+            self.device.ash().cmd_bind_descriptor_sets(
+                self.cmd,
+                vk::PipelineBindPoint::COMPUTE,
                 layout.raw(),
-                vk::ShaderStageFlags::VERTEX,
                 0,
-                bytes,
+                &[set.0],
+                &[],
+            );
+        }
+    }
+
+    /// Runs `groups` workgroups of the bound compute pipeline.
+    pub fn dispatch(&self, groups: [u32; 3]) {
+        // SAFETY: a compute pipeline and its sets are bound, outside
+        // rendering.
+        unsafe {
+            self.device
+                .ash()
+                .cmd_dispatch(self.cmd, groups[0], groups[1], groups[2])
+        };
+    }
+
+    /// A global memory barrier: the `before` (stages, accesses) complete
+    /// and are visible to the `after` ones.
+    pub fn memory_barrier(
+        &self,
+        before: (vk::PipelineStageFlags2, vk::AccessFlags2),
+        after: (vk::PipelineStageFlags2, vk::AccessFlags2),
+    ) {
+        let barrier = [vk::MemoryBarrier2::default()
+            .src_stage_mask(before.0)
+            .src_access_mask(before.1)
+            .dst_stage_mask(after.0)
+            .dst_access_mask(after.1)];
+        // SAFETY: `cmd` is recording outside rendering.
+        unsafe {
+            self.device.ash().cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().memory_barriers(&barrier),
             )
         };
+    }
+
+    /// Fills `buffer` with the 32-bit `value` (outside rendering); a
+    /// transfer write.
+    pub fn fill_buffer(&self, buffer: &Buffer, value: u32) {
+        // SAFETY: a buffer of this device with TRANSFER_DST usage.
+        unsafe {
+            self.device
+                .ash()
+                .cmd_fill_buffer(self.cmd, buffer.raw(), 0, vk::WHOLE_SIZE, value)
+        };
+    }
+
+    /// Makes `target`'s depth, just drawn, readable by compute shaders
+    /// (SHADER_READ_ONLY_OPTIMAL), keeping its contents.
+    pub fn depth_to_compute(&self, target: &TargetViews) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        self.transition_images(&[Transition {
+            image: target.depth_image,
+            aspect: vk::ImageAspectFlags::DEPTH,
+            from: (
+                L::DEPTH_ATTACHMENT_OPTIMAL,
+                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+            ),
+            to: (
+                L::SHADER_READ_ONLY_OPTIMAL,
+                S::COMPUTE_SHADER,
+                A::SHADER_SAMPLED_READ,
+            ),
+        }]);
+    }
+
+    /// Makes `target`'s depth an attachment again after `depth_to_compute`,
+    /// keeping its contents.
+    pub fn depth_to_attachment(&self, target: &TargetViews) {
+        use vk::{AccessFlags2 as A, ImageLayout as L, PipelineStageFlags2 as S};
+        self.transition_images(&[Transition {
+            image: target.depth_image,
+            aspect: vk::ImageAspectFlags::DEPTH,
+            from: (L::SHADER_READ_ONLY_OPTIMAL, S::COMPUTE_SHADER, A::NONE),
+            to: (
+                L::DEPTH_ATTACHMENT_OPTIMAL,
+                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
+                A::DEPTH_STENCIL_ATTACHMENT_READ | A::DEPTH_STENCIL_ATTACHMENT_WRITE,
+            ),
+        }]);
     }
 
     /// A non-indexed draw without vertex buffers (the shader uses

@@ -6,6 +6,7 @@ use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
 use super::memory::{Buffer, Image};
 use super::owned::{DescriptorSetLayout, Owned, Sampler};
+use super::target::TargetViews;
 
 /// One descriptor set of a `DescriptorSets`; valid while they are.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -119,8 +120,30 @@ impl Device {
         image: &Image,
         sampler: &Sampler,
     ) {
+        self.write_image_view(set, binding, image.view(), sampler);
+    }
+
+    /// Points a combined-image-sampler binding at `target`'s depth, read in
+    /// SHADER_READ_ONLY_OPTIMAL (see `Recorder::depth_to_compute`).
+    pub fn write_target_depth(
+        &self,
+        set: DescriptorSet,
+        binding: u32,
+        target: &TargetViews,
+        sampler: &Sampler,
+    ) {
+        self.write_image_view(set, binding, target.depth_view, sampler);
+    }
+
+    fn write_image_view(
+        &self,
+        set: DescriptorSet,
+        binding: u32,
+        view: vk::ImageView,
+        sampler: &Sampler,
+    ) {
         let info = [vk::DescriptorImageInfo::default()
-            .image_view(image.view())
+            .image_view(view)
             .sampler(sampler.raw())
             .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
         let write = vk::WriteDescriptorSet::default()

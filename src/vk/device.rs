@@ -38,12 +38,20 @@ pub struct Capabilities {
     /// Samples per pixel that colour and depth attachments both support,
     /// of 1, 2, 4 and 8, ascending.
     pub sample_counts: Vec<u32>,
+    /// Samples per pixel of depth attachments the occlusion pyramid can
+    /// read (sampled depth of these counts); empty: no occlusion culling.
+    pub occlusion_sample_counts: Vec<u32>,
 }
 
 impl Capabilities {
     /// Whether attachments of `samples` samples per pixel can be drawn.
     pub fn supports_samples(&self, samples: u32) -> bool {
         self.sample_counts.contains(&samples)
+    }
+
+    /// Whether occlusion culling can read depth drawn at `samples`.
+    pub fn supports_occlusion(&self, samples: u32) -> bool {
+        self.occlusion_sample_counts.contains(&samples)
     }
 
     /// "1, 4": the sample counts the device can draw.
@@ -186,6 +194,8 @@ pub struct DisabledFeatures {
     pub pipeline_statistics_query: bool,
     pub sampler_anisotropy: bool,
     pub timestamps: bool,
+    /// Sampling depth attachments (occlusion culling).
+    pub sampled_depth: bool,
 }
 
 impl DisabledFeatures {
@@ -197,6 +207,9 @@ impl DisabledFeatures {
         caps.sampler_anisotropy &= !self.sampler_anisotropy;
         if self.timestamps {
             caps.timestamp_period_ns = None;
+        }
+        if self.sampled_depth {
+            caps.occlusion_sample_counts.clear();
         }
     }
 }
@@ -252,6 +265,14 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
         }
         let (type_name, rank) = device_type_name(props.device_type);
         let timestamps = family.timestamp_valid_bits > 0 && props.limits.timestamp_period > 0.0;
+        let depth_features = instance
+            .get_physical_device_format_properties(physical, super::target::DEPTH_FORMAT)
+            .optimal_tiling_features;
+        let sampled_depth = if depth_features.contains(vk::FormatFeatureFlags::SAMPLED_IMAGE) {
+            props.limits.sampled_image_depth_sample_counts
+        } else {
+            vk::SampleCountFlags::empty()
+        };
         let v = props.api_version;
         Some(Candidate {
             physical,
@@ -281,6 +302,11 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 sample_counts: sample_counts(
                     props.limits.framebuffer_color_sample_counts
                         & props.limits.framebuffer_depth_sample_counts,
+                ),
+                occlusion_sample_counts: sample_counts(
+                    props.limits.framebuffer_color_sample_counts
+                        & props.limits.framebuffer_depth_sample_counts
+                        & sampled_depth,
                 ),
             },
             workarounds: Workarounds {

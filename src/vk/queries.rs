@@ -29,6 +29,11 @@ const STATISTICS: [vk::QueryPipelineStatisticFlags; 5] = [
     vk::QueryPipelineStatisticFlags::TESSELLATION_EVALUATION_SHADER_INVOCATIONS,
 ];
 
+/// Timestamps of one frame: its start and end, and two marks inside it.
+const TIMESTAMPS: u32 = 4;
+/// Pipeline-statistics queries of one frame: one per part it draws in.
+pub const COUNTED_PARTS: u32 = 2;
+
 /// Query pools for one frame in flight.
 pub struct FrameQueries {
     timestamps: Option<Owned<vk::QueryPool>>,
@@ -43,7 +48,7 @@ impl FrameQueries {
             Some(_) => {
                 let info = vk::QueryPoolCreateInfo::default()
                     .query_type(vk::QueryType::TIMESTAMP)
-                    .query_count(2);
+                    .query_count(TIMESTAMPS);
                 // SAFETY: valid create info.
                 let pool = unsafe { device.ash().create_query_pool(&info, None) }
                     .context("creating a timestamp query pool")?;
@@ -57,7 +62,7 @@ impl FrameQueries {
                 .fold(vk::QueryPipelineStatisticFlags::empty(), |a, &f| a | f);
             let info = vk::QueryPoolCreateInfo::default()
                 .query_type(vk::QueryType::PIPELINE_STATISTICS)
-                .query_count(1)
+                .query_count(COUNTED_PARTS)
                 .pipeline_statistics(flags);
             // SAFETY: the feature is enabled on the device.
             let pool = unsafe { device.ash().create_query_pool(&info, None) }
@@ -85,63 +90,84 @@ impl FrameQueries {
         // SAFETY: pools of this device, `cmd` recording outside rendering.
         unsafe {
             if let Some(pool) = &self.timestamps {
-                device.cmd_reset_query_pool(cmd, pool.raw(), 0, 2);
+                device.cmd_reset_query_pool(cmd, pool.raw(), 0, TIMESTAMPS);
             }
             if let Some(pool) = &self.statistics {
-                device.cmd_reset_query_pool(cmd, pool.raw(), 0, 1);
+                device.cmd_reset_query_pool(cmd, pool.raw(), 0, COUNTED_PARTS);
             }
         }
     }
 
-    /// Starts timing and counting.
-    pub fn begin(&self, rec: &Recorder) {
-        let (device, cmd) = (rec.device.ash(), rec.cmd);
-        // SAFETY: the pools were reset earlier in this command buffer.
-        unsafe {
-            if let Some(pool) = &self.timestamps {
-                device.cmd_write_timestamp2(
-                    cmd,
-                    vk::PipelineStageFlags2::TOP_OF_PIPE,
+    /// Starts timing the frame.
+    pub fn begin_timing(&self, rec: &Recorder) {
+        self.write_timestamp(rec, vk::PipelineStageFlags2::TOP_OF_PIPE, 0);
+    }
+
+    /// Starts counting part `part` (below `COUNTED_PARTS`) of the frame.
+    pub fn begin_counting(&self, rec: &Recorder, part: u32) {
+        if let Some(pool) = &self.statistics {
+            // SAFETY: the pool was reset earlier in this command buffer.
+            unsafe {
+                rec.device.ash().cmd_begin_query(
+                    rec.cmd,
                     pool.raw(),
-                    0,
-                );
-            }
-            if let Some(pool) = &self.statistics {
-                device.cmd_begin_query(cmd, pool.raw(), 0, vk::QueryControlFlags::empty());
-            }
+                    part,
+                    vk::QueryControlFlags::empty(),
+                )
+            };
         }
     }
 
-    /// Stops counting: what is drawn after this is timed but not counted.
-    pub fn end_counting(&self, rec: &Recorder) {
-        let (device, cmd) = (rec.device.ash(), rec.cmd);
-        // SAFETY: matches `begin` in the same command buffer.
-        unsafe {
-            if let Some(pool) = &self.statistics {
-                device.cmd_end_query(cmd, pool.raw(), 0);
-            }
+    /// Stops counting part `part`: what is drawn after this is timed but
+    /// not counted.
+    pub fn end_counting(&self, rec: &Recorder, part: u32) {
+        if let Some(pool) = &self.statistics {
+            // SAFETY: matches `begin_counting` in the same command buffer.
+            unsafe { rec.device.ash().cmd_end_query(rec.cmd, pool.raw(), part) };
         }
     }
 
-    /// Stops timing; after `end_counting`.
+    /// Marks where the frame's inner span (`span_ms`) starts, once the
+    /// work before it is done.
+    pub fn mark_span_start(&self, rec: &Recorder) {
+        self.write_timestamp(rec, vk::PipelineStageFlags2::ALL_COMMANDS, 2);
+    }
+
+    /// Marks where the frame's inner span ends.
+    pub fn mark_span_end(&self, rec: &Recorder) {
+        self.write_timestamp(rec, vk::PipelineStageFlags2::ALL_COMMANDS, 3);
+    }
+
+    /// Stops timing the frame; after `end_counting`.
     pub fn end_timing(&self, rec: &Recorder) {
-        let (device, cmd) = (rec.device.ash(), rec.cmd);
-        // SAFETY: matches `begin` in the same command buffer.
-        unsafe {
-            if let Some(pool) = &self.timestamps {
-                device.cmd_write_timestamp2(
-                    cmd,
-                    vk::PipelineStageFlags2::ALL_COMMANDS,
-                    pool.raw(),
-                    1,
-                );
-            }
+        self.write_timestamp(rec, vk::PipelineStageFlags2::ALL_COMMANDS, 1);
+    }
+
+    fn write_timestamp(&self, rec: &Recorder, stage: vk::PipelineStageFlags2, query: u32) {
+        if let Some(pool) = &self.timestamps {
+            // SAFETY: the pool was reset earlier in this command buffer.
+            unsafe {
+                rec.device
+                    .ash()
+                    .cmd_write_timestamp2(rec.cmd, stage, pool.raw(), query)
+            };
         }
     }
 
-    /// GPU milliseconds between `begin` and `end`, when timestamps exist.
-    /// Call after the frame's fence has signalled.
+    /// GPU milliseconds between the frame's start and end, when
+    /// timestamps exist. Call after the frame's fence has signalled.
     pub fn gpu_ms(&self) -> Result<Option<f64>> {
+        self.milliseconds(0)
+    }
+
+    /// GPU milliseconds of the inner span the frame marked (only a frame
+    /// that marked one may ask).
+    pub fn span_ms(&self) -> Result<Option<f64>> {
+        self.milliseconds(2)
+    }
+
+    /// Milliseconds from timestamp `first` to `first + 1`.
+    fn milliseconds(&self, first: u32) -> Result<Option<f64>> {
         let Some(pool) = &self.timestamps else {
             return Ok(None);
         };
@@ -150,7 +176,7 @@ impl FrameQueries {
         unsafe {
             pool.device().ash().get_query_pool_results(
                 pool.raw(),
-                0,
+                first,
                 &mut ticks,
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
             )
@@ -161,23 +187,31 @@ impl FrameQueries {
         Ok(Some(elapsed as f64 * self.period_ns / 1e6))
     }
 
-    /// The draw's counters, when pipeline statistics exist.
-    pub fn statistics(&self) -> Result<Option<PipelineStatistics>> {
+    /// The counters of the frame's first `parts` parts, summed, when
+    /// pipeline statistics exist.
+    pub fn statistics(&self, parts: u32) -> Result<Option<PipelineStatistics>> {
         let Some(pool) = &self.statistics else {
             return Ok(None);
         };
-        let mut values = [[0u64; STATISTICS.len()]; 1];
-        // SAFETY: the query was ended in a completed submission.
+        let mut values = [[0u64; STATISTICS.len()]; COUNTED_PARTS as usize];
+        let parts = parts.clamp(1, COUNTED_PARTS) as usize;
+        // SAFETY: the queries were ended in a completed submission.
         unsafe {
             pool.device().ash().get_query_pool_results(
                 pool.raw(),
                 0,
-                &mut values,
+                &mut values[..parts],
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
             )
         }
         .context("reading pipeline statistics")?;
-        let [vs, clip_in, clip_out, tcs, tes] = values[0];
+        let mut sum = [0u64; STATISTICS.len()];
+        for part in &values[..parts] {
+            for (s, v) in sum.iter_mut().zip(part) {
+                *s += v;
+            }
+        }
+        let [vs, clip_in, clip_out, tcs, tes] = sum;
         Ok(Some(PipelineStatistics {
             vertex_invocations: vs,
             tcs_patches: tcs,

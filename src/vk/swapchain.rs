@@ -13,7 +13,7 @@ use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
 use super::memory::{Buffer, Image, ImageDesc, Transition};
 use super::owned::{Owned, Semaphore};
-use super::target::{Multisampled, TargetViews, DEPTH_FORMAT};
+use super::target::{depth_usage, Multisampled, TargetViews, DEPTH_FORMAT, DEPTH_USED};
 
 /// Instance extensions a surface for this display needs.
 pub fn surface_extensions(display: RawDisplayHandle) -> Result<&'static [*const c_char]> {
@@ -251,7 +251,7 @@ impl Swapchain {
                     ImageDesc {
                         extent,
                         format: DEPTH_FORMAT,
-                        usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                        usage: depth_usage(device, 1),
                         aspect: vk::ImageAspectFlags::DEPTH,
                         samples: vk::SampleCountFlags::TYPE_1,
                     },
@@ -360,6 +360,8 @@ impl Swapchain {
                 color_format: self.format.format,
                 samples: vk::SampleCountFlags::TYPE_1,
                 depth_view: depth.view(),
+                depth_image: depth.raw(),
+                depth_readable: depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
                 color_resolve: None,
                 depth_resolve: None,
             },
@@ -379,11 +381,8 @@ impl Swapchain {
                 after_acquire,
                 depth.raw(),
                 // The depth image is shared by the frames in flight: the
-                // previous frame's depth writes must finish first.
-                (
-                    S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                    A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                ),
+                // previous frame's depth writes and reads must finish first.
+                DEPTH_USED,
             )),
             Attachments::Multisampled(ms) => {
                 rec.transition_images(&[Transition::to_color_attachment(image, after_acquire)]);

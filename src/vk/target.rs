@@ -28,8 +28,20 @@ pub struct TargetViews {
     pub samples: vk::SampleCountFlags,
     pub(super) color_view: vk::ImageView,
     pub(super) depth_view: vk::ImageView,
+    /// The image of `depth_view` (the one drawn into).
+    pub(super) depth_image: vk::Image,
+    /// Whether shaders can read `depth_view` (occlusion culling).
+    pub depth_readable: bool,
     pub(super) color_resolve: Option<vk::ImageView>,
     pub(super) depth_resolve: Option<vk::ImageView>,
+}
+
+impl TargetViews {
+    /// The depth view drawn into: a target whose depth is another view
+    /// needs its descriptors written again.
+    pub fn depth_view(&self) -> vk::ImageView {
+        self.depth_view
+    }
 }
 
 /// The multisampled colour and depth images a target draws into before
@@ -74,7 +86,7 @@ impl Multisampled {
             )?,
             depth: image(
                 DEPTH_FORMAT,
-                vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+                depth_usage(device, samples),
                 vk::ImageAspectFlags::DEPTH,
                 "multisampled_depth",
             )?,
@@ -90,10 +102,7 @@ impl Multisampled {
             self.color.raw(),
             (S::COLOR_ATTACHMENT_OUTPUT, A::COLOR_ATTACHMENT_WRITE),
             self.depth.raw(),
-            (
-                S::EARLY_FRAGMENT_TESTS | S::LATE_FRAGMENT_TESTS,
-                A::DEPTH_STENCIL_ATTACHMENT_WRITE,
-            ),
+            DEPTH_USED,
         ));
     }
 
@@ -111,9 +120,34 @@ impl Multisampled {
             samples: self.color.desc.samples,
             color_view: self.color.view(),
             depth_view: self.depth.view(),
+            depth_image: self.depth.raw(),
+            depth_readable: self.depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
             color_resolve: Some(color),
             depth_resolve: depth,
         }
+    }
+}
+
+/// The stages and accesses of a frame's use of a depth attachment that a
+/// later frame sharing it must wait for: depth tests, and the occlusion
+/// pyramid's reads.
+pub(super) const DEPTH_USED: (vk::PipelineStageFlags2, vk::AccessFlags2) = (
+    vk::PipelineStageFlags2::from_raw(
+        vk::PipelineStageFlags2::EARLY_FRAGMENT_TESTS.as_raw()
+            | vk::PipelineStageFlags2::LATE_FRAGMENT_TESTS.as_raw()
+            | vk::PipelineStageFlags2::COMPUTE_SHADER.as_raw(),
+    ),
+    vk::AccessFlags2::DEPTH_STENCIL_ATTACHMENT_WRITE,
+);
+
+/// Usage of a depth attachment of `samples` samples per pixel: sampled
+/// too where the device can read it (occlusion culling).
+pub(super) fn depth_usage(device: &Device, samples: u32) -> vk::ImageUsageFlags {
+    let usage = vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT;
+    if device.caps.supports_occlusion(samples) {
+        usage | vk::ImageUsageFlags::SAMPLED
+    } else {
+        usage
     }
 }
 
@@ -198,8 +232,7 @@ impl OffscreenTarget {
             ImageDesc {
                 extent,
                 format: DEPTH_FORMAT,
-                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT
-                    | vk::ImageUsageFlags::TRANSFER_SRC,
+                usage: depth_usage(device, 1) | vk::ImageUsageFlags::TRANSFER_SRC,
                 aspect: vk::ImageAspectFlags::DEPTH,
                 samples: vk::SampleCountFlags::TYPE_1,
             },
@@ -237,6 +270,8 @@ impl OffscreenTarget {
                 color_format: self.color.desc.format,
                 samples: vk::SampleCountFlags::TYPE_1,
                 depth_view: self.depth.view(),
+                depth_image: self.depth.raw(),
+                depth_readable: self.depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
                 color_resolve: None,
                 depth_resolve: None,
             },
@@ -246,12 +281,13 @@ impl OffscreenTarget {
     /// Makes both images attachments; earlier contents are discarded.
     pub fn record_begin(&self, rec: &Recorder) {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
-        // A previous frame's copies must finish before we overwrite.
+        // A previous frame's copies (and reads of depth by the occlusion
+        // pyramid) must finish before we overwrite.
         rec.transition_images(&Transition::to_attachments(
             self.color.raw(),
             (S::COPY, A::NONE),
             self.depth.raw(),
-            (S::COPY, A::NONE),
+            (S::COPY | S::COMPUTE_SHADER, A::NONE),
         ));
         if let Some(ms) = &self.multisampled {
             ms.record_begin(rec);

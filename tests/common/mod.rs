@@ -91,6 +91,7 @@ pub fn test_capabilities() -> vkterrain::vk::Capabilities {
         max_image_array_layers: 256,
         max_sampler_anisotropy: 16.0,
         sample_counts: vec![1, 4],
+        occlusion_sample_counts: vec![1, 4],
     }
 }
 

@@ -1,0 +1,463 @@
+//! Hierarchical-Z occlusion culling of patches, in two passes per frame:
+//!
+//! 1. the patches that passed last frame's test are drawn;
+//! 2. their depth is reduced to a pyramid, each texel the farthest depth
+//!    under it (glsl/hiz.comp, every sample of a multisampled pixel);
+//! 3. every patch's box (x and z from its corners, its Y bounds, which
+//!    allow for material displacement) is tested against the pyramid
+//!    (glsl/occlusion.comp), leaving one word of `OCCLUSION_*_BIT`s per
+//!    patch;
+//! 4. the patches found visible that were not drawn first are drawn.
+//!
+//! Step 4 finds whatever step 1 missed, so nothing visible is missing on a
+//! first frame or after a camera cut: the state only decides how much is
+//! drawn twice-tested instead of once. The draws read the state through
+//! glsl/occlusion.glsl: the tess path's control shader culls the patches a
+//! phase does not keep; the geomip path's vertex shader (and the tess
+//! path's full-resolution draws) moves their vertices out of the clip
+//! volume.
+
+use std::mem::size_of;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::shaders;
+use super::uniforms::FrameUniforms;
+use crate::shader_constants::{
+    BINDING_CONTROL_POINTS, BINDING_FRAME, BINDING_HIZ_DEPTH, BINDING_HIZ_PYRAMID,
+    BINDING_OCCLUSION_COUNT, BINDING_VISIBILITY, OCCLUSION_VISIBLE_BIT,
+};
+use crate::shader_variants::{HizSource, Shader};
+use crate::terrain::Terrain;
+use crate::vk::commands::Recorder;
+use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
+use crate::vk::memory::{Buffer, BufferDesc};
+use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
+use crate::vk::target::TargetViews;
+use crate::vk::{Device, Result, VkError};
+
+/// Workgroup sizes of glsl/hiz.comp (8x8) and glsl/occlusion.comp (64).
+const REDUCE_GROUP: u32 = 8;
+const TEST_GROUP: u32 = 64;
+
+/// Push constants of glsl/hiz.comp.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct ReduceConstants {
+    src_size: [i32; 2],
+    dst_size: [i32; 2],
+    src_offset: u32,
+    dst_offset: u32,
+    samples: u32,
+}
+const _: () = assert!(size_of::<ReduceConstants>() == 28);
+
+/// Push constants of glsl/occlusion.comp.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct TestConstants {
+    size: [i32; 2],
+    levels: u32,
+}
+const _: () = assert!(size_of::<TestConstants>() == 12);
+
+const PUSH_SIZE: u32 = 32;
+
+/// The pyramid's levels over a `width` x `height` depth: level l has
+/// ceil(size / 2^(l+1)) texels a side, down to 1x1. Mirror of
+/// `level_size` in glsl/occlusion.comp.
+pub fn pyramid_levels(width: u32, height: u32) -> Vec<[u32; 2]> {
+    let mut levels = Vec::new();
+    let mut l = 0;
+    loop {
+        let size = [
+            width.div_ceil(2u32 << l).max(1),
+            height.div_ceil(2u32 << l).max(1),
+        ];
+        levels.push(size);
+        if size == [1, 1] {
+            return levels;
+        }
+        l += 1;
+    }
+}
+
+/// The state the draws read, and what builds and tests against the
+/// pyramid where the device can read depth attachments.
+pub(super) struct Occlusion {
+    /// One word per patch, kept from frame to frame (every patch visible
+    /// at first, so a first frame draws everything in its first pass).
+    pub(super) visibility: Buffer,
+    patches: usize,
+    culling: Option<Culling>,
+}
+
+/// The compute side: pipelines and, per frame slot, the pyramid, the
+/// culled-patch count and a descriptor set.
+struct Culling {
+    /// Read through the sets: the patches' boxes.
+    _boxes: Buffer,
+    slots: Vec<CullingSlot>,
+    /// The slots' sets come from here.
+    _sets: DescriptorSets,
+    from_depth: Pipeline,
+    from_multisampled_depth: Pipeline,
+    reduce: Pipeline,
+    test: Pipeline,
+    layout: PipelineLayout,
+    _set_layout: DescriptorSetLayout,
+}
+
+struct CullingSlot {
+    set: DescriptorSet,
+    /// The patches culled this frame, read after its fence.
+    count: Buffer,
+    /// The pyramid and the depth extent it was sized for.
+    pyramid: Option<(Buffer, vk::Extent2D)>,
+    /// The depth view the set reads.
+    depth: Option<vk::ImageView>,
+}
+
+impl Occlusion {
+    /// The visibility state for `terrain`'s patches and, where `culling`,
+    /// the compute pipelines, with one set per frame slot reading that
+    /// slot's `uniforms`.
+    pub(super) fn new(
+        device: &Device,
+        terrain: &Terrain,
+        uniforms: &[&Buffer],
+        culling: bool,
+    ) -> Result<Self> {
+        let patches = terrain.grid().patch_count().max(1);
+        let visibility = device.upload_buffer(
+            "terrain.occlusion.visibility",
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            bytemuck::cast_slice(&vec![OCCLUSION_VISIBLE_BIT; patches]),
+        )?;
+        let culling = match culling {
+            true => Some(Culling::new(device, terrain, uniforms, &visibility)?),
+            false => None,
+        };
+        Ok(Occlusion {
+            visibility,
+            patches,
+            culling,
+        })
+    }
+
+    /// Whether frames can be culled (the device reads depth attachments).
+    pub(super) fn can_cull(&self) -> bool {
+        self.culling.is_some()
+    }
+
+    /// Points slot `slot`'s set at `target`'s depth and sizes its pyramid
+    /// for it, when either changed. The slot's previous frame must have
+    /// completed.
+    pub(super) fn prepare_target(
+        &mut self,
+        device: &Device,
+        slot: usize,
+        target: &TargetViews,
+        sampler: &Sampler,
+    ) -> Result<()> {
+        let culling = self.culling.as_mut().ok_or_else(not_built)?;
+        let s = &mut culling.slots[slot];
+        if s.depth != Some(target.depth_view()) {
+            device.write_target_depth(s.set, BINDING_HIZ_DEPTH, target, sampler);
+            s.depth = Some(target.depth_view());
+        }
+        if s.pyramid.as_ref().map(|(_, e)| *e) != Some(target.extent) {
+            let texels: u32 = pyramid_levels(target.extent.width, target.extent.height)
+                .iter()
+                .map(|[w, h]| w * h)
+                .sum();
+            let pyramid = device.create_buffer(
+                BufferDesc {
+                    size: u64::from(texels) * 4,
+                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                    location: MemoryLocation::GpuOnly,
+                },
+                &format!("terrain.occlusion.pyramid[{slot}]"),
+            )?;
+            device.write_buffer(
+                s.set,
+                BINDING_HIZ_PYRAMID,
+                vk::DescriptorType::STORAGE_BUFFER,
+                &pyramid,
+                pyramid.desc.size,
+            );
+            s.pyramid = Some((pyramid, target.extent));
+        }
+        Ok(())
+    }
+
+    /// Before the first pass: the previous frame's test is done with the
+    /// state, and the slot's count starts at 0.
+    pub(super) fn record_start(&self, rec: &Recorder, slot: usize) -> Result<()> {
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        let culling = self.culling.as_ref().ok_or_else(not_built)?;
+        rec.memory_barrier(
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            (
+                S::VERTEX_SHADER
+                    | S::TESSELLATION_CONTROL_SHADER
+                    | S::COMPUTE_SHADER
+                    | S::ALL_TRANSFER,
+                A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE | A::TRANSFER_WRITE,
+            ),
+        );
+        rec.fill_buffer(&culling.slots[slot].count, 0);
+        Ok(())
+    }
+
+    /// Between the passes (outside rendering): builds slot `slot`'s
+    /// pyramid from `target`'s depth and tests every patch.
+    pub(super) fn record_cull(
+        &self,
+        rec: &Recorder,
+        slot: usize,
+        target: &TargetViews,
+    ) -> Result<()> {
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        let culling = self.culling.as_ref().ok_or_else(not_built)?;
+        let s = &culling.slots[slot];
+        let extent = target.extent;
+        if s.pyramid.as_ref().map(|(_, e)| *e) != Some(extent) {
+            return Err(VkError::Unsupported(format!(
+                "occlusion slot {slot} was not prepared for a {}x{} target",
+                extent.width, extent.height
+            )));
+        }
+        rec.depth_to_compute(target);
+        // The count's fill and the first pass's reads of the state come
+        // before the test's writes.
+        rec.memory_barrier(
+            (
+                S::ALL_TRANSFER | S::VERTEX_SHADER | S::TESSELLATION_CONTROL_SHADER,
+                A::TRANSFER_WRITE,
+            ),
+            (
+                S::COMPUTE_SHADER,
+                A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE,
+            ),
+        );
+        let levels = pyramid_levels(extent.width, extent.height);
+        let samples = target.samples.as_raw();
+        let mut src_size = [extent.width as i32, extent.height as i32];
+        let mut src_offset = 0u32;
+        let mut dst_offset = 0u32;
+        for (l, &[w, h]) in levels.iter().enumerate() {
+            let pipeline = match (l, samples) {
+                (0, 1) => &culling.from_depth,
+                (0, _) => &culling.from_multisampled_depth,
+                _ => &culling.reduce,
+            };
+            if l > 0 {
+                rec.memory_barrier(
+                    (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+                    (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+                );
+            }
+            rec.bind_compute(pipeline, &culling.layout, s.set);
+            let constants = ReduceConstants {
+                src_size,
+                dst_size: [w as i32, h as i32],
+                src_offset,
+                dst_offset,
+                samples,
+            };
+            rec.push_constants(
+                &culling.layout,
+                vk::ShaderStageFlags::COMPUTE,
+                bytemuck::bytes_of(&constants),
+            );
+            rec.dispatch([w.div_ceil(REDUCE_GROUP), h.div_ceil(REDUCE_GROUP), 1]);
+            src_size = [w as i32, h as i32];
+            src_offset = dst_offset;
+            dst_offset += w * h;
+        }
+        rec.memory_barrier(
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+        );
+        rec.bind_compute(&culling.test, &culling.layout, s.set);
+        let constants = TestConstants {
+            size: [extent.width as i32, extent.height as i32],
+            levels: levels.len() as u32,
+        };
+        rec.push_constants(
+            &culling.layout,
+            vk::ShaderStageFlags::COMPUTE,
+            bytemuck::bytes_of(&constants),
+        );
+        rec.dispatch([(self.patches as u32).div_ceil(TEST_GROUP), 1, 1]);
+        Ok(())
+    }
+
+    /// After `record_cull`: hands depth, colour and the state to the
+    /// second pass.
+    pub(super) fn record_resume(&self, rec: &Recorder, target: &TargetViews) {
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        // The state feeds the second pass's draws, the count the host.
+        rec.memory_barrier(
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            (
+                S::VERTEX_SHADER | S::TESSELLATION_CONTROL_SHADER | S::HOST,
+                A::SHADER_STORAGE_READ | A::HOST_READ,
+            ),
+        );
+        rec.depth_to_attachment(target);
+        // The second pass loads what the first stored.
+        rec.memory_barrier(
+            (S::COLOR_ATTACHMENT_OUTPUT, A::COLOR_ATTACHMENT_WRITE),
+            (
+                S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_READ | A::COLOR_ATTACHMENT_WRITE,
+            ),
+        );
+    }
+
+    /// The patches slot `slot`'s last frame culled; call after its fence.
+    pub(super) fn culled(&self, slot: usize) -> Result<u32> {
+        let culling = self.culling.as_ref().ok_or_else(not_built)?;
+        let bytes = culling.slots[slot]
+            .count
+            .mapped()
+            .ok_or_else(|| VkError::Unsupported("the culled count is not host-mapped".into()))?;
+        Ok(bytemuck::pod_read_unaligned(&bytes[..4]))
+    }
+}
+
+impl Culling {
+    fn new(
+        device: &Device,
+        terrain: &Terrain,
+        uniforms: &[&Buffer],
+        visibility: &Buffer,
+    ) -> Result<Self> {
+        let stage = vk::ShaderStageFlags::COMPUTE;
+        let storage = vk::DescriptorType::STORAGE_BUFFER;
+        let set_layout = device.create_descriptor_set_layout(
+            &[
+                (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stage),
+                (
+                    BINDING_HIZ_DEPTH,
+                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                    stage,
+                ),
+                (BINDING_HIZ_PYRAMID, storage, stage),
+                (BINDING_CONTROL_POINTS, storage, stage),
+                (BINDING_VISIBILITY, storage, stage),
+                (BINDING_OCCLUSION_COUNT, storage, stage),
+            ],
+            "terrain.occlusion.set_layout",
+        )?;
+        let layout = device.create_pipeline_layout_with_push(
+            &[&set_layout],
+            stage,
+            PUSH_SIZE,
+            "terrain.occlusion.pipeline_layout",
+        )?;
+        let sets = device.allocate_descriptor_sets(
+            &set_layout,
+            &[
+                (vk::DescriptorType::UNIFORM_BUFFER, 1),
+                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+                (storage, 4),
+            ],
+            uniforms.len() as u32,
+            "terrain.occlusion.set",
+        )?;
+        let pipeline = |shader, name: &str| {
+            device.create_compute_pipeline(
+                shaders::spirv(shader),
+                &layout,
+                &format!("terrain.occlusion.{name}"),
+            )
+        };
+        // The tess path's control points: x, z and each patch's Y bounds.
+        let boxes = device.upload_buffer(
+            "terrain.occlusion.boxes",
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            bytemuck::cast_slice(terrain.control_points()),
+        )?;
+        let mut slots = Vec::with_capacity(uniforms.len());
+        for (i, (set, frame)) in sets.iter().zip(uniforms).enumerate() {
+            let count = device.create_buffer(
+                BufferDesc {
+                    size: 4,
+                    usage: vk::BufferUsageFlags::STORAGE_BUFFER
+                        | vk::BufferUsageFlags::TRANSFER_DST,
+                    location: MemoryLocation::GpuToCpu,
+                },
+                &format!("terrain.occlusion.count[{i}]"),
+            )?;
+            device.write_buffer(
+                set,
+                BINDING_FRAME,
+                vk::DescriptorType::UNIFORM_BUFFER,
+                frame,
+                size_of::<FrameUniforms>() as u64,
+            );
+            for (binding, buffer) in [
+                (BINDING_CONTROL_POINTS, &boxes),
+                (BINDING_VISIBILITY, visibility),
+                (BINDING_OCCLUSION_COUNT, &count),
+            ] {
+                device.write_buffer(set, binding, storage, buffer, buffer.desc.size);
+            }
+            slots.push(CullingSlot {
+                set,
+                count,
+                pyramid: None,
+                depth: None,
+            });
+        }
+        Ok(Culling {
+            from_depth: pipeline(Shader::HizComp(HizSource::Depth), "pyramid_from_depth")?,
+            from_multisampled_depth: pipeline(
+                Shader::HizComp(HizSource::DepthMultisampled),
+                "pyramid_from_multisampled_depth",
+            )?,
+            reduce: pipeline(Shader::HizComp(HizSource::Pyramid), "pyramid_reduce")?,
+            test: pipeline(Shader::OcclusionComp, "test")?,
+            _boxes: boxes,
+            slots,
+            _sets: sets,
+            layout,
+            _set_layout: set_layout,
+        })
+    }
+}
+
+fn not_built() -> VkError {
+    VkError::Unsupported("occlusion culling was not built for this renderer".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pyramid_levels_halve_rounding_up_down_to_one_texel() {
+        assert_eq!(
+            pyramid_levels(1280, 720),
+            vec![
+                [640, 360],
+                [320, 180],
+                [160, 90],
+                [80, 45],
+                [40, 23],
+                [20, 12],
+                [10, 6],
+                [5, 3],
+                [3, 2],
+                [2, 1],
+                [1, 1]
+            ]
+        );
+        assert_eq!(pyramid_levels(1, 1), vec![[1, 1]]);
+        assert_eq!(pyramid_levels(3, 1), vec![[2, 1], [1, 1]]);
+    }
+}
