@@ -9,7 +9,9 @@ use vkterrain::bench::cameras::{flythrough, named_views};
 use vkterrain::bench::error::{ErrorHistogram, PixelError};
 use vkterrain::bench::look::LookRow;
 use vkterrain::bench::report::{check_targets, csv, markdown, merge, Results};
-use vkterrain::bench::run::{configs, Config, Row, RowLod, RowPath, QUICK_TAUS, TAUS};
+use vkterrain::bench::run::{
+    configs, Config, Row, RowLod, RowPath, OCCLUSION_TAU, QUICK_TAUS, TAUS,
+};
 use vkterrain::terrain::{DistanceLod, TerrainInfo};
 
 fn terrains() -> Vec<(&'static str, TerrainInfo)> {
@@ -134,10 +136,28 @@ fn configurations_cover_every_path_and_tolerance() {
     ] {
         let taus: Vec<f32> = full
             .iter()
-            .filter(|c| c.path() == path && c.lod() == lod)
+            .filter(|c| c.path() == path && c.lod() == lod && !c.occlusion())
             .filter_map(|c| c.tau())
             .collect();
         assert_eq!(taus, TAUS, "{path:?} {lod:?}");
+    }
+    // Each error mode once more with occlusion culling, beside its
+    // counterpart without.
+    let occluded: Vec<Config> = full.iter().copied().filter(Config::occlusion).collect();
+    assert_eq!(
+        occluded,
+        [
+            Config::TessErrorOccluded(OCCLUSION_TAU),
+            Config::GeomipErrorOccluded(OCCLUSION_TAU)
+        ]
+    );
+    for c in occluded {
+        let off = c.unoccluded().expect("an occluded row has a counterpart");
+        assert!(full.contains(&off) && !off.occlusion());
+        assert_eq!(
+            (c.path(), c.lod(), c.tau()),
+            (off.path(), off.lod(), off.tau())
+        );
     }
     assert_eq!(count(&|c| matches!(c, Config::GeomipDistance(_))), 4);
     // The distance sweep spans the scene's distances from 1/4 to 8 times.
@@ -160,7 +180,7 @@ fn configurations_cover_every_path_and_tolerance() {
     // Without tessellation there are no tess rows, the rest remains.
     let fallback = configs(lod, false, false);
     assert!(fallback.iter().all(|c| c.path() != RowPath::Tess));
-    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3);
+    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3 - 1);
     // The peers' policies, each once, in the quick run too.
     for run in [&full, &quick] {
         let peers: Vec<_> = run

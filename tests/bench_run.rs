@@ -24,7 +24,7 @@ impl Progress for Count {
 
 fn rows_of<'a>(rows: &'a [Row], camera: &str, path: RowPath, lod: Option<RowLod>) -> Vec<&'a Row> {
     rows.iter()
-        .filter(|r| r.camera == camera && r.path == path && r.lod == lod)
+        .filter(|r| r.camera == camera && r.path == path && r.lod == lod && !r.occlusion)
         .collect()
 }
 
@@ -126,6 +126,31 @@ fn a_quick_run_measures_every_configuration() {
                 "{camera} {path:?}: {tris:?}"
             );
         }
+        // Occlusion culling changes no pixel and draws no more.
+        for r in rows.iter().filter(|r| r.camera == camera && r.occlusion) {
+            let off = rows_of(&rows, camera, r.path, r.lod)
+                .into_iter()
+                .find(|o| o.tau == r.tau)
+                .expect("an occluded row has its counterpart");
+            assert_eq!(r.differing_pixels, Some(0), "{}", r.config);
+            assert!(r.triangles <= off.triangles, "{}", r.config);
+            assert!(r.patches_occluded.is_some(), "{}", r.config);
+            assert!(r.culling_gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+            assert_eq!(
+                (r.max_px, r.p99_px, r.mismatched_pixels),
+                (off.max_px, off.p99_px, off.mismatched_pixels),
+                "{}",
+                r.config
+            );
+        }
+        for r in rows.iter().filter(|r| !r.occlusion) {
+            assert_eq!(
+                (r.patches_occluded, r.culling_gpu_ms, r.differing_pixels),
+                (None, None, None),
+                "{}",
+                r.config
+            );
+        }
         for r in rows_of(&rows, camera, RowPath::Oracle, None) {
             assert!(r.triangles.unwrap() <= brute_tris, "{}", r.config);
         }
@@ -224,7 +249,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
     let csv = std::fs::read_to_string(dir.path().join("out/results.csv")).unwrap();
     assert_eq!(
         csv.lines().count(),
-        1 + rows.len() + rows.len() - 9,
+        1 + rows.len() + rows.len() - 10,
         "second run has no tess rows"
     );
 

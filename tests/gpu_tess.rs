@@ -245,7 +245,8 @@ fn culling_skips_patches_outside_the_frustum() {
     let total = terrain.grid().patch_count();
     let (c, size, top) = extent(&terrain);
     let mut scene = GpuScene::new(terrain, 256, 256, false);
-    // Every patch gets factor 8, so each visible patch costs the same.
+    // Every patch gets factor 8, so each visible patch costs the same;
+    // one pass, so each patch reaches the control shader once.
     let settings = RenderSettings {
         lod: DistanceLod {
             min_dist: 0.0,
@@ -253,6 +254,7 @@ fn culling_skips_patches_outside_the_frustum() {
             min_exp: 3.0,
             max_exp: 3.0,
         },
+        occlusion: false,
         ..RenderSettings::default()
     };
 
@@ -554,6 +556,7 @@ fn flat_terrain_at_minimum_tessellation() {
         },
         shading: Shading::Flat,
         clear_color: [0.0; 3],
+        occlusion: false,
         ..RenderSettings::default()
     };
     let frame = scene.render(&cams[0].1, &settings);

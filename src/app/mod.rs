@@ -4,6 +4,7 @@
 
 pub mod camera;
 
+use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -42,6 +43,7 @@ vkterrain controls
   F1  this help                  F2  wireframe (when the device supports it)
   F3  LOD colours                F4  freeze culling (keep the current frustum)
   F5  LOD debug mode             F6  render path (tess, geomip, brute)
+  F7  occlusion culling on / off F8  show occlusion-culled patches
   - / =   LOD distances down / up
   F12 screenshot                 Esc     quit";
 
@@ -522,6 +524,21 @@ impl Running {
                 self.settings.path = paths[next];
                 log::info!("render path: {:?}", self.settings.path);
             }
+            KeyCode::F7 => {
+                self.settings.occlusion = !self.settings.occlusion;
+                if self.settings.occlusion && !self.graphics.renderer.can_cull_occluded() {
+                    log::warn!(
+                        "occlusion culling is unavailable: the device cannot sample its depth attachments"
+                    );
+                }
+                log::info!(
+                    "occlusion culling {}",
+                    if self.settings.occlusion { "on" } else { "off" }
+                );
+            }
+            KeyCode::F8 => {
+                self.settings.show_culled = !self.settings.show_culled;
+            }
             KeyCode::F5 => {
                 self.settings.lod_mode = match self.settings.lod_mode {
                     DistanceMode::Smooth => DistanceMode::Debug,
@@ -750,6 +767,9 @@ impl Running {
         }
         if self.input.frozen.is_some() {
             title.push_str(" | culling frozen");
+        }
+        if let Some(o) = stats.last.occlusion {
+            let _ = write!(title, " | {} occluded", o.patches_occluded);
         }
         self.window.set_title(&title);
     }

@@ -90,6 +90,9 @@ pub(super) struct Occlusion {
     /// at first, so a first frame draws everything in its first pass).
     pub(super) visibility: Buffer,
     patches: usize,
+    /// The stages that read the state: the vertex shader, and the
+    /// tessellation control shader where the device has one.
+    readers: vk::PipelineStageFlags2,
     culling: Option<Culling>,
 }
 
@@ -139,9 +142,16 @@ impl Occlusion {
             true => Some(Culling::new(device, terrain, uniforms, &visibility)?),
             false => None,
         };
+        let readers = if device.caps.tessellation_shader {
+            vk::PipelineStageFlags2::VERTEX_SHADER
+                | vk::PipelineStageFlags2::TESSELLATION_CONTROL_SHADER
+        } else {
+            vk::PipelineStageFlags2::VERTEX_SHADER
+        };
         Ok(Occlusion {
             visibility,
             patches,
+            readers,
             culling,
         })
     }
@@ -200,10 +210,7 @@ impl Occlusion {
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (
-                S::VERTEX_SHADER
-                    | S::TESSELLATION_CONTROL_SHADER
-                    | S::COMPUTE_SHADER
-                    | S::ALL_TRANSFER,
+                self.readers | S::COMPUTE_SHADER | S::ALL_TRANSFER,
                 A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE | A::TRANSFER_WRITE,
             ),
         );
@@ -233,10 +240,7 @@ impl Occlusion {
         // The count's fill and the first pass's reads of the state come
         // before the test's writes.
         rec.memory_barrier(
-            (
-                S::ALL_TRANSFER | S::VERTEX_SHADER | S::TESSELLATION_CONTROL_SHADER,
-                A::TRANSFER_WRITE,
-            ),
+            (S::ALL_TRANSFER | self.readers, A::TRANSFER_WRITE),
             (
                 S::COMPUTE_SHADER,
                 A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE,
@@ -303,7 +307,7 @@ impl Occlusion {
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (
-                S::VERTEX_SHADER | S::TESSELLATION_CONTROL_SHADER | S::HOST,
+                self.readers | S::HOST,
                 A::SHADER_STORAGE_READ | A::HOST_READ,
             ),
         );

@@ -83,6 +83,13 @@ impl GpuScene {
         Self::on(gpu, terrain, appearance, (width, height, wireframe, 1))
     }
 
+    /// A plain scene drawn with `samples` samples per pixel.
+    pub fn with_samples(terrain: Terrain, width: u32, height: u32, samples: u32) -> Self {
+        let gpu = open_gpu(None);
+        let appearance = Appearance::default();
+        Self::on(gpu, terrain, &appearance, (width, height, false, samples))
+    }
+
     /// As `with_appearance`, on the device golden images were made on.
     pub fn for_golden(terrain: Terrain, appearance: &Appearance, width: u32, height: u32) -> Self {
         Self::for_golden_samples(terrain, appearance, (width, height), 1)
