@@ -43,7 +43,7 @@ fn flythrough_matches(samples: u32, frames: usize) {
     // Consecutive frames, then a cut half the loop away.
     let cameras: Vec<_> = (0..half)
         .chain(loop_frames / 2..loop_frames / 2 + frames - half)
-        .map(|i| path_cameras[i].clone())
+        .map(|i| path_cameras[i])
         .collect();
     let mut scene = GpuScene::with_samples(terrain, 320, 180, samples);
     for path in [RenderPath::Tess, RenderPath::Geomip] {

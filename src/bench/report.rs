@@ -604,7 +604,14 @@ which at most {:.0} % of the patch's pixels exceed tau (its per-patch 99th perce
 most tau); unseen patches take the coarsest level. Neighbours are then refined to within one \
 level of each other so the stitched edges meet, and that mix is rendered and measured like any \
 other row. Its triangle count is what measured error alone says a level choice could get \
-away with.\n",
+away with.\n\n\
+**Occlusion.** Rows marked \"+ occlusion\" draw each frame in two passes: the patches that \
+passed the last frame's test, then, after a depth pyramid is built and every patch's box is \
+tested against it, the patches newly found visible. Their renderer keeps its visibility from \
+frame to frame and sees only its own row's frames, so each fixed view starts as a camera cut \
+from the view before it (that first frame is compared but not timed) and the flythrough runs \
+on from the last fixed view. `differing` counts the pixels, over every compared frame, whose \
+colour differs from the same row's render without occlusion culling at the same camera.\n",
         100.0 * ORACLE_EXCEED_FRACTION
     )
 }

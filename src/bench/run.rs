@@ -669,6 +669,16 @@ impl<'a> Bench<'a> {
                     }
                     _ => None,
                 };
+                // A fixed view is a camera cut for an occluded row: its
+                // first frame starts from the last view's visibility. That
+                // frame is compared too, and not timed.
+                let cut = match config.occlusion() && cameras.len() == 1 {
+                    true => Some(self.render(camera, config, levels)?),
+                    false => None,
+                };
+                if cut.is_some() {
+                    progress.advance(&message);
+                }
                 let frame = self.render_gathered(
                     camera,
                     config,
@@ -681,20 +691,23 @@ impl<'a> Bench<'a> {
                 )?;
                 g.errors
                     .add(&pixel_errors(&DepthView::of(&frame), &reference_view, k));
-                let rgba = &frame.readback.rgba;
                 if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
-                    unoccluded.push((*config, rgba.clone()));
+                    unoccluded.push((*config, frame.readback.rgba.clone()));
                 }
                 if let Some(off) = config.unoccluded() {
                     let Some((_, image)) = unoccluded.iter().find(|(c, _)| *c == off) else {
                         anyhow::bail!("{} runs without {}", config.label(), off.label());
                     };
-                    let differing = rgba
-                        .chunks_exact(4)
-                        .zip(image.chunks_exact(4))
-                        .filter(|(a, b)| a != b)
-                        .count();
-                    *g.differing_pixels.get_or_insert(0) += differing;
+                    for f in cut.iter().chain([&frame]) {
+                        let differing = f
+                            .readback
+                            .rgba
+                            .chunks_exact(4)
+                            .zip(image.chunks_exact(4))
+                            .filter(|(a, b)| a != b)
+                            .count();
+                        *g.differing_pixels.get_or_insert(0) += differing;
+                    }
                 }
                 if let Some(o) = frame.measurements.occlusion {
                     let drawn = frame.patches_in_frustum as u64 - u64::from(o.patches_occluded);
@@ -741,13 +754,18 @@ impl<'a> Bench<'a> {
             .iter()
             .filter(|c| matches!(c, Config::Oracle(_)))
             .count() as u64;
+        let occluded = configs.iter().filter(|c| c.occlusion()).count() as u64;
         let per_frame = |repeats: u64| {
             repeats * configs.len() as u64 + if oracles > 0 { level_count } else { 0 }
         };
+        // Occluded rows render a fixed view once more (its cut frame).
         progress.start(
             views
                 .iter()
-                .map(|(_, cams, repeats)| cams.len() as u64 * per_frame(*repeats as u64))
+                .map(|(_, cams, repeats)| {
+                    let cut = if cams.len() == 1 { occluded } else { 0 };
+                    cams.len() as u64 * per_frame(*repeats as u64) + cut
+                })
                 .sum(),
         );
         let caps = &self.gpu.device.caps;
