@@ -356,6 +356,36 @@ fn targets_are_read_from_the_rows() {
     );
     assert!(md.contains("## Predicted against measured error"));
     assert!(md.contains("Because."));
+    // No occluded rows, no occlusion rows in its table.
+    assert!(!md.contains("| tess | 4000 / "));
+
+    // An occluded tess row beside its counterpart, and the best row, are
+    // read into the occlusion table; it does not count as the best row.
+    let mut with_occlusion = rows.clone();
+    with_occlusion.push(Row {
+        occlusion: true,
+        patches_occluded: Some(40),
+        patches_drawn_hidden: Some(3),
+        culling_gpu_ms: Some(0.25),
+        differing_pixels: Some(0),
+        ..row("v", "tess", Some("error"), Some(1.0), 1_000, 2.5, 0.8)
+    });
+    let refs: Vec<&Row> = with_occlusion.iter().collect();
+    assert_eq!(check_targets(&refs).tess_vs_best, Some(4.0 / 3.0));
+    let md = markdown(
+        &Results {
+            rows: &with_occlusion,
+            look: &[],
+        },
+        "",
+        "pareto.png",
+    );
+    assert!(
+        md.contains(
+            "| s | d | v | tess | 4000 / 1000 / 3000 | 4.00x | 0.33x | 5.0 / 2.5 | 0.2 (10.0 %) | 40 | 3 | 0 |"
+        ),
+        "{md}"
+    );
     assert!(md.contains("![GPU time and triangles against p99 error](pareto.png)"));
 }
 

@@ -113,6 +113,27 @@ fn ridge_view(pillar: f32) -> (u32, HeadlessFrame, HeadlessFrame) {
             ..settings
         },
     );
+    // What was culled, drawn over the frame.
+    let shown = scene.render(
+        &camera,
+        &RenderSettings {
+            show_culled: true,
+            ..settings
+        },
+    );
+    let magenta = |f: &HeadlessFrame| {
+        f.readback
+            .rgba
+            .chunks_exact(4)
+            .filter(|p| p[0] > 240 && p[1] < 140 && p[2] > 160)
+            .count()
+    };
+    assert_eq!(magenta(&on), 0, "magenta without show_culled");
+    assert!(
+        magenta(&shown) > 100,
+        "the culled patches cover only {} pixels",
+        magenta(&shown)
+    );
     scene.finish();
     (occluded(&on), on, off)
 }

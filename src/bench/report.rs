@@ -476,21 +476,29 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(
         w,
         "Error mode at tau = 1 px with occlusion culling (\"+ occlusion\") beside the same mode \
-         without it, and the oracle at 1 px, which charges hidden patches nothing. Triangles and \
-         GPU ms are per frame; \"culling\" is the depth pyramid and the patch test, part of the \
+         without it, and the oracle at 1 px, which charges hidden patches nothing. \"on / best\" \
+         sets the culled row's triangles against the fewest of any row without culling whose p99 \
+         is within 1 px (the targets' best row). Triangles and GPU ms are per frame; \"culling\" is the depth pyramid and the patch test, part of the \
          frame; \"occluded\" the patches it hid; \"drawn hidden\" the patches it drew though the \
          reference shows none of their pixels; \"differing\" the pixels, over all frames, whose \
          colour differs from the render without occlusion culling (the target is 0).\n"
     );
     let _ = writeln!(
         w,
-        "| scene | device | camera | path | triangles off / on / oracle | fewer | GPU ms off / on | culling ms (share) | occluded | drawn hidden | differing |"
+        "| scene | device | camera | path | triangles off / on / oracle | fewer | on / best | GPU ms off / on | culling ms (share) | occluded | drawn hidden | differing |"
     );
-    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
         let oracle = group
             .iter()
             .find(|r| r.path == RowPath::Oracle && r.tau == Some(1.0));
+        // The fewest triangles of any row without occlusion culling whose
+        // p99 is within 1 px (the targets' best row).
+        let best = group
+            .iter()
+            .filter(|r| r.p99_px <= 1.0 && !r.occlusion)
+            .filter_map(|r| r.triangles)
+            .min();
         for path in [RowPath::Tess, RowPath::Geomip] {
             let find = |occlusion: bool| {
                 group.iter().find(|r| {
@@ -503,10 +511,12 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
             let (Some(off), Some(on)) = (find(false), find(true)) else {
                 continue;
             };
-            let fewer = match (off.triangles, on.triangles) {
+            let ratio = |a: Option<u64>, b: Option<u64>| match (a, b) {
                 (Some(a), Some(b)) if b > 0 => format!("{:.2}x", a as f64 / b as f64),
                 _ => "n/a".into(),
             };
+            let fewer = ratio(off.triangles, on.triangles);
+            let vs_best = ratio(on.triangles, best);
             let ms = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.1}"));
             let share = match (on.culling_gpu_ms, on.gpu_ms) {
                 (Some(c), Some(f)) if f > 0.0 => format!("{c:.1} ({:.1} %)", 100.0 * c / f),
@@ -514,7 +524,7 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
             };
             let _ = writeln!(
                 w,
-                "| {scene} | {device} | {camera} | {} | {} / {} / {} | {fewer} | {} / {} | {share} | {} | {} | {} |",
+                "| {scene} | {device} | {camera} | {} | {} / {} / {} | {fewer} | {vs_best} | {} / {} | {share} | {} | {} | {} |",
                 path.name(),
                 opt(off.triangles),
                 opt(on.triangles),
