@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 use common::gpu::*;
 use common::*;
 use glam::DVec2;
+use vkterrain::bench::error::differing_pixels;
 use vkterrain::material::generate::blend_maps_from_rules;
 use vkterrain::material::Appearance;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings};
@@ -261,13 +262,7 @@ fn culling_keeps_what_displacement_lifts_into_view() {
             ..settings
         },
     );
-    let differing = culled
-        .readback
-        .rgba
-        .chunks_exact(4)
-        .zip(all.readback.rgba.chunks_exact(4))
-        .filter(|(a, b)| a != b)
-        .count();
+    let differing = differing_pixels(&culled.readback.rgba, &all.readback.rgba);
     assert!(
         differing > 100,
         "ungrown bounds should lose ground: {differing} pixels differ"

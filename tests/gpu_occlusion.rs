@@ -9,6 +9,7 @@ use common::gpu::*;
 use common::*;
 use glam::DVec2;
 use vkterrain::bench::cameras::flythrough;
+use vkterrain::bench::error::differing_pixels;
 use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
@@ -170,13 +171,7 @@ fn a_patch_behind_a_ridge_is_culled_and_one_peeking_over_it_is_not() {
         0,
         0.0,
     );
-    let pillar_pixels = peeking_on
-        .readback
-        .rgba
-        .chunks_exact(4)
-        .zip(hidden_on.readback.rgba.chunks_exact(4))
-        .filter(|(a, b)| a != b)
-        .count();
+    let pillar_pixels = differing_pixels(&peeking_on.readback.rgba, &hidden_on.readback.rgba);
     assert!(
         pillar_pixels > 20,
         "the pillar covers only {pillar_pixels} pixels"

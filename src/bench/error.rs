@@ -236,3 +236,12 @@ impl ErrorHistogram {
         }
     }
 }
+
+/// Pixels whose RGBA differs between two images of the same size (any
+/// channel, any amount).
+pub fn differing_pixels(a: &[u8], b: &[u8]) -> usize {
+    a.chunks_exact(4)
+        .zip(b.chunks_exact(4))
+        .filter(|(p, q)| p != q)
+        .count()
+}

@@ -6,7 +6,7 @@ use glam::DMat4;
 use serde::{Deserialize, Serialize};
 
 use super::cameras::{flythrough, named_views, FLYTHROUGH};
-use super::error::{pixel_errors, DepthView, ErrorHistogram};
+use super::error::{differing_pixels, pixel_errors, DepthView, ErrorHistogram};
 use crate::render::{
     Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
     TerrainRenderer,
@@ -699,14 +699,8 @@ impl<'a> Bench<'a> {
                         anyhow::bail!("{} runs without {}", config.label(), off.label());
                     };
                     for f in cut.iter().chain([&frame]) {
-                        let differing = f
-                            .readback
-                            .rgba
-                            .chunks_exact(4)
-                            .zip(image.chunks_exact(4))
-                            .filter(|(a, b)| a != b)
-                            .count();
-                        *g.differing_pixels.get_or_insert(0) += differing;
+                        *g.differing_pixels.get_or_insert(0) +=
+                            differing_pixels(&f.readback.rgba, image);
                     }
                 }
                 if let Some(o) = frame.measurements.occlusion {

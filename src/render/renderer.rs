@@ -37,7 +37,7 @@ use crate::shader_constants::{
     BINDING_VISIBILITY, OCCLUSION_PHASE_ALL, OCCLUSION_PHASE_CULLED, OCCLUSION_PHASE_FIRST,
     OCCLUSION_PHASE_SECOND,
 };
-use crate::shader_variants::Shader;
+use crate::shader_variants::{Placing, Shader};
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
 use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
 use crate::vk::commands::{Recorder, RenderingPart};
@@ -1020,24 +1020,7 @@ fn create_pipeline(
             } else {
                 format!("terrain.pipeline.tess.{suffix}")
             },
-            &[
-                (
-                    vk::ShaderStageFlags::VERTEX,
-                    shaders::spirv(Shader::TerrainVert),
-                ),
-                (
-                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
-                    shaders::spirv(Shader::TerrainTesc),
-                ),
-                (
-                    vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-                    shaders::spirv(Shader::TerrainTese {
-                        placing,
-                        equal_spacing,
-                    }),
-                ),
-                (vk::ShaderStageFlags::FRAGMENT, frag),
-            ],
+            &tess_stages(placing, equal_spacing, frag),
             vk::PrimitiveTopology::PATCH_LIST,
             4,
             size_of::<[f32; 4]>() as u32,
@@ -1091,6 +1074,34 @@ fn create_pipeline(
     })
 }
 
+/// The tess path's stages: the vertex and control shaders, the evaluation
+/// shader placing vertices as `placing` with `equal_spacing` or fractional
+/// even spacing, and `frag`.
+fn tess_stages(
+    placing: Placing,
+    equal_spacing: bool,
+    frag: &'static [u8],
+) -> [(vk::ShaderStageFlags, &'static [u8]); 4] {
+    [
+        (
+            vk::ShaderStageFlags::VERTEX,
+            shaders::spirv(Shader::TerrainVert),
+        ),
+        (
+            vk::ShaderStageFlags::TESSELLATION_CONTROL,
+            shaders::spirv(Shader::TerrainTesc),
+        ),
+        (
+            vk::ShaderStageFlags::TESSELLATION_EVALUATION,
+            shaders::spirv(Shader::TerrainTese {
+                placing,
+                equal_spacing,
+            }),
+        ),
+        (vk::ShaderStageFlags::FRAGMENT, frag),
+    ]
+}
+
 /// The show-culled overlay's pipeline for the tess path with `equal_spacing`
 /// (the error LOD) or fractional even spacing.
 fn create_culled_pipeline(renderer: &TerrainRenderer, equal_spacing: bool) -> Result<Pipeline> {
@@ -1098,27 +1109,11 @@ fn create_culled_pipeline(renderer: &TerrainRenderer, equal_spacing: bool) -> Re
     let spacing = if equal_spacing { "equal" } else { "fractional" };
     device.create_graphics_pipeline(&GraphicsPipelineDesc {
         name: &format!("terrain.pipeline.culled.{spacing}"),
-        stages: &[
-            (
-                vk::ShaderStageFlags::VERTEX,
-                shaders::spirv(Shader::TerrainVert),
-            ),
-            (
-                vk::ShaderStageFlags::TESSELLATION_CONTROL,
-                shaders::spirv(Shader::TerrainTesc),
-            ),
-            (
-                vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-                shaders::spirv(Shader::TerrainTese {
-                    placing: renderer.appearance.variant.placing(),
-                    equal_spacing,
-                }),
-            ),
-            (
-                vk::ShaderStageFlags::FRAGMENT,
-                shaders::spirv(Shader::CulledFrag),
-            ),
-        ],
+        stages: &tess_stages(
+            renderer.appearance.variant.placing(),
+            equal_spacing,
+            shaders::spirv(Shader::CulledFrag),
+        ),
         vertex_stride: size_of::<[f32; 4]>() as u32,
         vertex_attributes: &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
         topology: vk::PrimitiveTopology::PATCH_LIST,
