@@ -1,7 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
 #include "terrain_common.glsl"
-#include "occlusion.glsl"
 #ifdef MATERIAL
 #include "material.glsl"
 #endif
@@ -18,7 +17,6 @@ layout(push_constant) uniform PatchConstants {
     int level;         // step 2^level
     float interior;    // morph factor of the interior
     vec4 sides;        // morph factors of the left, top, right, bottom sides
-    uint occlusion_phase; // which patches this draw keeps (OCCLUSION_PHASE_*)
 } pc;
 
 layout(location = 0) out vec2 out_grid;
@@ -44,16 +42,6 @@ float height_of(ivec2 offset) {
 }
 
 void main() {
-    // A patch this phase does not keep: every vertex outside the clip
-    // volume, so its triangles are clipped away whole.
-    ivec2 patch_cr = pc.origin / int(frame.cells_per_patch);
-    if (!drawn_in_phase(pc.occlusion_phase, patch_cr.y * int(frame.error_lod.z) + patch_cr.x)) {
-        gl_Position = vec4(2.0, 2.0, 2.0, 1.0);
-        out_grid = vec2(0.0);
-        out_height = 0.0;
-        out_inside_factor = 0.0;
-        return;
-    }
     ivec2 offset = ivec2(in_offset);
     ivec2 sample_cr = clamp_sample(offset);
     float h = displaced(sample_cr);

@@ -24,6 +24,10 @@ pub const BINDING_HIZ_PYRAMID: u32 = 14;
 pub const BINDING_CONTROL_POINTS: u32 = 15;
 /// Storage buffer counting the patches the occlusion test culled.
 pub const BINDING_OCCLUSION_COUNT: u32 = 16;
+/// Storage buffer of the patch of each draw the CPU lists (occlusion).
+pub const BINDING_DRAW_PATCHES: u32 = 17;
+/// The indirect draw commands of the CPU's list, both phases (occlusion).
+pub const BINDING_DRAW_COMMANDS: u32 = 18;
 /// Occlusion state bit: the patch passed this frame's test (drawn first
 /// next frame).
 pub const OCCLUSION_VISIBLE_BIT: u32 = 1;
@@ -115,6 +119,8 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("BINDING_VISIBILITY", BINDING_VISIBILITY.to_string()),
         ("BINDING_HIZ_DEPTH", BINDING_HIZ_DEPTH.to_string()),
         ("BINDING_HIZ_PYRAMID", BINDING_HIZ_PYRAMID.to_string()),
+        ("BINDING_DRAW_PATCHES", BINDING_DRAW_PATCHES.to_string()),
+        ("BINDING_DRAW_COMMANDS", BINDING_DRAW_COMMANDS.to_string()),
         ("BINDING_CONTROL_POINTS", BINDING_CONTROL_POINTS.to_string()),
         (
             "BINDING_OCCLUSION_COUNT",

@@ -161,6 +161,8 @@ pub enum Shader {
     HizComp(HizSource),
     /// The occlusion test of every patch.
     OcclusionComp,
+    /// The instance counts of the CPU's draw list for a phase.
+    OcclusionDrawsComp,
     /// The occlusion-culled patches in one colour.
     CulledFrag,
 }
@@ -190,6 +192,7 @@ impl Shader {
             all.push(Shader::HizComp(source));
         }
         all.push(Shader::OcclusionComp);
+        all.push(Shader::OcclusionDrawsComp);
         all.push(Shader::CulledFrag);
         all
     }
@@ -208,6 +211,7 @@ impl Shader {
             Shader::MirrorCheckComp => "mirror_check.comp",
             Shader::HizComp(_) => "hiz.comp",
             Shader::OcclusionComp => "occlusion.comp",
+            Shader::OcclusionDrawsComp => "occlusion_draws.comp",
             Shader::CulledFrag => "culled.frag",
         }
     }
@@ -236,6 +240,7 @@ impl Shader {
             | Shader::SkyFrag
             | Shader::MirrorCheckComp
             | Shader::OcclusionComp
+            | Shader::OcclusionDrawsComp
             | Shader::CulledFrag => Vec::new(),
         }
     }

@@ -11,11 +11,12 @@
 //!
 //! Step 4 finds whatever step 1 missed, so nothing visible is missing on a
 //! first frame or after a camera cut: the state only decides how much is
-//! drawn twice-tested instead of once. The draws read the state through
-//! glsl/occlusion.glsl: the tess path's control shader culls the patches a
-//! phase does not keep; the geomip path's vertex shader (and the tess
-//! path's full-resolution draws) moves their vertices out of the clip
-//! volume.
+//! drawn twice-tested instead of once. The tess path's control shader
+//! reads the state (glsl/occlusion.glsl) and culls the patches a phase does
+//! not keep. The draws the CPU lists (the geomip path's patches, the tess
+//! path's full-resolution ones) are indirect: before each pass a compute
+//! shader (glsl/occlusion_draws.comp) sets each one's instance count to 1
+//! or 0 from the state, so a patch a pass does not keep costs nothing.
 
 use std::mem::size_of;
 
@@ -25,8 +26,9 @@ use gpu_allocator::MemoryLocation;
 use super::shaders;
 use super::uniforms::FrameUniforms;
 use crate::shader_constants::{
-    BINDING_CONTROL_POINTS, BINDING_FRAME, BINDING_HIZ_DEPTH, BINDING_HIZ_PYRAMID,
-    BINDING_OCCLUSION_COUNT, BINDING_VISIBILITY, OCCLUSION_VISIBLE_BIT,
+    BINDING_CONTROL_POINTS, BINDING_DRAW_COMMANDS, BINDING_DRAW_PATCHES, BINDING_FRAME,
+    BINDING_HIZ_DEPTH, BINDING_HIZ_PYRAMID, BINDING_OCCLUSION_COUNT, BINDING_VISIBILITY,
+    OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND, OCCLUSION_VISIBLE_BIT,
 };
 use crate::shader_variants::{HizSource, Shader};
 use crate::terrain::Terrain;
@@ -61,6 +63,30 @@ struct TestConstants {
     levels: u32,
 }
 const _: () = assert!(size_of::<TestConstants>() == 12);
+
+/// Push constants of glsl/occlusion_draws.comp.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct SelectConstants {
+    count: u32,
+    phase: u32,
+    first: u32,
+}
+const _: () = assert!(size_of::<SelectConstants>() == 12);
+
+/// One VkDrawIndexedIndirectCommand.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct DrawCommand {
+    index_count: u32,
+    instance_count: u32,
+    first_index: u32,
+    vertex_offset: i32,
+    first_instance: u32,
+}
+/// Bytes of one indirect command.
+pub const DRAW_COMMAND_BYTES: u64 = size_of::<DrawCommand>() as u64;
+const _: () = assert!(DRAW_COMMAND_BYTES == 20);
 
 const PUSH_SIZE: u32 = 32;
 
@@ -108,6 +134,7 @@ struct Culling {
     from_multisampled_depth: Pipeline,
     reduce: Pipeline,
     test: Pipeline,
+    select: Pipeline,
     layout: PipelineLayout,
     _set_layout: DescriptorSetLayout,
 }
@@ -120,6 +147,12 @@ struct CullingSlot {
     pyramid: Option<(Buffer, vk::Extent2D)>,
     /// The depth view the set reads.
     depth: Option<vk::ImageView>,
+    /// The patch of each listed draw, and their indirect commands: the
+    /// first pass's, then (from command `patches` on) the second's.
+    draw_patches: Buffer,
+    commands: Buffer,
+    /// Draws listed this frame.
+    listed: u32,
 }
 
 impl Occlusion {
@@ -202,8 +235,79 @@ impl Occlusion {
         Ok(())
     }
 
+    /// Lists this frame's CPU-chosen draws (patch, first index, index
+    /// count) for slot `slot`, their instance counts still 0.
+    pub(super) fn write_draws(&mut self, slot: usize, draws: &[(u32, u32, u32)]) -> Result<()> {
+        let patches = self.patches;
+        let culling = self.culling.as_mut().ok_or_else(not_built)?;
+        let s = &mut culling.slots[slot];
+        if draws.len() > patches {
+            return Err(VkError::Unsupported(format!(
+                "{} draws listed for {patches} patches",
+                draws.len()
+            )));
+        }
+        let mut commands = vec![DrawCommand::default(); 2 * patches];
+        let mut ids = vec![0u32; patches];
+        for (i, &(patch, first_index, index_count)) in draws.iter().enumerate() {
+            ids[i] = patch;
+            let command = DrawCommand {
+                index_count,
+                first_index,
+                ..DrawCommand::default()
+            };
+            commands[i] = command;
+            commands[patches + i] = command;
+        }
+        s.draw_patches.write(bytemuck::cast_slice(&ids))?;
+        s.commands.write(bytemuck::cast_slice(&commands))?;
+        s.listed = draws.len() as u32;
+        Ok(())
+    }
+
+    /// The indirect commands of the listed draws for `phase`: the buffer,
+    /// and the phase's first command.
+    pub(super) fn draw_commands(&self, slot: usize, phase: u32) -> Result<(&Buffer, u64)> {
+        let culling = self.culling.as_ref().ok_or_else(not_built)?;
+        let first = match phase {
+            OCCLUSION_PHASE_FIRST => 0,
+            OCCLUSION_PHASE_SECOND => self.patches as u64,
+            _ => {
+                return Err(VkError::Unsupported(format!(
+                    "no listed draws for occlusion phase {phase}"
+                )))
+            }
+        };
+        Ok((&culling.slots[slot].commands, first))
+    }
+
+    /// Sets the listed draws' instance counts for `phase` from the state.
+    fn record_select(&self, rec: &Recorder, culling: &Culling, slot: usize, phase: u32) {
+        let s = &culling.slots[slot];
+        if s.listed == 0 {
+            return;
+        }
+        rec.bind_compute(&culling.select, &culling.layout, s.set);
+        let constants = SelectConstants {
+            count: s.listed,
+            phase,
+            first: if phase == OCCLUSION_PHASE_FIRST {
+                0
+            } else {
+                self.patches as u32
+            },
+        };
+        rec.push_constants(
+            &culling.layout,
+            vk::ShaderStageFlags::COMPUTE,
+            bytemuck::bytes_of(&constants),
+        );
+        rec.dispatch([s.listed.div_ceil(TEST_GROUP), 1, 1]);
+    }
+
     /// Before the first pass: the previous frame's test is done with the
-    /// state, and the slot's count starts at 0.
+    /// state, the slot's count starts at 0, and the listed draws keep the
+    /// patches visible last frame.
     pub(super) fn record_start(&self, rec: &Recorder, slot: usize) -> Result<()> {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
         let culling = self.culling.as_ref().ok_or_else(not_built)?;
@@ -215,6 +319,11 @@ impl Occlusion {
             ),
         );
         rec.fill_buffer(&culling.slots[slot].count, 0);
+        self.record_select(rec, culling, slot, OCCLUSION_PHASE_FIRST);
+        rec.memory_barrier(
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
+        );
         Ok(())
     }
 
@@ -296,6 +405,11 @@ impl Occlusion {
             bytemuck::bytes_of(&constants),
         );
         rec.dispatch([(self.patches as u32).div_ceil(TEST_GROUP), 1, 1]);
+        rec.memory_barrier(
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+            (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
+        );
+        self.record_select(rec, culling, slot, OCCLUSION_PHASE_SECOND);
         Ok(())
     }
 
@@ -303,12 +417,13 @@ impl Occlusion {
     /// second pass.
     pub(super) fn record_resume(&self, rec: &Recorder, target: &TargetViews) {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
-        // The state feeds the second pass's draws, the count the host.
+        // The state and the commands feed the second pass's draws, the
+        // count the host.
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (
-                self.readers | S::HOST,
-                A::SHADER_STORAGE_READ | A::HOST_READ,
+                self.readers | S::DRAW_INDIRECT | S::HOST,
+                A::SHADER_STORAGE_READ | A::INDIRECT_COMMAND_READ | A::HOST_READ,
             ),
         );
         rec.depth_to_attachment(target);
@@ -354,6 +469,8 @@ impl Culling {
                 (BINDING_CONTROL_POINTS, storage, stage),
                 (BINDING_VISIBILITY, storage, stage),
                 (BINDING_OCCLUSION_COUNT, storage, stage),
+                (BINDING_DRAW_PATCHES, storage, stage),
+                (BINDING_DRAW_COMMANDS, storage, stage),
             ],
             "terrain.occlusion.set_layout",
         )?;
@@ -368,7 +485,7 @@ impl Culling {
             &[
                 (vk::DescriptorType::UNIFORM_BUFFER, 1),
                 (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
-                (storage, 4),
+                (storage, 6),
             ],
             uniforms.len() as u32,
             "terrain.occlusion.set",
@@ -404,10 +521,29 @@ impl Culling {
                 frame,
                 size_of::<FrameUniforms>() as u64,
             );
+            let patches = terrain.grid().patch_count().max(1) as u64;
+            let list = |name: &str, size: u64, usage: vk::BufferUsageFlags| {
+                device.create_buffer(
+                    BufferDesc {
+                        size,
+                        usage: vk::BufferUsageFlags::STORAGE_BUFFER | usage,
+                        location: MemoryLocation::CpuToGpu,
+                    },
+                    &format!("terrain.occlusion.{name}[{i}]"),
+                )
+            };
+            let draw_patches = list("draw_patches", 4 * patches, vk::BufferUsageFlags::empty())?;
+            let commands = list(
+                "draw_commands",
+                2 * patches * DRAW_COMMAND_BYTES,
+                vk::BufferUsageFlags::INDIRECT_BUFFER,
+            )?;
             for (binding, buffer) in [
                 (BINDING_CONTROL_POINTS, &boxes),
                 (BINDING_VISIBILITY, visibility),
                 (BINDING_OCCLUSION_COUNT, &count),
+                (BINDING_DRAW_PATCHES, &draw_patches),
+                (BINDING_DRAW_COMMANDS, &commands),
             ] {
                 device.write_buffer(set, binding, storage, buffer, buffer.desc.size);
             }
@@ -416,6 +552,9 @@ impl Culling {
                 count,
                 pyramid: None,
                 depth: None,
+                draw_patches,
+                commands,
+                listed: 0,
             });
         }
         Ok(Culling {
@@ -426,6 +565,7 @@ impl Culling {
             )?,
             reduce: pipeline(Shader::HizComp(HizSource::Pyramid), "pyramid_reduce")?,
             test: pipeline(Shader::OcclusionComp, "test")?,
+            select: pipeline(Shader::OcclusionDrawsComp, "select_draws")?,
             _boxes: boxes,
             slots,
             _sets: sets,

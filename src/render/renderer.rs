@@ -26,7 +26,7 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::material::{GpuAppearance, ShaderVariant};
-use super::occlusion::Occlusion;
+use super::occlusion::{Occlusion, DRAW_COMMAND_BYTES};
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
 use super::uniforms::FrameUniforms;
@@ -151,6 +151,8 @@ struct CulledPipelines {
 /// One patch of the geomip path: its index list and push constants.
 #[derive(Clone, Copy, Debug)]
 struct GeomipDraw {
+    /// The patch's index in the grid.
+    patch: u32,
     first: u32,
     count: u32,
     constants: GeomipConstants,
@@ -164,12 +166,9 @@ pub struct GeomipConstants {
     pub level: i32,
     pub interior: f32,
     pub sides: [f32; 4],
-    /// Which patches the draw keeps (`OCCLUSION_PHASE_*`).
-    pub occlusion_phase: u32,
 }
-const _: () = assert!(size_of::<GeomipConstants>() == 36);
+const _: () = assert!(size_of::<GeomipConstants>() == 32);
 const _: () = assert!(std::mem::offset_of!(GeomipConstants, sides) == 16);
-const _: () = assert!(std::mem::offset_of!(GeomipConstants, occlusion_phase) == 32);
 
 struct BruteGeometry {
     vertex_count: u32,
@@ -628,8 +627,21 @@ impl TerrainRenderer {
             && target.depth_readable
             && self.occlusion.as_ref().is_some_and(Occlusion::can_cull);
         if cull {
+            // The patches the CPU lists (the geomip path's, the tess
+            // path's full-resolution ones) are drawn indirectly, each pass
+            // keeping those the occlusion state picks.
+            let listed: &[GeomipDraw] = match (settings.path, settings.lod_metric) {
+                (RenderPath::Geomip, _) => self.geomip.as_ref().map_or(&[], |g| &g.draws),
+                (RenderPath::Tess, LodMetric::Error(_)) => {
+                    self.tess.as_ref().map_or(&[], |t| &t.exact)
+                }
+                _ => &[],
+            };
+            let commands: Vec<(u32, u32, u32)> =
+                listed.iter().map(|d| (d.patch, d.first, d.count)).collect();
             let occlusion = self.occlusion.as_mut().ok_or_else(no_occlusion)?;
             occlusion.prepare_target(&self.device, slot, target, &self.sampler)?;
+            occlusion.write_draws(slot, &commands)?;
         }
         self.frames[slot].culled = cull;
         let frame = &self.frames[slot];
@@ -641,7 +653,7 @@ impl TerrainRenderer {
             occlusion.record_start(rec, slot)?;
             rec.begin_rendering(target, RenderingPart::First { clear_color });
             frame.queries.begin_counting(rec, 0);
-            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_FIRST)?;
+            self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_FIRST)?;
             frame.queries.end_counting(rec, 0);
             rec.end_rendering();
             // The marks come before barriers: lavapipe takes a timestamp
@@ -652,7 +664,7 @@ impl TerrainRenderer {
             occlusion.record_resume(rec, target);
             rec.begin_rendering(target, RenderingPart::Last);
             frame.queries.begin_counting(rec, 1);
-            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_SECOND)?;
+            self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_SECOND)?;
             frame.queries.end_counting(rec, 1);
             if settings.show_culled {
                 self.draw_culled(rec, frame, &settings)?;
@@ -660,7 +672,7 @@ impl TerrainRenderer {
         } else {
             rec.begin_rendering(target, RenderingPart::Whole { clear_color });
             frame.queries.begin_counting(rec, 0);
-            self.draw_terrain(rec, frame, &settings, OCCLUSION_PHASE_ALL)?;
+            self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_ALL)?;
             frame.queries.end_counting(rec, 0);
         }
         // The sky is timed with the terrain but not counted: the frame's
@@ -679,10 +691,11 @@ impl TerrainRenderer {
     fn draw_terrain(
         &self,
         rec: &Recorder,
-        frame: &FrameSlot,
+        slot: usize,
         settings: &RenderSettings,
         phase: u32,
     ) -> Result<()> {
+        let frame = &self.frames[slot];
         let not_built = || {
             VkError::Unsupported(format!(
                 "the {:?} path was not built for this renderer",
@@ -705,12 +718,14 @@ impl TerrainRenderer {
                 );
                 if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
                     let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, phase)?;
+                    let indirect = self.indirect_draws(slot, phase)?;
+                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, indirect)?;
                 }
             }
             RenderPath::Geomip => {
                 let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                geomip.draw(rec, frame.set, settings.wireframe, &geomip.draws, phase)?;
+                let indirect = self.indirect_draws(slot, phase)?;
+                geomip.draw(rec, frame.set, settings.wireframe, &geomip.draws, indirect)?;
             }
             RenderPath::Brute => {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
@@ -723,6 +738,16 @@ impl TerrainRenderer {
             }
         }
         Ok(())
+    }
+
+    /// Where the CPU-listed draws of `phase` read their commands: none for
+    /// a frame drawn in one pass.
+    fn indirect_draws(&self, slot: usize, phase: u32) -> Result<Option<(&Buffer, u64)>> {
+        if phase == OCCLUSION_PHASE_ALL {
+            return Ok(None);
+        }
+        let occlusion = self.occlusion.as_ref().ok_or_else(no_occlusion)?;
+        Ok(Some(occlusion.draw_commands(slot, phase)?))
     }
 
     /// Every patch of the tess path through `pipeline`, for `phase`: one
@@ -949,8 +974,8 @@ impl DescriptorPlan {
                 .push((vk::DescriptorType::STORAGE_BUFFER, 2));
         }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
-        // The occlusion state: the tess path's control shader and the
-        // geomip path's vertex shader read it.
+        // The occlusion state: the tess path's control shader reads it (the
+        // listed draws take it through their indirect commands).
         plan.bindings.push((
             BINDING_VISIBILITY,
             vk::DescriptorType::STORAGE_BUFFER,
@@ -1298,27 +1323,30 @@ impl GeomipGeometry {
 
     /// Draws `draws` (this path's patches, or the tess path's
     /// full-resolution ones) with the geomip pipeline.
+    /// With `indirect`, draw i reads its instance count (0 or 1, set by
+    /// the occlusion state) from the command buffer's command `first + i`.
     fn draw(
         &self,
         rec: &Recorder,
         set: DescriptorSet,
         wireframe: bool,
         draws: &[GeomipDraw],
-        occlusion_phase: u32,
+        indirect: Option<(&Buffer, u64)>,
     ) -> Result<()> {
         rec.bind_graphics(self.pipelines.select(wireframe)?, &self.layout, set);
         rec.bind_geometry(&self.template, &self.indices);
-        for draw in draws {
-            let constants = GeomipConstants {
-                occlusion_phase,
-                ..draw.constants
-            };
+        for (i, draw) in draws.iter().enumerate() {
             rec.push_constants(
                 &self.layout,
                 vk::ShaderStageFlags::VERTEX,
-                bytemuck::bytes_of(&constants),
+                bytemuck::bytes_of(&draw.constants),
             );
-            rec.draw_indexed(draw.first, draw.count);
+            match indirect {
+                Some((commands, first)) => {
+                    rec.draw_indexed_indirect(commands, (first + i as u64) * DRAW_COMMAND_BYTES)
+                }
+                None => rec.draw_indexed(draw.first, draw.count),
+            }
         }
         Ok(())
     }
@@ -1350,6 +1378,7 @@ impl GeomipGeometry {
                 (0.0, [0.0; 4])
             };
             self.draws.push(GeomipDraw {
+                patch: p as u32,
                 first,
                 count,
                 constants: GeomipConstants {
@@ -1357,7 +1386,6 @@ impl GeomipGeometry {
                     level: level as i32,
                     interior,
                     sides,
-                    occlusion_phase: OCCLUSION_PHASE_ALL,
                 },
             });
         }
@@ -1394,6 +1422,7 @@ impl TessGeometry {
             let rect = grid.sample_rect(grid.patch_id(p));
             let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
             self.exact.push(GeomipDraw {
+                patch: p as u32,
                 first,
                 count,
                 constants: GeomipConstants {
@@ -1401,7 +1430,6 @@ impl TessGeometry {
                     level: 0,
                     interior: 0.0,
                     sides: [0.0; 4],
-                    occlusion_phase: OCCLUSION_PHASE_ALL,
                 },
             });
         }

@@ -576,6 +576,18 @@ impl<'a> Recorder<'a> {
         unsafe { self.device.ash().cmd_draw(self.cmd, vertex_count, 1, 0, 0) };
     }
 
+    /// One indexed draw whose parameters (a VkDrawIndexedIndirectCommand)
+    /// the GPU reads from `buffer` at `offset`.
+    pub fn draw_indexed_indirect(&self, buffer: &Buffer, offset: u64) {
+        // SAFETY: geometry and pipeline are bound, inside rendering; the
+        // buffer has INDIRECT_BUFFER usage and holds a command at `offset`.
+        unsafe {
+            self.device
+                .ash()
+                .cmd_draw_indexed_indirect(self.cmd, buffer.raw(), offset, 1, 0)
+        };
+    }
+
     pub fn draw_indexed(&self, first_index: u32, index_count: u32) {
         // SAFETY: geometry and pipeline are bound, inside rendering; the
         // caller keeps the range inside the index buffer.
