@@ -2,10 +2,10 @@
 #extension GL_GOOGLE_include_directive : require
 #include "occlusion.glsl"
 
-// The instance count (0 or 1) of each patch drawn from the CPU's list (the
-// geomip path's patches, the tess path's full-resolution ones) for one
-// draw phase, from the occlusion state: the draws are indirect, so a patch
-// the phase does not keep costs nothing.
+// The instance count of each draw the CPU lists (a geomip patch, a batch
+// of tess patches, a full-resolution tess patch) for one draw phase: 1 when
+// the occlusion state keeps any of its patches, else 0. The draws are
+// indirect, so a draw with nothing to keep costs nothing.
 
 layout(local_size_x = 64) in;
 
@@ -15,9 +15,9 @@ layout(push_constant) uniform Select {
     uint first;   // the phase's first command
 } pc;
 
-// The patch of each draw.
+// The patches of each draw: first, count (grid order).
 layout(std430, set = 0, binding = BINDING_DRAW_PATCHES) readonly buffer DrawPatches {
-    uint draw_patches[];
+    uvec2 draw_patches[];
 };
 
 // VkDrawIndexedIndirectCommand: index count, instance count, first index,
@@ -31,6 +31,10 @@ void main() {
     if (i >= pc.count) {
         return;
     }
-    bool drawn = drawn_in_phase(pc.phase, int(draw_patches[i]));
+    uvec2 range = draw_patches[i];
+    bool drawn = false;
+    for (uint p = range.x; p < range.x + range.y; ++p) {
+        drawn = drawn || drawn_in_phase(pc.phase, int(p));
+    }
     commands[(pc.first + i) * 5u + 1u] = drawn ? 1u : 0u;
 }

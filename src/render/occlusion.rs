@@ -13,10 +13,11 @@
 //! first frame or after a camera cut: the state only decides how much is
 //! drawn twice-tested instead of once. The tess path's control shader
 //! reads the state (glsl/occlusion.glsl) and culls the patches a phase does
-//! not keep. The draws the CPU lists (the geomip path's patches, the tess
-//! path's full-resolution ones) are indirect: before each pass a compute
-//! shader (glsl/occlusion_draws.comp) sets each one's instance count to 1
-//! or 0 from the state, so a patch a pass does not keep costs nothing.
+//! not keep. Every draw is indirect (the geomip path's patches, the tess
+//! path's batches of patches and its full-resolution ones): before each
+//! pass a compute shader (glsl/occlusion_draws.comp) sets each one's
+//! instance count to 1 when the pass keeps any of its patches and to 0
+//! otherwise, so a draw with nothing to draw costs nothing.
 
 use std::mem::size_of;
 
@@ -73,6 +74,16 @@ struct SelectConstants {
     first: u32,
 }
 const _: () = assert!(size_of::<SelectConstants>() == 12);
+
+/// A draw the CPU lists: the patches it covers (first, count, in grid
+/// order) and its index range. A pass draws it when the occlusion state
+/// keeps any of its patches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ListedDraw {
+    pub patches: [u32; 2],
+    pub first_index: u32,
+    pub index_count: u32,
+}
 
 /// One VkDrawIndexedIndirectCommand.
 #[repr(C)]
@@ -147,8 +158,8 @@ struct CullingSlot {
     pyramid: Option<(Buffer, vk::Extent2D)>,
     /// The depth view the set reads.
     depth: Option<vk::ImageView>,
-    /// The patch of each listed draw, and their indirect commands: the
-    /// first pass's, then (from command `patches` on) the second's.
+    /// The patches of each listed draw, and their indirect commands: the
+    /// first pass's, then (from command `list_capacity` on) the second's.
     draw_patches: Buffer,
     commands: Buffer,
     /// Draws listed this frame.
@@ -235,34 +246,44 @@ impl Occlusion {
         Ok(())
     }
 
-    /// Lists this frame's CPU-chosen draws (patch, first index, index
-    /// count) for slot `slot`, their instance counts still 0.
-    pub(super) fn write_draws(&mut self, slot: usize, draws: &[(u32, u32, u32)]) -> Result<()> {
-        let patches = self.patches;
+    /// Lists this frame's CPU-chosen draws for slot `slot`, their
+    /// instance counts still 0.
+    pub(super) fn write_draws(&mut self, slot: usize, draws: &[ListedDraw]) -> Result<()> {
+        let capacity = self.list_capacity();
         let culling = self.culling.as_mut().ok_or_else(not_built)?;
         let s = &mut culling.slots[slot];
-        if draws.len() > patches {
+        if draws.len() > capacity {
             return Err(VkError::Unsupported(format!(
-                "{} draws listed for {patches} patches",
+                "{} draws listed, room for {capacity}",
                 draws.len()
             )));
         }
-        let mut commands = vec![DrawCommand::default(); 2 * patches];
-        let mut ids = vec![0u32; patches];
-        for (i, &(patch, first_index, index_count)) in draws.iter().enumerate() {
-            ids[i] = patch;
-            let command = DrawCommand {
-                index_count,
-                first_index,
+        let ranges: Vec<[u32; 2]> = draws.iter().map(|d| d.patches).collect();
+        let commands: Vec<DrawCommand> = draws
+            .iter()
+            .map(|d| DrawCommand {
+                index_count: d.index_count,
+                first_index: d.first_index,
                 ..DrawCommand::default()
-            };
-            commands[i] = command;
-            commands[patches + i] = command;
-        }
-        s.draw_patches.write(bytemuck::cast_slice(&ids))?;
-        s.commands.write(bytemuck::cast_slice(&commands))?;
+            })
+            .collect();
+        let command_bytes: &[u8] = bytemuck::cast_slice(&commands);
+        let ranges_bytes: &[u8] = bytemuck::cast_slice(&ranges);
+        let unmapped = || VkError::Unsupported("the draw list is not host-mapped".into());
+        s.draw_patches.mapped_mut().ok_or_else(unmapped)?[..ranges_bytes.len()]
+            .copy_from_slice(ranges_bytes);
+        let second = capacity * DRAW_COMMAND_BYTES as usize;
+        let mapped = s.commands.mapped_mut().ok_or_else(unmapped)?;
+        mapped[..command_bytes.len()].copy_from_slice(command_bytes);
+        mapped[second..second + command_bytes.len()].copy_from_slice(command_bytes);
         s.listed = draws.len() as u32;
         Ok(())
+    }
+
+    /// Draws one frame may list: the tess path's batches (at most one per
+    /// patch) and its full-resolution patches.
+    fn list_capacity(&self) -> usize {
+        2 * self.patches
     }
 
     /// The indirect commands of the listed draws for `phase`: the buffer,
@@ -271,7 +292,7 @@ impl Occlusion {
         let culling = self.culling.as_ref().ok_or_else(not_built)?;
         let first = match phase {
             OCCLUSION_PHASE_FIRST => 0,
-            OCCLUSION_PHASE_SECOND => self.patches as u64,
+            OCCLUSION_PHASE_SECOND => self.list_capacity() as u64,
             _ => {
                 return Err(VkError::Unsupported(format!(
                     "no listed draws for occlusion phase {phase}"
@@ -294,7 +315,7 @@ impl Occlusion {
             first: if phase == OCCLUSION_PHASE_FIRST {
                 0
             } else {
-                self.patches as u32
+                self.list_capacity() as u32
             },
         };
         rec.push_constants(
@@ -532,10 +553,15 @@ impl Culling {
                     &format!("terrain.occlusion.{name}[{i}]"),
                 )
             };
-            let draw_patches = list("draw_patches", 4 * patches, vk::BufferUsageFlags::empty())?;
+            // Room for two draws a patch (see `list_capacity`).
+            let draw_patches = list(
+                "draw_patches",
+                2 * 8 * patches,
+                vk::BufferUsageFlags::empty(),
+            )?;
             let commands = list(
                 "draw_commands",
-                2 * patches * DRAW_COMMAND_BYTES,
+                2 * 2 * patches * DRAW_COMMAND_BYTES,
                 vk::BufferUsageFlags::INDIRECT_BUFFER,
             )?;
             for (binding, buffer) in [

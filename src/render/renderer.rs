@@ -26,7 +26,7 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::material::{GpuAppearance, ShaderVariant};
-use super::occlusion::{Occlusion, DRAW_COMMAND_BYTES};
+use super::occlusion::{ListedDraw, Occlusion, DRAW_COMMAND_BYTES};
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
 use super::uniforms::FrameUniforms;
@@ -630,15 +630,35 @@ impl TerrainRenderer {
             // The patches the CPU lists (the geomip path's, the tess
             // path's full-resolution ones) are drawn indirectly, each pass
             // keeping those the occlusion state picks.
-            let listed: &[GeomipDraw] = match (settings.path, settings.lod_metric) {
-                (RenderPath::Geomip, _) => self.geomip.as_ref().map_or(&[], |g| &g.draws),
-                (RenderPath::Tess, LodMetric::Error(_)) => {
-                    self.tess.as_ref().map_or(&[], |t| &t.exact)
-                }
-                _ => &[],
+            let patch_draws = |draws: &[GeomipDraw]| -> Vec<ListedDraw> {
+                draws
+                    .iter()
+                    .map(|d| ListedDraw {
+                        patches: [d.patch, 1],
+                        first_index: d.first,
+                        index_count: d.count,
+                    })
+                    .collect()
             };
-            let commands: Vec<(u32, u32, u32)> =
-                listed.iter().map(|d| (d.patch, d.first, d.count)).collect();
+            let commands: Vec<ListedDraw> = match (settings.path, &self.tess, &self.geomip) {
+                (RenderPath::Geomip, _, Some(g)) => patch_draws(&g.draws),
+                (RenderPath::Tess, Some(t), _) => {
+                    // Four indices per patch.
+                    let mut list: Vec<ListedDraw> = self
+                        .tess_batches(t)
+                        .map(|(first, count)| ListedDraw {
+                            patches: [first / 4, count / 4],
+                            first_index: first,
+                            index_count: count,
+                        })
+                        .collect();
+                    if matches!(settings.lod_metric, LodMetric::Error(_)) {
+                        list.extend(patch_draws(&t.exact));
+                    }
+                    list
+                }
+                _ => Vec::new(),
+            };
             let occlusion = self.occlusion.as_mut().ok_or_else(no_occlusion)?;
             occlusion.prepare_target(&self.device, slot, target, &self.sampler)?;
             occlusion.write_draws(slot, &commands)?;
@@ -709,17 +729,20 @@ impl TerrainRenderer {
                     LodMetric::Error(_) => &tess.error_pipelines,
                     _ => &tess.pipelines,
                 };
+                let indirect = self.indirect_draws(slot, phase)?;
                 self.draw_patches(
                     rec,
                     frame,
-                    tess,
-                    pipelines.select(settings.wireframe)?,
+                    (tess, pipelines.select(settings.wireframe)?),
                     phase,
+                    indirect,
                 );
                 if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
                     let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                    let indirect = self.indirect_draws(slot, phase)?;
-                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, indirect)?;
+                    // Listed after the batches.
+                    let batches = self.tess_batches(tess).count() as u64;
+                    let exact = indirect.map(|(commands, base)| (commands, base + batches));
+                    geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, exact)?;
                 }
             }
             RenderPath::Geomip => {
@@ -750,16 +773,16 @@ impl TerrainRenderer {
         Ok(Some(occlusion.draw_commands(slot, phase)?))
     }
 
-    /// Every patch of the tess path through `pipeline`, for `phase`: one
-    /// draw, or batches where the driver needs them (see
-    /// `Workarounds::max_patches_per_draw`).
+    /// Every patch of the tess path through `pipeline`, for `phase`, in
+    /// the draws of `tess_batches`; with `indirect`, draw b reads its
+    /// instance count from command `first + b` (see `indirect_draws`).
     fn draw_patches(
         &self,
         rec: &Recorder,
         frame: &FrameSlot,
-        tess: &TessGeometry,
-        pipeline: &Pipeline,
+        (tess, pipeline): (&TessGeometry, &Pipeline),
         phase: u32,
+        indirect: Option<(&Buffer, u64)>,
     ) {
         rec.bind_graphics(pipeline, &self.pipeline_layout, frame.set);
         rec.push_constants(
@@ -768,15 +791,26 @@ impl TerrainRenderer {
             bytemuck::bytes_of(&phase),
         );
         rec.bind_geometry(&tess.control_points, &tess.indices);
-        let batch = self
-            .max_patches_per_draw
-            .map_or(tess.index_count, |n| n * 4);
-        let mut first = 0;
-        while first < tess.index_count {
-            let count = (tess.index_count - first).min(batch);
-            rec.draw_indexed(first, count);
-            first += count;
+        for (b, (first, count)) in self.tess_batches(tess).enumerate() {
+            match indirect {
+                Some((commands, base)) => {
+                    rec.draw_indexed_indirect(commands, (base + b as u64) * DRAW_COMMAND_BYTES)
+                }
+                None => rec.draw_indexed(first, count),
+            }
         }
+    }
+
+    /// The tess path's draws: (first index, index count) of one draw of
+    /// every patch, or of batches where the driver needs them (see
+    /// `Workarounds::max_patches_per_draw`).
+    fn tess_batches(&self, tess: &TessGeometry) -> impl Iterator<Item = (u32, u32)> {
+        let total = tess.index_count;
+        let batch = self.max_patches_per_draw.map_or(total, |n| n * 4).max(4);
+        (0..total.div_ceil(batch)).map(move |b| {
+            let first = b * batch;
+            (first, batch.min(total - first))
+        })
     }
 
     /// The tess path's patches that occlusion culled, in one colour over
@@ -799,7 +833,7 @@ impl TerrainRenderer {
             LodMetric::Error(_) => &culled.equal,
             _ => &culled.fractional,
         };
-        self.draw_patches(rec, frame, tess, pipeline, OCCLUSION_PHASE_CULLED);
+        self.draw_patches(rec, frame, (tess, pipeline), OCCLUSION_PHASE_CULLED, None);
         Ok(())
     }
 
