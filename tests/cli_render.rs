@@ -367,7 +367,7 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
         .as_bytes(),
     );
     let anisotropic = anisotropic.to_str().unwrap();
-    let cases: [(&str, &[&str], &str); 5] = [
+    let cases: [(&str, &[&str], &str); 6] = [
         ("tessellation", &[], "falling back to the geomip path"),
         (
             "fill-mode-non-solid",
@@ -385,6 +385,7 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
             "textures are filtered without anisotropy",
         ),
         ("timestamps", &[], "GPU time is not measured"),
+        ("sampled-depth", &[], "drawing without occlusion culling"),
     ];
     for (feature, extra, note) in cases {
         let mut args = vec![
@@ -423,6 +424,8 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
                 "tess"
             }
         );
+        // Occlusion culling needs depth it can sample.
+        assert_eq!(s["occlusion"], feature != "sampled-depth", "{feature}");
         // Unavailable figures are null, never zero.
         assert_eq!(
             s["triangles"].is_null(),
@@ -439,6 +442,7 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
             "fill-mode-non-solid" => "fillModeNonSolid",
             "pipeline-statistics" => "pipelineStatisticsQuery",
             "sampler-anisotropy" => "samplerAnisotropy",
+            "sampled-depth" => "sampled depth attachments",
             _ => "timestamps",
         };
         assert!(missing.contains(name), "{feature}: {missing}");

@@ -595,6 +595,10 @@ pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
             caps.sampler_anisotropy,
         ),
         ("timestamps (GPU time)", caps.timestamp_period_ns.is_some()),
+        (
+            "sampled depth attachments (occlusion culling)",
+            !caps.occlusion_sample_counts.is_empty(),
+        ),
     ];
     let mut used = vec!["dynamicRendering", "synchronization2"];
     used.extend(optional.iter().filter(|o| o.1).map(|o| o.0));
