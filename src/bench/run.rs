@@ -544,7 +544,7 @@ impl<'a> Bench<'a> {
     fn oracle_levels(
         &mut self,
         camera: &Camera,
-        reference: &HeadlessFrame,
+        (reference, reference_patch): (&HeadlessFrame, &[Option<usize>]),
         taus: &[f32],
         progress: &mut dyn Progress,
         message: &str,
@@ -555,7 +555,6 @@ impl<'a> Bench<'a> {
         let count = geomip::level_count(grid.cells_per_patch());
         let k = f64::from(reference.view.pixels_per_radian);
         let reference_view = DepthView::of(reference);
-        let reference_patch = pixel_patches(terrain, camera, &reference_view);
         // [patch][level]: pixels, and pixels over each tau.
         let mut pixels = vec![0u32; patches * count];
         let mut over = vec![0u32; patches * count * taus.len()];
@@ -644,18 +643,31 @@ impl<'a> Bench<'a> {
                 .1
                 .errors
                 .add(&pixel_errors(&reference_view, &reference_view, k));
+            // The patch under each of the reference's pixels: for the
+            // oracle, and for the patches the occluded rows draw hidden.
+            let reference_patch =
+                if oracle_taus.is_empty() && !configs.iter().any(Config::occlusion) {
+                    Vec::new()
+                } else {
+                    pixel_patches(self.terrain, camera, &reference_view)
+                };
             let oracle = if oracle_taus.is_empty() {
                 Vec::new()
             } else {
-                self.oracle_levels(camera, &reference, &oracle_taus, progress, &message)?
+                self.oracle_levels(
+                    camera,
+                    (&reference, &reference_patch),
+                    &oracle_taus,
+                    progress,
+                    &message,
+                )?
             };
             // The last image of each configuration an occluded one must
             // equal, from this camera.
             let mut unoccluded: Vec<(Config, Vec<u8>)> = Vec::new();
             let visible_patches = {
-                let patches = pixel_patches(self.terrain, camera, &reference_view);
                 let mut seen = vec![false; self.terrain.grid().patch_count()];
-                for p in patches.into_iter().flatten() {
+                for &p in reference_patch.iter().flatten() {
                     seen[p] = true;
                 }
                 seen.iter().filter(|&&s| s).count() as u64

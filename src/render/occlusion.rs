@@ -127,9 +127,10 @@ pub(super) struct Occlusion {
     /// at first, so a first frame draws everything in its first pass).
     pub(super) visibility: Buffer,
     patches: usize,
-    /// The stages that read the state: the vertex shader, and the
-    /// tessellation control shader where the device has one.
-    readers: vk::PipelineStageFlags2,
+    /// The graphics stage that reads the state, and how: the tessellation
+    /// control shader's storage reads where the device has one, nothing
+    /// otherwise (the listed draws read it through their commands).
+    readers: (vk::PipelineStageFlags2, vk::AccessFlags2),
     culling: Option<Culling>,
 }
 
@@ -187,10 +188,12 @@ impl Occlusion {
             false => None,
         };
         let readers = if device.caps.tessellation_shader {
-            vk::PipelineStageFlags2::VERTEX_SHADER
-                | vk::PipelineStageFlags2::TESSELLATION_CONTROL_SHADER
+            (
+                vk::PipelineStageFlags2::TESSELLATION_CONTROL_SHADER,
+                vk::AccessFlags2::SHADER_STORAGE_READ,
+            )
         } else {
-            vk::PipelineStageFlags2::VERTEX_SHADER
+            (vk::PipelineStageFlags2::NONE, vk::AccessFlags2::NONE)
         };
         Ok(Occlusion {
             visibility,
@@ -290,33 +293,38 @@ impl Occlusion {
     /// and the phase's first command.
     pub(super) fn draw_commands(&self, slot: usize, phase: u32) -> Result<(&Buffer, u64)> {
         let culling = self.culling.as_ref().ok_or_else(not_built)?;
-        let first = match phase {
-            OCCLUSION_PHASE_FIRST => 0,
-            OCCLUSION_PHASE_SECOND => self.list_capacity() as u64,
-            _ => {
-                return Err(VkError::Unsupported(format!(
-                    "no listed draws for occlusion phase {phase}"
-                )))
-            }
-        };
-        Ok((&culling.slots[slot].commands, first))
+        Ok((&culling.slots[slot].commands, self.first_command(phase)?))
+    }
+
+    /// Where `phase`'s commands start in a slot's command buffer: the
+    /// first pass's at 0, the second's after room for a whole list.
+    fn first_command(&self, phase: u32) -> Result<u64> {
+        match phase {
+            OCCLUSION_PHASE_FIRST => Ok(0),
+            OCCLUSION_PHASE_SECOND => Ok(self.list_capacity() as u64),
+            _ => Err(VkError::Unsupported(format!(
+                "no listed draws for occlusion phase {phase}"
+            ))),
+        }
     }
 
     /// Sets the listed draws' instance counts for `phase` from the state.
-    fn record_select(&self, rec: &Recorder, culling: &Culling, slot: usize, phase: u32) {
+    fn record_select(
+        &self,
+        rec: &Recorder,
+        culling: &Culling,
+        slot: usize,
+        phase: u32,
+    ) -> Result<()> {
         let s = &culling.slots[slot];
         if s.listed == 0 {
-            return;
+            return Ok(());
         }
         rec.bind_compute(&culling.select, &culling.layout, s.set);
         let constants = SelectConstants {
             count: s.listed,
             phase,
-            first: if phase == OCCLUSION_PHASE_FIRST {
-                0
-            } else {
-                self.list_capacity() as u32
-            },
+            first: self.first_command(phase)? as u32,
         };
         rec.push_constants(
             &culling.layout,
@@ -324,6 +332,7 @@ impl Occlusion {
             bytemuck::bytes_of(&constants),
         );
         rec.dispatch([s.listed.div_ceil(TEST_GROUP), 1, 1]);
+        Ok(())
     }
 
     /// Before the first pass: the previous frame's test is done with the
@@ -335,12 +344,12 @@ impl Occlusion {
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (
-                self.readers | S::COMPUTE_SHADER | S::ALL_TRANSFER,
+                self.readers.0 | S::COMPUTE_SHADER | S::ALL_TRANSFER,
                 A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE | A::TRANSFER_WRITE,
             ),
         );
         rec.fill_buffer(&culling.slots[slot].count, 0);
-        self.record_select(rec, culling, slot, OCCLUSION_PHASE_FIRST);
+        self.record_select(rec, culling, slot, OCCLUSION_PHASE_FIRST)?;
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (S::DRAW_INDIRECT, A::INDIRECT_COMMAND_READ),
@@ -370,7 +379,7 @@ impl Occlusion {
         // The count's fill and the first pass's reads of the state come
         // before the test's writes.
         rec.memory_barrier(
-            (S::ALL_TRANSFER | self.readers, A::TRANSFER_WRITE),
+            (S::ALL_TRANSFER | self.readers.0, A::TRANSFER_WRITE),
             (
                 S::COMPUTE_SHADER,
                 A::SHADER_STORAGE_READ | A::SHADER_STORAGE_WRITE,
@@ -430,8 +439,7 @@ impl Occlusion {
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
         );
-        self.record_select(rec, culling, slot, OCCLUSION_PHASE_SECOND);
-        Ok(())
+        self.record_select(rec, culling, slot, OCCLUSION_PHASE_SECOND)
     }
 
     /// After `record_cull`: hands depth, colour and the state to the
@@ -443,8 +451,8 @@ impl Occlusion {
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
             (
-                self.readers | S::DRAW_INDIRECT | S::HOST,
-                A::SHADER_STORAGE_READ | A::INDIRECT_COMMAND_READ | A::HOST_READ,
+                self.readers.0 | S::DRAW_INDIRECT | S::HOST,
+                self.readers.1 | A::INDIRECT_COMMAND_READ | A::HOST_READ,
             ),
         );
         rec.depth_to_attachment(target);

@@ -187,14 +187,16 @@ pub struct TerrainRenderer {
     brute: Option<BruteGeometry>,
     /// Per-patch errors for the tess path's error-bounded factors.
     error_table: Option<Buffer>,
-    /// The patches' occlusion state and culling (built in `new`).
-    occlusion: Option<Occlusion>,
+    /// The patches' occlusion state and culling.
+    occlusion: Occlusion,
     /// Built when a frame first shows culled patches.
     culled_pipelines: Option<CulledPipelines>,
-    sets: DescriptorSets,
+    /// Where the frames' sets come from.
+    _sets: DescriptorSets,
     pipeline_layout: PipelineLayout,
     set_layout: DescriptorSetLayout,
-    heightmap: Image,
+    /// Read through the frames' sets.
+    _heightmap: Image,
     sampler: Sampler,
     /// Material layers, blend maps and lightmap, as the scene needs.
     appearance: GpuAppearance,
@@ -291,18 +293,26 @@ impl TerrainRenderer {
             "terrain.frame_set",
         )?;
         let sky = create_sky_pipeline(device, &pipeline_layout, color_format, samples)?;
+        let frames = build_frames(device, &sets, (&heightmap, &sampler), &appearance)?;
+        let uniforms: Vec<&Buffer> = frames.iter().map(|f| &f.uniforms).collect();
+        let occlusion = Occlusion::new(
+            device,
+            terrain,
+            &uniforms,
+            device.caps.supports_occlusion(options.samples),
+        )?;
         let mut renderer = TerrainRenderer {
-            frames: Vec::new(),
+            frames,
             tess: None,
             geomip: None,
             brute: None,
             error_table: None,
-            occlusion: None,
+            occlusion,
             culled_pipelines: None,
-            sets,
+            _sets: sets,
             pipeline_layout,
             set_layout,
-            heightmap,
+            _heightmap: heightmap,
             sampler,
             appearance,
             sky,
@@ -313,24 +323,6 @@ impl TerrainRenderer {
             error_table_ms: 0.0,
             predicted_max_px: None,
         };
-        renderer.frames = renderer.build_frames()?;
-        let uniforms: Vec<&Buffer> = renderer.frames.iter().map(|f| &f.uniforms).collect();
-        let occlusion = Occlusion::new(
-            device,
-            terrain,
-            &uniforms,
-            device.caps.supports_occlusion(options.samples),
-        )?;
-        for frame in &renderer.frames {
-            device.write_buffer(
-                frame.set,
-                BINDING_VISIBILITY,
-                vk::DescriptorType::STORAGE_BUFFER,
-                &occlusion.visibility,
-                occlusion.visibility.desc.size,
-            );
-        }
-        renderer.occlusion = Some(occlusion);
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
         }
@@ -431,7 +423,8 @@ impl TerrainRenderer {
     }
 
     /// Per frame slot, the buffer of full-resolution patch bits, and the
-    /// slot's set pointed at it and at the error table.
+    /// slot's set pointed at it, the error table and the occlusion state
+    /// (the bindings of the tess path's control shader).
     fn add_full_resolution_bits(&mut self, terrain: &Terrain) -> Result<()> {
         let device = &self.device;
         let errors = self.error_table.as_ref().expect("uploaded by the caller");
@@ -445,6 +438,7 @@ impl TerrainRenderer {
             for (binding, buffer) in [
                 (BINDING_ERROR_TABLE, errors),
                 (BINDING_FULL_RESOLUTION, &bits),
+                (BINDING_VISIBILITY, &self.occlusion.visibility),
             ] {
                 let size = buffer.desc.size;
                 device.write_buffer(
@@ -458,32 +452,6 @@ impl TerrainRenderer {
             frame.full_resolution = Some(bits);
         }
         Ok(())
-    }
-
-    /// One uniform block and query set per descriptor set, with the set
-    /// written (the tess path adds its own bindings when it is built).
-    fn build_frames(&self) -> Result<Vec<FrameSlot>> {
-        let device = &self.device;
-        let mut frames = Vec::new();
-        for (i, set) in self.sets.iter().enumerate() {
-            let uniforms = device.create_host_buffer(
-                &format!("terrain.frame_uniforms[{i}]"),
-                vk::BufferUsageFlags::UNIFORM_BUFFER,
-                bytemuck::bytes_of(&FrameUniforms::default()),
-            )?;
-            let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
-            write_frame_bindings(device, set, &uniforms, &self.heightmap, &self.sampler);
-            self.appearance.write(device, set);
-            frames.push(FrameSlot {
-                uniforms,
-                set,
-                queries,
-                full_resolution: None,
-                settings: None,
-                culled: false,
-            });
-        }
-        Ok(frames)
     }
 
     /// Milliseconds `new` spent computing the per-patch error table.
@@ -625,7 +593,7 @@ impl TerrainRenderer {
         let cull = settings.occlusion
             && settings.path != RenderPath::Brute
             && target.depth_readable
-            && self.occlusion.as_ref().is_some_and(Occlusion::can_cull);
+            && self.occlusion.can_cull();
         if cull {
             // The patches the CPU lists (the geomip path's, the tess
             // path's full-resolution ones) are drawn indirectly, each pass
@@ -659,9 +627,9 @@ impl TerrainRenderer {
                 }
                 _ => Vec::new(),
             };
-            let occlusion = self.occlusion.as_mut().ok_or_else(no_occlusion)?;
-            occlusion.prepare_target(&self.device, slot, target, &self.sampler)?;
-            occlusion.write_draws(slot, &commands)?;
+            self.occlusion
+                .prepare_target(&self.device, slot, target, &self.sampler)?;
+            self.occlusion.write_draws(slot, &commands)?;
         }
         self.frames[slot].culled = cull;
         let frame = &self.frames[slot];
@@ -669,7 +637,7 @@ impl TerrainRenderer {
         frame.queries.reset(rec);
         frame.queries.begin_timing(rec);
         if cull {
-            let occlusion = self.occlusion.as_ref().ok_or_else(no_occlusion)?;
+            let occlusion = &self.occlusion;
             occlusion.record_start(rec, slot)?;
             rec.begin_rendering(target, RenderingPart::First { clear_color });
             frame.queries.begin_counting(rec, 0);
@@ -769,8 +737,7 @@ impl TerrainRenderer {
         if phase == OCCLUSION_PHASE_ALL {
             return Ok(None);
         }
-        let occlusion = self.occlusion.as_ref().ok_or_else(no_occlusion)?;
-        Ok(Some(occlusion.draw_commands(slot, phase)?))
+        Ok(Some(self.occlusion.draw_commands(slot, phase)?))
     }
 
     /// Every patch of the tess path through `pipeline`, for `phase`, in
@@ -842,11 +809,7 @@ impl TerrainRenderer {
         let frame = &self.frames[slot];
         let occlusion = match frame.culled {
             true => Some(OcclusionMeasurements {
-                patches_occluded: self
-                    .occlusion
-                    .as_ref()
-                    .ok_or_else(no_occlusion)?
-                    .culled(slot)?,
+                patches_occluded: self.occlusion.culled(slot)?,
                 culling_ms: frame.queries.span_ms()?,
             }),
             false => None,
@@ -862,12 +825,8 @@ impl TerrainRenderer {
     /// Whether this renderer can cull hidden patches (the device reads its
     /// depth attachments at the renderer's sample count).
     pub fn can_cull_occluded(&self) -> bool {
-        self.occlusion.as_ref().is_some_and(Occlusion::can_cull)
+        self.occlusion.can_cull()
     }
-}
-
-fn no_occlusion() -> VkError {
-    VkError::Unsupported("the renderer's occlusion state was not built".into())
 }
 
 impl Drop for TerrainRenderer {
@@ -877,6 +836,36 @@ impl Drop for TerrainRenderer {
         // do than free them anyway.
         let _ = self.device.wait_idle();
     }
+}
+
+/// One uniform block and query set per descriptor set, with the set
+/// written (the tess path adds its own bindings when it is built).
+fn build_frames(
+    device: &Device,
+    sets: &DescriptorSets,
+    (heightmap, sampler): (&Image, &Sampler),
+    appearance: &GpuAppearance,
+) -> Result<Vec<FrameSlot>> {
+    let mut frames = Vec::new();
+    for (i, set) in sets.iter().enumerate() {
+        let uniforms = device.create_host_buffer(
+            &format!("terrain.frame_uniforms[{i}]"),
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            bytemuck::bytes_of(&FrameUniforms::default()),
+        )?;
+        let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
+        write_frame_bindings(device, set, &uniforms, heightmap, sampler);
+        appearance.write(device, set);
+        frames.push(FrameSlot {
+            uniforms,
+            set,
+            queries,
+            full_resolution: None,
+            settings: None,
+            culled: false,
+        });
+    }
+    Ok(frames)
 }
 
 /// Refuses what this device or the draw limits cannot do, before anything
@@ -997,7 +986,13 @@ impl DescriptorPlan {
             ],
         };
         if tess {
-            for binding in [BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION] {
+            // The control shader's: the error table, the full-resolution
+            // bits and the occlusion state.
+            for binding in [
+                BINDING_ERROR_TABLE,
+                BINDING_FULL_RESOLUTION,
+                BINDING_VISIBILITY,
+            ] {
                 plan.bindings.push((
                     binding,
                     vk::DescriptorType::STORAGE_BUFFER,
@@ -1005,18 +1000,9 @@ impl DescriptorPlan {
                 ));
             }
             plan.pool_sizes
-                .push((vk::DescriptorType::STORAGE_BUFFER, 2));
+                .push((vk::DescriptorType::STORAGE_BUFFER, 3));
         }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
-        // The occlusion state: the tess path's control shader reads it (the
-        // listed draws take it through their indirect commands).
-        plan.bindings.push((
-            BINDING_VISIBILITY,
-            vk::DescriptorType::STORAGE_BUFFER,
-            vertex_stages & !vk::ShaderStageFlags::TESSELLATION_EVALUATION,
-        ));
-        plan.pool_sizes
-            .push((vk::DescriptorType::STORAGE_BUFFER, 1));
         for binding in appearance.bindings(vertex_stages) {
             plan.pool_sizes.push((binding.1, 1));
             plan.bindings.push(binding);
