@@ -595,9 +595,9 @@ impl TerrainRenderer {
             && target.depth_readable
             && self.occlusion.can_cull();
         if cull {
-            // The patches the CPU lists (the geomip path's, the tess
-            // path's full-resolution ones) are drawn indirectly, each pass
-            // keeping those the occlusion state picks.
+            // Every draw is indirect (the geomip path's patches, the tess
+            // path's batches and its full-resolution patches), each pass
+            // drawing those that hold a patch the occlusion state keeps.
             let patch_draws = |draws: &[GeomipDraw]| -> Vec<ListedDraw> {
                 draws
                     .iter()
