@@ -23,7 +23,24 @@ struct Walk {
 }
 
 impl Walk {
+    /// Runs the walk's command with `fault`. Under load, xvfb-run itself
+    /// sometimes fails to remove its temporary directory after the
+    /// command has finished and exits with its own error; such a run says
+    /// nothing of vkterrain and is run again (at most twice more).
     fn run(&self, dir: &Path, fault: &str) -> Output {
+        let mut out = self.run_once(dir, fault);
+        for _ in 0..2 {
+            let xvfb_failed = String::from_utf8_lossy(&out.stderr)
+                .contains("xvfb-run: error: problem while cleaning up temporary directory");
+            if !(self.window && xvfb_failed) {
+                break;
+            }
+            out = self.run_once(dir, fault);
+        }
+        out
+    }
+
+    fn run_once(&self, dir: &Path, fault: &str) -> Output {
         let bin = env!("CARGO_BIN_EXE_vkterrain");
         let mut cmd = if self.window {
             let mut c = Command::new("xvfb-run");
