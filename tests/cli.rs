@@ -273,3 +273,114 @@ fn bad_points_file_names_the_line() {
     let stderr = run_err(&["height", "--heightmap", &dem, "--points", &p]);
     assert!(stderr.contains("bad.txt:2"), "{stderr}");
 }
+
+#[test]
+fn import_writes_a_tiled_terrain_that_height_and_inspect_open() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("dem.vkt");
+    let out = out_path.display().to_string();
+    let mut args: Vec<String> = vec!["import".into()];
+    args.push(data_path("jacksboro_fault_dem.r16").display().to_string());
+    args.extend(
+        [
+            "--size",
+            "403x344",
+            "--height-scale",
+            "65535",
+            "--tile",
+            "64",
+            "--out",
+            &out,
+        ]
+        .map(String::from),
+    );
+    let report = run_ok(&args);
+    assert_eq!(report["width"], 403);
+    assert_eq!(report["depth"], 344);
+    assert_eq!(report["read"], "streamed by rows");
+    assert_eq!(report["tiles_x"], 7);
+    assert_eq!(report["levels_as_floats"], 0);
+    assert_eq!(report["max_error"], 0.0);
+    assert_eq!(
+        report["file_bytes"],
+        std::fs::metadata(&out_path).unwrap().len()
+    );
+    assert!(report["seconds"].as_f64().unwrap() >= 0.0);
+
+    // The same heights as the source, at full resolution, read tile by
+    // tile; and the same grid through inspect (loaded whole).
+    let info = dem_info(32);
+    let corner = info.sample_position(343, 402);
+    let points = [
+        format!("{},{}", corner.x, corner.y),
+        "0,0".into(),
+        "1234.5,-987.25".into(),
+        "-1e7,5".into(),
+    ];
+    let query = |heightmap: Vec<String>| {
+        let mut args = vec!["height".to_string()];
+        args.extend(heightmap);
+        args.extend(["--cell-spacing".into(), "74.48,92.15".into()]);
+        for p in &points {
+            args.extend(["--at".into(), p.clone()]);
+        }
+        run_ok(&args)
+    };
+    let tiled = query(vec!["--heightmap".into(), out.clone()]);
+    let mut source = dem_args();
+    source.truncate(6);
+    assert_eq!(tiled, query(source));
+    assert_eq!(tiled[3]["height"], serde_json::Value::Null);
+    assert_eq!(
+        tiled[0]["height"],
+        f64::from(info.heightmap().get(343, 402))
+    );
+    let inspect = run_ok(&[
+        "inspect".into(),
+        "--heightmap".into(),
+        out.clone(),
+        "--cell-spacing".into(),
+        "74.48,92.15".into(),
+    ]);
+    assert_eq!(inspect["width"], 403);
+    assert_eq!(inspect["min_height"], 236.0);
+    assert_eq!(inspect["patch_cols"], 13);
+
+    // Heights were fixed at import: mapping options are refused, not
+    // silently ignored.
+    let err = run_err(&[
+        "height",
+        "--heightmap",
+        &out,
+        "--height-scale",
+        "2",
+        "--at",
+        "0,0",
+    ]);
+    assert!(
+        err.contains("dem.vkt") && err.contains("height scale"),
+        "{err}"
+    );
+    // Bad import arguments: nothing is left behind.
+    let bad = dir.path().join("bad.vkt").display().to_string();
+    let r16 = data_path("jacksboro_fault_dem.r16").display().to_string();
+    for (args, says) in [
+        (
+            vec![
+                "import", &r16, "--size", "403x344", "--tile", "100", "--out", &bad,
+            ],
+            "power of two",
+        ),
+        (
+            vec!["import", &r16, "--size", "400x344", "--out", &bad],
+            "too long",
+        ),
+        (vec!["import", "no-such.png", "--out", &bad], "not found"),
+        (vec!["import", &r16, &r16, "--out", &bad], "SRTM"),
+    ] {
+        let err = run_err(&args);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!dir.path().join("bad.vkt").exists());
+        assert!(!dir.path().join(".bad.vkt.partial").exists());
+    }
+}

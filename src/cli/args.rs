@@ -188,7 +188,7 @@ pub struct TerrainArgs {
     pub max_samples: Option<u64>,
 }
 
-fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
+pub fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
     s.parse()
         .map_err(|e: crate::terrain::heightmap::UnknownFormatName| e.to_string())
 }

@@ -12,12 +12,16 @@ use clap::{Parser, Subcommand};
 use glam::DVec2;
 use serde::Serialize;
 
+use crate::scene::HeightmapSource;
+use crate::terrain::heightmap::check_tiled_options;
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{PatchId, Terrain, TerrainInfo};
+use crate::terrain::tiled::TiledHeightmap;
+use crate::terrain::{PatchId, Placement, Terrain, TerrainInfo};
 use args::{parse_point, TerrainArgs};
 
 pub mod bench;
 pub mod demo;
+pub mod import;
 pub mod render;
 pub mod soak;
 
@@ -58,6 +62,10 @@ pub enum Command {
     /// Generate a fractal, eroded heightmap as a 16-bit PNG (the default
     /// scene's heightmap is `generate --out assets/heightmaps/default.png`).
     Generate(render::GenerateCmd),
+    /// Cut a heightmap, or a mosaic of SRTM .hgt tiles, into a tiled
+    /// terrain file that --heightmap opens on every command, reading only
+    /// the tiles it needs where it can; prints what it wrote as JSON.
+    Import(import::ImportCmd),
     /// Generate the default layer textures (tileable colour, normal and
     /// height maps for sand, grass, dirt, rock and snow).
     GenerateTextures(assets::GenerateTexturesCmd),
@@ -106,6 +114,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
         Some(Command::Height(cmd)) => height(cmd, out),
         Some(Command::Inspect(cmd)) => inspect(cmd, out),
         Some(Command::Generate(cmd)) => render::generate(cmd, out),
+        Some(Command::Import(cmd)) => import::import(cmd, out),
         Some(Command::GenerateTextures(cmd)) => assets::generate_textures(cmd, out),
         Some(Command::GenerateBlendMap(cmd)) => assets::generate_blend_map(cmd, out),
         Some(Command::Bench(cmd)) => bench::bench(cmd, out),
@@ -136,7 +145,31 @@ fn height(cmd: HeightCmd, out: &mut dyn Write) -> Result<()> {
         Some(path) => read_points(path)?,
         None => cmd.at.clone(),
     };
-    let info = load_terrain_info(&cmd.terrain, None)?;
+    let scene = cmd.terrain.scene()?;
+    if let HeightmapSource::File(path) = &scene.heightmap {
+        if TiledHeightmap::is_tiled(path) && !scene.load.smooth {
+            // Only the tiles the points fall in are read (smoothing needs
+            // the whole map, loaded below).
+            check_tiled_options(path, &scene.load)?;
+            let map = TiledHeightmap::open(path)?;
+            let placement =
+                Placement::new(map.width(), map.depth(), scene.cell_spacing, scene.origin)?;
+            let answers = points
+                .iter()
+                .map(|p| {
+                    Ok(HeightAnswer {
+                        x: p.x,
+                        z: p.y,
+                        height: map.height_at(&placement, p.x, p.y)?,
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            serde_json::to_writer_pretty(&mut *out, &answers)?;
+            writeln!(out)?;
+            return Ok(());
+        }
+    }
+    let info = scene.terrain_info()?;
     let answers: Vec<HeightAnswer> = points
         .iter()
         .map(|p| HeightAnswer {

@@ -88,6 +88,12 @@ pub enum HeightmapError {
     #[error("{path}: PNG colour type {color} is not supported (use 8- or 16-bit grayscale)")]
     UnsupportedPng { path: PathBuf, color: String },
 
+    #[error("{path}: an imported (tiled) terrain's heights were fixed by `vkterrain import`; {option} applies to the import, not here")]
+    TiledOption { path: PathBuf, option: &'static str },
+
+    #[error(transparent)]
+    Tiled(#[from] super::tiled::TiledError),
+
     #[error("{path}: height scale {scale} and offset {offset} must be finite")]
     BadMapping {
         path: PathBuf,

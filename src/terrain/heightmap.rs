@@ -221,7 +221,15 @@ impl Heightmap {
 
     /// Reads a heightmap file. Size limits are checked against the file's
     /// length before its samples are read or allocated.
+    ///
+    /// A tiled terrain (`vkterrain import`) is recognised by its header
+    /// and loaded whole, within `max_samples`; its heights were fixed at
+    /// import, so the format, size and height mapping options are refused
+    /// for it rather than ignored.
     pub fn load(path: &Path, opts: &LoadOptions) -> Result<Self, HeightmapError> {
+        if super::tiled::TiledHeightmap::is_tiled(path) {
+            return load_tiled(path, opts);
+        }
         let format = match opts.format {
             Some(f) => f,
             None => HeightmapFormat::from_path(path)?,
@@ -325,37 +333,18 @@ impl Heightmap {
     /// the f32 result at a sample is the sample itself.
     #[inline]
     pub fn interpolate(&self, col: f64, row: f64) -> f64 {
-        let max_c = (self.width - 1) as f64;
-        let max_r = (self.depth - 1) as f64;
-        let (c, r) = (col.clamp(0.0, max_c), row.clamp(0.0, max_r));
-        // The last row/column has no cell of its own: a point on it belongs
-        // to the cell before, at s or t = 1.
-        let c0 = (c as usize).min(self.width - 2);
-        let r0 = (r as usize).min(self.depth - 2);
-        let s = c - c0 as f64;
-        let t = r - r0 as f64;
-        let upper = self.row(r0);
-        let lower = self.row(r0 + 1);
-        let a = f64::from(upper[c0]);
-        let b = f64::from(upper[c0 + 1]);
-        let cc = f64::from(lower[c0]);
-        let d = f64::from(lower[c0 + 1]);
-        // Triangle ABC weighs A, B, C by (1 - s - t, s, t); triangle DCB
-        // weighs D, C, B by (1 - u - v, u, v) with u = 1 - s, v = 1 - t. The
-        // choice is a select rather than a branch: which side of the
-        // diagonal a query falls on is unpredictable.
-        let lower_triangle = s + t > 1.0;
-        let (p, q, w) = if lower_triangle {
-            (d, cc, b)
-        } else {
-            (a, b, cc)
-        };
-        let (u, v) = if lower_triangle {
-            (1.0 - s, 1.0 - t)
-        } else {
-            (s, t)
-        };
-        (1.0 - u - v) * p + u * q + v * w
+        let cell = locate_cell(self.width, self.depth, col, row);
+        let upper = self.row(cell.row);
+        let lower = self.row(cell.row + 1);
+        blend_cell(
+            &cell,
+            [
+                upper[cell.col],
+                upper[cell.col + 1],
+                lower[cell.col],
+                lower[cell.col + 1],
+            ],
+        )
     }
 
     /// Smallest and largest height.
@@ -402,6 +391,62 @@ pub(crate) fn min_max_of(values: &[f32]) -> (f32, f32) {
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
             (lo.min(v), hi.max(v))
         })
+}
+
+/// The cell a continuous sample position (`col`, `row`) falls in, clamped
+/// to a grid of `width` x `depth` samples, and the position's fractions
+/// across it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CellPoint {
+    /// The cell's upper-left sample.
+    pub row: usize,
+    pub col: usize,
+    /// Fractions across (s) and down (t) the cell, in [0, 1].
+    pub s: f64,
+    pub t: f64,
+}
+
+/// Finds the cell of `Heightmap::interpolate` (and of every reader that
+/// mirrors it): the last row or column has no cell of its own, so a point
+/// on it belongs to the cell before, at s or t = 1.
+#[inline]
+pub fn locate_cell(width: usize, depth: usize, col: f64, row: f64) -> CellPoint {
+    let max_c = (width - 1) as f64;
+    let max_r = (depth - 1) as f64;
+    let (c, r) = (col.clamp(0.0, max_c), row.clamp(0.0, max_r));
+    let c0 = (c as usize).min(width - 2);
+    let r0 = (r as usize).min(depth - 2);
+    CellPoint {
+        row: r0,
+        col: c0,
+        s: c - c0 as f64,
+        t: r - r0 as f64,
+    }
+}
+
+/// The height at `cell`'s point on the cell's two triangles, from its
+/// samples [A upper-left, B upper-right, C lower-left, D lower-right]
+/// (see `terrain::query` for the split).
+#[inline]
+pub fn blend_cell(cell: &CellPoint, [a, b, c, d]: [f32; 4]) -> f64 {
+    let (a, b, cc, d) = (f64::from(a), f64::from(b), f64::from(c), f64::from(d));
+    let (s, t) = (cell.s, cell.t);
+    // Triangle ABC weighs A, B, C by (1 - s - t, s, t); triangle DCB
+    // weighs D, C, B by (1 - u - v, u, v) with u = 1 - s, v = 1 - t. The
+    // choice is a select rather than a branch: which side of the
+    // diagonal a query falls on is unpredictable.
+    let lower_triangle = s + t > 1.0;
+    let (p, q, w) = if lower_triangle {
+        (d, cc, b)
+    } else {
+        (a, b, cc)
+    };
+    let (u, v) = if lower_triangle {
+        (1.0 - s, 1.0 - t)
+    } else {
+        (s, t)
+    };
+    (1.0 - u - v) * p + u * q + v * w
 }
 
 fn check_finite(path: &Path, width: usize, heights: &[f32]) -> Result<(), HeightmapError> {
@@ -498,6 +543,56 @@ fn raw_shape(
     Ok((width as usize, depth as usize))
 }
 
+/// The width and depth of a headerless file of `len` bytes, checked as
+/// `Heightmap::load` checks them, without reading it.
+pub(crate) fn headerless_shape(
+    path: &Path,
+    format: HeightmapFormat,
+    opts: &LoadOptions,
+    len: u64,
+) -> Result<(usize, usize), HeightmapError> {
+    if len == 0 {
+        return Err(HeightmapError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    // Streamed, so the whole-load sample limit does not apply.
+    let opts = LoadOptions {
+        max_samples: u64::MAX,
+        ..opts.clone()
+    };
+    raw_shape(path, format, &opts, len)
+}
+
+/// Refuses the load options that would change a tiled terrain's heights:
+/// they were fixed by `vkterrain import`.
+pub fn check_tiled_options(path: &Path, opts: &LoadOptions) -> Result<(), HeightmapError> {
+    let defaults = LoadOptions::default();
+    let refused = [
+        (opts.format.is_some(), "a format"),
+        (opts.size.is_some(), "a size"),
+        (opts.height_scale != defaults.height_scale, "a height scale"),
+        (
+            opts.height_offset != defaults.height_offset,
+            "a height offset",
+        ),
+        (opts.luminance, "luminance conversion"),
+    ];
+    if let Some((_, what)) = refused.iter().find(|(given, _)| *given) {
+        return Err(HeightmapError::TiledOption {
+            path: path.to_path_buf(),
+            option: what,
+        });
+    }
+    Ok(())
+}
+
+fn load_tiled(path: &Path, opts: &LoadOptions) -> Result<Heightmap, HeightmapError> {
+    check_tiled_options(path, opts)?;
+    let map = super::tiled::TiledHeightmap::open(path)?.to_heightmap(opts.max_samples)?;
+    Ok(if opts.smooth { map.smoothed() } else { map })
+}
+
 /// The exact square root of `n`, if `n` is a perfect square.
 fn integer_sqrt(n: u64) -> Option<u64> {
     let guess = (n as f64).sqrt() as u64;
@@ -505,7 +600,16 @@ fn integer_sqrt(n: u64) -> Option<u64> {
 }
 
 fn map_integer(v: f64, max: f64, opts: &LoadOptions) -> f32 {
-    (opts.height_scale * v / max + opts.height_offset) as f32
+    integer_height(v, max, opts.height_scale, opts.height_offset)
+}
+
+/// The height of an integer sample `v` of a format whose largest value is
+/// `max`: `scale * v / max + offset` in f64, rounded once to f32. Tiled
+/// terrains store integer samples with the same mapping, so they read back
+/// bit for bit.
+#[inline]
+pub fn integer_height(v: f64, max: f64, scale: f64, offset: f64) -> f32 {
+    (scale * v / max + offset) as f32
 }
 
 fn decode_raw(

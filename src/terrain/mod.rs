@@ -14,13 +14,14 @@ pub mod info;
 pub mod lod;
 mod query;
 pub mod shading;
+pub mod tiled;
 
 pub use camera::{look_at, perspective, Frustum};
 pub use error::{HeightmapError, TerrainError};
 pub use error_table::{ErrorTable, PatchErrors, ERROR_LEVELS};
 pub use grid::{PatchGrid, PatchId, SampleRect};
 pub use heightmap::{Heightmap, HeightmapFormat, LoadOptions};
-pub use info::{TerrainInfo, DEFAULT_CELLS_PER_PATCH};
+pub use info::{Placement, TerrainInfo, DEFAULT_CELLS_PER_PATCH};
 pub use lod::{DistanceLod, DistanceMode, PatchTessFactors};
 
 use glam::Vec3;

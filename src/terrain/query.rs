@@ -19,18 +19,18 @@
 
 use glam::{DVec2, Vec3};
 
-use super::info::TerrainInfo;
+use super::info::{Placement, TerrainInfo};
 
 /// How far outside the grid (in cells) a query may land and still count as
 /// on the terrain. It absorbs the rounding of world -> grid conversion, so the
 /// far edge's own samples are not reported as outside.
 const EDGE_TOLERANCE_CELLS: f64 = 1e-7;
 
-impl TerrainInfo {
-    /// Height of the surface at world (x, z), or None outside the terrain
-    /// (or for a non-finite coordinate).
+impl Placement {
+    /// Continuous sample coordinates (column, row) of world (x, z), or
+    /// None outside the terrain (or for a non-finite coordinate).
     #[inline]
-    pub fn height_at(&self, x: f64, z: f64) -> Option<f32> {
+    pub fn grid_on_terrain(&self, x: f64, z: f64) -> Option<DVec2> {
         let g = self.world_to_grid(x, z);
         let max_c = (self.cols() - 1) as f64;
         let max_r = (self.rows() - 1) as f64;
@@ -39,7 +39,17 @@ impl TerrainInfo {
             && g.x <= max_c + EDGE_TOLERANCE_CELLS
             && g.y >= -EDGE_TOLERANCE_CELLS
             && g.y <= max_r + EDGE_TOLERANCE_CELLS;
-        inside.then(|| self.heightmap().interpolate(g.x, g.y) as f32)
+        inside.then_some(g)
+    }
+}
+
+impl TerrainInfo {
+    /// Height of the surface at world (x, z), or None outside the terrain
+    /// (or for a non-finite coordinate).
+    #[inline]
+    pub fn height_at(&self, x: f64, z: f64) -> Option<f32> {
+        let g = self.placement().grid_on_terrain(x, z)?;
+        Some(self.heightmap().interpolate(g.x, g.y) as f32)
     }
 
     /// Height at the point of the terrain nearest to world (x, z): the

@@ -1,0 +1,110 @@
+//! `vkterrain import`: a heightmap, or a mosaic of SRTM tiles, to a tiled
+//! terrain that every `--heightmap` opens.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::args::{parse_finite, parse_format, parse_size};
+use crate::output::write_atomically;
+use crate::terrain::heightmap::{HeightmapFormat, LoadOptions, DEFAULT_MAX_SAMPLES};
+use crate::terrain::tiled::{self, SourceKind, DEFAULT_TILE_CELLS};
+
+#[derive(clap::Args, Debug)]
+pub struct ImportCmd {
+    /// A heightmap file (any format `--heightmap` reads), or SRTM .hgt
+    /// tiles named by their south-west corner (N37W119.hgt) and
+    /// directories of them, mosaicked into one terrain.
+    #[arg(value_name = "INPUT", required = true, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
+
+    /// Where to write the tiled terrain.
+    #[arg(long, value_name = "PATH")]
+    pub out: PathBuf,
+
+    /// Cells per tile side: a power of two from 2 to 4096.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_TILE_CELLS)]
+    pub tile: u32,
+
+    /// File format of a single input; inferred from its extension when
+    /// omitted (.r8 .r16/.raw .png .hgt .f32).
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<HeightmapFormat>,
+
+    /// Samples across and down for headerless files, e.g. 403x344; square
+    /// files are inferred.
+    #[arg(long, value_name = "WxD", value_parser = parse_size)]
+    pub size: Option<(u64, u64)>,
+
+    /// Height of the format's largest value (255, 65535, or 32767 for .hgt);
+    /// for float input, the factor applied to each sample.
+    #[arg(long, value_name = "S", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_scale: Option<f64>,
+
+    /// Added to every height after scaling.
+    #[arg(long, value_name = "O", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_offset: Option<f64>,
+
+    /// Accept colour PNGs by converting them to luminance (loaded whole).
+    #[arg(long)]
+    pub luminance: bool,
+
+    /// Largest input, in samples, loaded whole (colour or interlaced PNGs,
+    /// a single .hgt); streamed inputs have no limit.
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_MAX_SAMPLES)]
+    pub max_samples: u64,
+}
+
+pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
+    tiled::validate_tile_cells(cmd.tile)?;
+    let defaults = LoadOptions::default();
+    let opts = LoadOptions {
+        format: cmd.format,
+        size: cmd.size,
+        height_scale: cmd.height_scale.unwrap_or(defaults.height_scale),
+        height_offset: cmd.height_offset.unwrap_or(defaults.height_offset),
+        smooth: false,
+        luminance: cmd.luminance,
+        max_samples: cmd.max_samples,
+    };
+    let (mut source, kind) = tiled::open_source(&cmd.inputs, &opts)?;
+    let bar = ProgressBar::new(source.depth() as u64).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} rows, {eta} left")
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    let mut report = None;
+    write_atomically(&cmd.out, |tmp| {
+        let written = tiled::import(source.as_mut(), cmd.tile, tmp, &mut |done, _| {
+            bar.set_position(done)
+        })
+        .with_context(|| format!("{}: import failed", cmd.out.display()))?;
+        report = Some(written);
+        Ok(())
+    })?;
+    bar.finish_and_clear();
+    let report = report.expect("written");
+    #[derive(serde::Serialize)]
+    struct Output<'a> {
+        out: &'a std::path::Path,
+        read: &'static str,
+        #[serde(flatten)]
+        report: tiled::ImportReport,
+    }
+    serde_json::to_writer_pretty(
+        &mut *out,
+        &Output {
+            out: &cmd.out,
+            read: match kind {
+                SourceKind::Streamed => "streamed by rows",
+                SourceKind::Whole => "loaded whole",
+                SourceKind::SrtmMosaic => "SRTM mosaic, one row of tiles at a time",
+            },
+            report,
+        },
+    )?;
+    writeln!(out)?;
+    Ok(())
+}

@@ -1,0 +1,489 @@
+//! Tiled terrains on disk: a heightmap cut into square tiles, each stored
+//! with a pyramid of coarser levels, so that a terrain larger than memory
+//! can be opened and read a tile at a time.
+//!
+//! `vkterrain import` writes one (`import`), and every `--heightmap` opens
+//! one, recognised by its header (`TiledHeightmap::is_tiled`).
+//!
+//! # Layout (version 1, little-endian throughout)
+//!
+//! ```text
+//! header      HEADER_BYTES bytes at offset 0 (`Header`)
+//! tile data   the encoded samples of every tile level, in any order
+//! directory   one ENTRY_BYTES entry per tile level (`Entry`), tile rows
+//!             top to bottom, tiles left to right, levels finest first
+//! ```
+//!
+//! **Tiles.** With `T` cells per tile, tile (tx, tz) covers sample columns
+//! `tx * T ..= min((tx + 1) * T, width - 1)` and the matching rows: a tile
+//! holds its shared border samples, so each is complete on its own, and
+//! the last tile of a row or column is narrower when `width - 1` is not a
+//! multiple of `T`. Level `l` keeps every `2^l`-th sample of the tile, and
+//! the tile's last column and row whatever their index, so every level has
+//! the tile's corners and `ceil(cells / 2^l) + 1` samples a side. The
+//! coarsest level (`l = log2 T`) is a tile's corners.
+//!
+//! **Samples.** A tile level is stored either as 32-bit floats, or, where
+//! that is exact, as 16-bit codes `q` with heights
+//! `h = scale * ((base + q) / divisor) + offset`, rounded once from f64 to
+//! f32: the integer loaders' own mapping (`Heightmap::load`), so an integer
+//! heightmap imports losslessly in half the space. Every sample is checked
+//! at import; a level whose heights the codes cannot reproduce bit for bit
+//! is stored as floats. Heights read back are therefore exactly the heights
+//! imported.
+//!
+//! **Integrity.** The header carries a magic number, a format version and
+//! a CRC-32 of itself; the directory and every tile level carry their own
+//! CRC-32. A reader checks the header and directory when it opens a file
+//! and each tile level when it reads it, and names the tile in any error.
+
+mod import;
+mod reader;
+
+pub use import::{
+    import, open_source, ImportReport, IntegerMapping, MemoryRows, RowSource, SourceKind,
+};
+pub use reader::{fuzz_open, fuzz_open_resealed, TileLevel, TiledHeightmap, DEFAULT_CACHE_BYTES};
+
+use std::path::PathBuf;
+
+/// The first eight bytes of every tiled terrain. The CR LF catches a file
+/// mangled by a text-mode copy.
+pub const MAGIC: [u8; 8] = *b"VKTERR\r\n";
+/// The layout version this build reads and writes.
+pub const VERSION: u32 = 1;
+/// Size of the header.
+pub const HEADER_BYTES: usize = 64;
+/// Size of one directory entry.
+pub const ENTRY_BYTES: usize = 56;
+/// Smallest and largest cells per tile side.
+pub const MIN_TILE_CELLS: u32 = 2;
+pub const MAX_TILE_CELLS: u32 = 4096;
+/// Cells per tile when the caller does not choose: 257^2 samples, 129 KiB
+/// at 16 bits.
+pub const DEFAULT_TILE_CELLS: u32 = 256;
+/// Largest side, in samples, of a tiled terrain.
+pub const MAX_SIDE: u64 = 1 << 24;
+
+/// Why a tiled terrain could not be read or written. Every variant names
+/// the file; those about one tile name the tile and level too.
+#[derive(Debug, thiserror::Error)]
+pub enum TiledError {
+    // The reason follows in the error's source chain.
+    #[error("{path}: cannot read")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: file not found")]
+    Missing { path: PathBuf },
+
+    #[error("{path}: cannot write")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: not a tiled terrain (no vkterrain tiled header)")]
+    NotTiled { path: PathBuf },
+
+    #[error("{path}: tiled terrain version {found}, but this build reads version {VERSION}; import the source heightmap again")]
+    Version { path: PathBuf, found: u32 },
+
+    #[error("{path}: corrupt tiled terrain header: {what}")]
+    Header { path: PathBuf, what: String },
+
+    #[error("{path}: corrupt tiled terrain directory: {what}")]
+    Directory { path: PathBuf, what: String },
+
+    #[error("{path}: tile ({tx}, {tz}) level {level}: {what}")]
+    Tile {
+        path: PathBuf,
+        tx: u32,
+        tz: u32,
+        level: u32,
+        what: String,
+    },
+
+    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole")]
+    TooLarge {
+        path: PathBuf,
+        width: u64,
+        depth: u64,
+        samples: u64,
+        limit: u64,
+    },
+
+    #[error(
+        "cells per tile must be a power of two from {MIN_TILE_CELLS} to {MAX_TILE_CELLS}, got {0}"
+    )]
+    TileCells(u32),
+
+    #[error("{path}: {what}")]
+    Input { path: PathBuf, what: String },
+
+    /// An input the heightmap loaders refused, with their reason.
+    #[error(transparent)]
+    Load(Box<crate::terrain::HeightmapError>),
+}
+
+impl TiledError {
+    /// An I/O error on `path`; a missing file says so plainly.
+    pub fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        if source.kind() == std::io::ErrorKind::NotFound {
+            TiledError::Missing {
+                path: path.to_path_buf(),
+            }
+        } else {
+            TiledError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        }
+    }
+}
+
+/// The fixed-size header at the start of a tiled terrain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Header {
+    pub width: u32,
+    pub depth: u32,
+    /// Cells per tile side, `T`.
+    pub tile_cells: u32,
+    /// Levels per tile: `log2(T) + 1`.
+    pub levels: u32,
+    pub min_height: f32,
+    pub max_height: f32,
+    pub directory_offset: u64,
+    pub directory_crc: u32,
+}
+
+impl Header {
+    /// Tiles across and down.
+    pub fn tiles(&self) -> (u32, u32) {
+        (
+            tile_count(self.width, self.tile_cells),
+            tile_count(self.depth, self.tile_cells),
+        )
+    }
+
+    /// Number of directory entries.
+    pub fn entry_count(&self) -> u64 {
+        let (x, z) = self.tiles();
+        u64::from(x) * u64::from(z) * u64::from(self.levels)
+    }
+
+    pub fn directory_bytes(&self) -> u64 {
+        self.entry_count() * ENTRY_BYTES as u64
+    }
+
+    /// Index of a tile level's directory entry.
+    pub fn entry_index(&self, tx: u32, tz: u32, level: u32) -> usize {
+        let (x, _) = self.tiles();
+        ((tz as usize * x as usize + tx as usize) * self.levels as usize) + level as usize
+    }
+
+    /// The samples tile (tx, tz) covers, borders included: (first column,
+    /// last column, first row, last row).
+    pub fn tile_rect(&self, tx: u32, tz: u32) -> [u32; 4] {
+        let t = self.tile_cells;
+        [
+            tx * t,
+            ((tx + 1) * t).min(self.width - 1),
+            tz * t,
+            ((tz + 1) * t).min(self.depth - 1),
+        ]
+    }
+
+    /// Samples across and down of tile (tx, tz) at `level`.
+    pub fn level_size(&self, tx: u32, tz: u32, level: u32) -> (u32, u32) {
+        let [c0, c1, r0, r1] = self.tile_rect(tx, tz);
+        (level_side(c1 - c0, level), level_side(r1 - r0, level))
+    }
+
+    pub fn encode(&self) -> [u8; HEADER_BYTES] {
+        let mut b = [0u8; HEADER_BYTES];
+        b[0..8].copy_from_slice(&MAGIC);
+        b[8..12].copy_from_slice(&VERSION.to_le_bytes());
+        b[12..16].copy_from_slice(&(HEADER_BYTES as u32).to_le_bytes());
+        b[16..20].copy_from_slice(&self.width.to_le_bytes());
+        b[20..24].copy_from_slice(&self.depth.to_le_bytes());
+        b[24..28].copy_from_slice(&self.tile_cells.to_le_bytes());
+        b[28..32].copy_from_slice(&self.levels.to_le_bytes());
+        b[32..36].copy_from_slice(&self.min_height.to_le_bytes());
+        b[36..40].copy_from_slice(&self.max_height.to_le_bytes());
+        b[40..48].copy_from_slice(&self.directory_offset.to_le_bytes());
+        b[48..52].copy_from_slice(&self.directory_crc.to_le_bytes());
+        // 52..60 reserved, zero.
+        let crc = crc32fast::hash(&b[..60]);
+        b[60..64].copy_from_slice(&crc.to_le_bytes());
+        b
+    }
+
+    /// Parses and checks a header against the length of its file: magic,
+    /// version, checksum, sizes, and a directory that lies inside the file.
+    pub fn decode(b: &[u8], file_len: u64, path: &std::path::Path) -> Result<Header, TiledError> {
+        let path = path.to_path_buf();
+        if b.len() < 8 || b[0..8] != MAGIC {
+            return Err(TiledError::NotTiled { path });
+        }
+        let bad = |what: String| TiledError::Header {
+            path: path.clone(),
+            what,
+        };
+        if b.len() < 12 {
+            return Err(bad(format!(
+                "the file ends after {} bytes, inside the header",
+                b.len()
+            )));
+        }
+        let version = u32_at(b, 8);
+        if version != VERSION {
+            return Err(TiledError::Version {
+                path,
+                found: version,
+            });
+        }
+        if b.len() < HEADER_BYTES {
+            return Err(bad(format!(
+                "the file ends after {} bytes, inside the {HEADER_BYTES}-byte header",
+                b.len()
+            )));
+        }
+        let stored_crc = u32_at(b, 60);
+        if crc32fast::hash(&b[..60]) != stored_crc {
+            return Err(bad("checksum mismatch".into()));
+        }
+        let header_bytes = u32_at(b, 12);
+        if header_bytes as usize != HEADER_BYTES {
+            return Err(bad(format!(
+                "header size {header_bytes}, expected {HEADER_BYTES}"
+            )));
+        }
+        let header = Header {
+            width: u32_at(b, 16),
+            depth: u32_at(b, 20),
+            tile_cells: u32_at(b, 24),
+            levels: u32_at(b, 28),
+            min_height: f32::from_le_bytes(b[32..36].try_into().expect("4 bytes")),
+            max_height: f32::from_le_bytes(b[36..40].try_into().expect("4 bytes")),
+            directory_offset: u64::from_le_bytes(b[40..48].try_into().expect("8 bytes")),
+            directory_crc: u32_at(b, 48),
+        };
+        let (w, d) = (u64::from(header.width), u64::from(header.depth));
+        if w < 2 || d < 2 || w > MAX_SIDE || d > MAX_SIDE {
+            return Err(bad(format!(
+                "size {w}x{d} is outside 2x2 to {MAX_SIDE}x{MAX_SIDE}"
+            )));
+        }
+        if validate_tile_cells(header.tile_cells).is_err() {
+            return Err(bad(format!(
+                "cells per tile {} is not a power of two from {MIN_TILE_CELLS} to {MAX_TILE_CELLS}",
+                header.tile_cells
+            )));
+        }
+        if header.levels != level_count(header.tile_cells) {
+            return Err(bad(format!(
+                "{} levels per tile, expected {} for {}-cell tiles",
+                header.levels,
+                level_count(header.tile_cells),
+                header.tile_cells
+            )));
+        }
+        let (lo, hi) = (header.min_height, header.max_height);
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(bad(format!("height range {lo}..{hi} is not finite")));
+        }
+        let end = header
+            .directory_offset
+            .checked_add(header.directory_bytes())
+            .filter(|&end| header.directory_offset >= HEADER_BYTES as u64 && end <= file_len);
+        if end.is_none() {
+            return Err(bad(format!(
+                "the directory ({} bytes at offset {}) does not lie inside the file of {file_len} bytes (truncated?)",
+                header.directory_bytes(),
+                header.directory_offset
+            )));
+        }
+        Ok(header)
+    }
+}
+
+/// How a tile level's samples are stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Encoding {
+    /// 32-bit floats.
+    F32,
+    /// 16-bit codes q: `h = (scale * ((base + q) / divisor) + offset) as f32`.
+    Codes { base: i32, mapping: IntegerMapping },
+}
+
+impl Encoding {
+    pub fn sample_bytes(self) -> u64 {
+        match self {
+            Encoding::F32 => 4,
+            Encoding::Codes { .. } => 2,
+        }
+    }
+}
+
+/// One tile level's directory entry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Entry {
+    pub offset: u64,
+    pub bytes: u32,
+    pub encoding: Encoding,
+    /// Smallest and largest height of the level (at level 0, the tile's Y
+    /// bounds).
+    pub min: f32,
+    pub max: f32,
+    /// CRC-32 of the stored bytes.
+    pub crc: u32,
+}
+
+impl Entry {
+    pub fn encode(&self) -> [u8; ENTRY_BYTES] {
+        let mut b = [0u8; ENTRY_BYTES];
+        b[0..8].copy_from_slice(&self.offset.to_le_bytes());
+        b[8..12].copy_from_slice(&self.bytes.to_le_bytes());
+        b[16..20].copy_from_slice(&self.min.to_le_bytes());
+        b[20..24].copy_from_slice(&self.max.to_le_bytes());
+        b[24..28].copy_from_slice(&self.crc.to_le_bytes());
+        match self.encoding {
+            Encoding::F32 => b[12..16].copy_from_slice(&0u32.to_le_bytes()),
+            Encoding::Codes { base, mapping } => {
+                b[12..16].copy_from_slice(&1u32.to_le_bytes());
+                b[28..32].copy_from_slice(&base.to_le_bytes());
+                b[32..40].copy_from_slice(&mapping.scale.to_le_bytes());
+                b[40..48].copy_from_slice(&mapping.divisor.to_le_bytes());
+                b[48..56].copy_from_slice(&mapping.offset.to_le_bytes());
+            }
+        }
+        b
+    }
+
+    /// Parses an entry; `Err` says what is wrong with it.
+    pub fn decode(b: &[u8]) -> Result<Entry, String> {
+        let f64_at = |i: usize| f64::from_le_bytes(b[i..i + 8].try_into().expect("8 bytes"));
+        let encoding = match u32_at(b, 12) {
+            0 => Encoding::F32,
+            1 => {
+                let mapping = IntegerMapping {
+                    scale: f64_at(32),
+                    divisor: f64_at(40),
+                    offset: f64_at(48),
+                };
+                if !(mapping.scale.is_finite()
+                    && mapping.offset.is_finite()
+                    && mapping.divisor.is_finite()
+                    && mapping.divisor > 0.0)
+                {
+                    return Err(format!("sample mapping {mapping:?} is not finite"));
+                }
+                Encoding::Codes {
+                    base: u32_at(b, 28) as i32,
+                    mapping,
+                }
+            }
+            other => return Err(format!("unknown sample encoding {other}")),
+        };
+        let entry = Entry {
+            offset: u64::from_le_bytes(b[0..8].try_into().expect("8 bytes")),
+            bytes: u32_at(b, 8),
+            encoding,
+            min: f32::from_le_bytes(b[16..20].try_into().expect("4 bytes")),
+            max: f32::from_le_bytes(b[20..24].try_into().expect("4 bytes")),
+            crc: u32_at(b, 24),
+        };
+        if !(entry.min.is_finite() && entry.max.is_finite() && entry.min <= entry.max) {
+            return Err(format!(
+                "height range {}..{} is not finite",
+                entry.min, entry.max
+            ));
+        }
+        Ok(entry)
+    }
+}
+
+fn u32_at(b: &[u8], i: usize) -> u32 {
+    u32::from_le_bytes(b[i..i + 4].try_into().expect("4 bytes"))
+}
+
+/// Tiles needed to cover `samples` samples with `tile_cells`-cell tiles.
+pub fn tile_count(samples: u32, tile_cells: u32) -> u32 {
+    (samples - 1).div_ceil(tile_cells)
+}
+
+/// Levels per tile of `tile_cells` cells: down to the tile's corners.
+pub fn level_count(tile_cells: u32) -> u32 {
+    tile_cells.trailing_zeros() + 1
+}
+
+/// Samples along a tile side of `cells` cells at `level`: every `2^level`-th
+/// sample and the last.
+pub fn level_side(cells: u32, level: u32) -> u32 {
+    cells.div_ceil(1 << level) + 1
+}
+
+/// The tile-relative sample index of position `i` along a side of `cells`
+/// cells at `level`.
+pub fn level_sample(i: u32, cells: u32, level: u32) -> u32 {
+    (i << level).min(cells)
+}
+
+pub fn validate_tile_cells(n: u32) -> Result<(), TiledError> {
+    if n.is_power_of_two() && (MIN_TILE_CELLS..=MAX_TILE_CELLS).contains(&n) {
+        Ok(())
+    } else {
+        Err(TiledError::TileCells(n))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_keep_every_other_sample_and_the_last() {
+        assert_eq!(level_count(256), 9);
+        assert_eq!(level_side(256, 0), 257);
+        assert_eq!(level_side(256, 8), 2);
+        // A 100-cell remainder tile: 0, 8, ..., 96, then 100.
+        assert_eq!(level_side(100, 3), 14);
+        assert_eq!(level_sample(12, 100, 3), 96);
+        assert_eq!(level_sample(13, 100, 3), 100);
+    }
+
+    #[test]
+    fn header_round_trips_and_rejects_a_changed_byte() {
+        let header = Header {
+            width: 1025,
+            depth: 700,
+            tile_cells: 256,
+            levels: 9,
+            min_height: -3.5,
+            max_height: 812.25,
+            directory_offset: 4096,
+            directory_crc: 0xdead_beef,
+        };
+        let path = std::path::Path::new("t.vkt");
+        let bytes = header.encode();
+        let len = 4096 + header.directory_bytes();
+        assert_eq!(Header::decode(&bytes, len, path).unwrap(), header);
+        assert_eq!(header.tiles(), (4, 3));
+        assert_eq!(header.tile_rect(3, 2), [768, 1024, 512, 699]);
+        assert_eq!(header.level_size(3, 2, 0), (257, 188));
+        assert_eq!(header.level_size(3, 2, 8), (2, 2));
+        let mut flipped = bytes;
+        flipped[20] ^= 1;
+        let err = Header::decode(&flipped, len, path).unwrap_err().to_string();
+        assert!(err.contains("checksum"), "{err}");
+        let err = Header::decode(&bytes, len - 1, path)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("truncated"), "{err}");
+    }
+}

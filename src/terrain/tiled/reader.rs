@@ -1,0 +1,466 @@
+//! Reading a tiled terrain: the header and directory when it is opened,
+//! tile levels on demand through a bounded cache.
+
+use std::collections::HashMap;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use super::{Encoding, Entry, Header, TiledError, ENTRY_BYTES, HEADER_BYTES};
+use crate::terrain::heightmap::{blend_cell, locate_cell, Heightmap};
+
+/// Decoded tile levels a reader keeps by default: 64 MiB, 256 full tiles
+/// of 257^2 samples.
+pub const DEFAULT_CACHE_BYTES: usize = 64 << 20;
+
+/// What a reader reads from: a file, or bytes in memory (tests, fuzzing).
+trait Source: Read + Seek + Send {}
+impl<T: Read + Seek + Send> Source for T {}
+
+/// One tile level's heights, row-major.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TileLevel {
+    pub cols: u32,
+    pub rows: u32,
+    pub heights: Vec<f32>,
+}
+
+impl TileLevel {
+    #[inline]
+    pub fn get(&self, row: u32, col: u32) -> f32 {
+        self.heights[row as usize * self.cols as usize + col as usize]
+    }
+}
+
+/// Tile levels read recently, least recently used first out.
+struct Cache {
+    budget: usize,
+    bytes: usize,
+    tick: u64,
+    levels: HashMap<(u32, u32, u32), (u64, Arc<TileLevel>)>,
+}
+
+impl Cache {
+    fn get(&mut self, key: (u32, u32, u32)) -> Option<Arc<TileLevel>> {
+        self.tick += 1;
+        let tick = self.tick;
+        self.levels.get_mut(&key).map(|(used, level)| {
+            *used = tick;
+            Arc::clone(level)
+        })
+    }
+
+    fn insert(&mut self, key: (u32, u32, u32), level: Arc<TileLevel>) {
+        let size = level.heights.len() * 4;
+        while self.bytes + size > self.budget && !self.levels.is_empty() {
+            let oldest = *self
+                .levels
+                .iter()
+                .min_by_key(|(_, (used, _))| *used)
+                .map(|(k, _)| k)
+                .expect("not empty");
+            let (_, gone) = self.levels.remove(&oldest).expect("present");
+            self.bytes -= gone.heights.len() * 4;
+        }
+        if size <= self.budget {
+            self.tick += 1;
+            self.bytes += size;
+            self.levels.insert(key, (self.tick, level));
+        }
+    }
+}
+
+/// An open tiled terrain. Its header and directory are in memory; tile
+/// levels are read when asked for and kept in a cache of bounded size.
+pub struct TiledHeightmap {
+    path: PathBuf,
+    header: Header,
+    entries: Vec<Entry>,
+    source: Mutex<Box<dyn Source>>,
+    cache: Mutex<Cache>,
+}
+
+impl std::fmt::Debug for TiledHeightmap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TiledHeightmap")
+            .field("path", &self.path)
+            .field("header", &self.header)
+            .finish_non_exhaustive()
+    }
+}
+
+impl TiledHeightmap {
+    /// Whether `path` starts with a tiled terrain's magic number. False for
+    /// files that cannot be read: the loader that takes them reports why.
+    pub fn is_tiled(path: &Path) -> bool {
+        let mut magic = [0u8; 8];
+        std::fs::File::open(path)
+            .and_then(|mut f| f.read_exact(&mut magic))
+            .is_ok_and(|()| magic == super::MAGIC)
+    }
+
+    /// Opens a tiled terrain, checking its header and directory.
+    pub fn open(path: &Path) -> Result<Self, TiledError> {
+        let io = |source| TiledError::io(path, source);
+        let file = std::fs::File::open(path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        Self::from_source(Box::new(std::io::BufReader::new(file)), len, path)
+    }
+
+    /// Reads a tiled terrain from bytes in memory; `path` only names it in
+    /// errors.
+    pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Self, TiledError> {
+        let len = bytes.len() as u64;
+        Self::from_source(Box::new(std::io::Cursor::new(bytes)), len, path)
+    }
+
+    fn from_source(mut source: Box<dyn Source>, len: u64, path: &Path) -> Result<Self, TiledError> {
+        let io = |source| TiledError::io(path, source);
+        let mut head = vec![0u8; HEADER_BYTES.min(len as usize)];
+        source.read_exact(&mut head).map_err(io)?;
+        let header = Header::decode(&head, len, path)?;
+        let directory_bytes =
+            usize::try_from(header.directory_bytes()).map_err(|_| TiledError::Directory {
+                path: path.to_path_buf(),
+                what: "too large for this machine".into(),
+            })?;
+        let mut directory = vec![0u8; directory_bytes];
+        source
+            .seek(SeekFrom::Start(header.directory_offset))
+            .map_err(io)?;
+        source.read_exact(&mut directory).map_err(io)?;
+        if crc32fast::hash(&directory) != header.directory_crc {
+            return Err(TiledError::Directory {
+                path: path.to_path_buf(),
+                what: "checksum mismatch".into(),
+            });
+        }
+        let (tiles_x, tiles_z) = header.tiles();
+        let mut entries = Vec::with_capacity(header.entry_count() as usize);
+        for tz in 0..tiles_z {
+            for tx in 0..tiles_x {
+                for level in 0..header.levels {
+                    let i = header.entry_index(tx, tz, level);
+                    let bad = |what: String| TiledError::Tile {
+                        path: path.to_path_buf(),
+                        tx,
+                        tz,
+                        level,
+                        what,
+                    };
+                    let entry = Entry::decode(&directory[i * ENTRY_BYTES..(i + 1) * ENTRY_BYTES])
+                        .map_err(bad)?;
+                    let (cols, rows) = header.level_size(tx, tz, level);
+                    let expected =
+                        u64::from(cols) * u64::from(rows) * entry.encoding.sample_bytes();
+                    if u64::from(entry.bytes) != expected {
+                        return Err(bad(format!(
+                            "{} bytes stored, but {cols}x{rows} samples need {expected}",
+                            entry.bytes
+                        )));
+                    }
+                    let end = entry.offset.checked_add(u64::from(entry.bytes));
+                    if entry.offset < HEADER_BYTES as u64
+                        || !end.is_some_and(|end| end <= header.directory_offset)
+                    {
+                        return Err(bad(format!(
+                            "its {} bytes at offset {} lie outside the tile data (bytes {HEADER_BYTES} to {})",
+                            entry.bytes, entry.offset, header.directory_offset
+                        )));
+                    }
+                    entries.push(entry);
+                }
+            }
+        }
+        Ok(TiledHeightmap {
+            path: path.to_path_buf(),
+            header,
+            entries,
+            source: Mutex::new(source),
+            cache: Mutex::new(Cache {
+                budget: DEFAULT_CACHE_BYTES,
+                bytes: 0,
+                tick: 0,
+                levels: HashMap::new(),
+            }),
+        })
+    }
+
+    /// Keeps at most `bytes` of decoded tile levels.
+    pub fn with_cache_bytes(self, bytes: usize) -> Self {
+        self.cache.lock().expect("cache lock").budget = bytes;
+        self
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// Sample columns.
+    pub fn width(&self) -> usize {
+        self.header.width as usize
+    }
+
+    /// Sample rows.
+    pub fn depth(&self) -> usize {
+        self.header.depth as usize
+    }
+
+    /// Smallest and largest height of the whole terrain.
+    pub fn min_max(&self) -> (f32, f32) {
+        (self.header.min_height, self.header.max_height)
+    }
+
+    /// The directory entry of a tile level.
+    pub fn entry(&self, tx: u32, tz: u32, level: u32) -> &Entry {
+        &self.entries[self.header.entry_index(tx, tz, level)]
+    }
+
+    /// Bytes of decoded tile levels the cache holds now.
+    pub fn cached_bytes(&self) -> usize {
+        self.cache.lock().expect("cache lock").bytes
+    }
+
+    /// Tile (tx, tz) at `level`, read and checked on first use.
+    pub fn tile(&self, tx: u32, tz: u32, level: u32) -> Result<Arc<TileLevel>, TiledError> {
+        let (tiles_x, tiles_z) = self.header.tiles();
+        assert!(
+            tx < tiles_x && tz < tiles_z && level < self.header.levels,
+            "tile ({tx}, {tz}) level {level} out of range"
+        );
+        let key = (tx, tz, level);
+        if let Some(level) = self.cache.lock().expect("cache lock").get(key) {
+            return Ok(level);
+        }
+        let decoded = Arc::new(self.read_level(tx, tz, level)?);
+        self.cache
+            .lock()
+            .expect("cache lock")
+            .insert(key, Arc::clone(&decoded));
+        Ok(decoded)
+    }
+
+    fn read_level(&self, tx: u32, tz: u32, level: u32) -> Result<TileLevel, TiledError> {
+        let bad = |what: String| TiledError::Tile {
+            path: self.path.clone(),
+            tx,
+            tz,
+            level,
+            what,
+        };
+        let entry = *self.entry(tx, tz, level);
+        let mut bytes = vec![0u8; entry.bytes as usize];
+        {
+            let mut source = self.source.lock().expect("source lock");
+            source
+                .seek(SeekFrom::Start(entry.offset))
+                .and_then(|_| source.read_exact(&mut bytes))
+                .map_err(|e| bad(format!("cannot read its samples: {e}")))?;
+        }
+        if crc32fast::hash(&bytes) != entry.crc {
+            return Err(bad("checksum mismatch in its samples".into()));
+        }
+        let heights: Vec<f32> = match entry.encoding {
+            Encoding::F32 => bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            Encoding::Codes { base, mapping } => bytes
+                .chunks_exact(2)
+                .map(|b| {
+                    mapping.height(i64::from(base) + i64::from(u16::from_le_bytes([b[0], b[1]])))
+                })
+                .collect(),
+        };
+        let (cols, rows) = self.header.level_size(tx, tz, level);
+        for (i, &h) in heights.iter().enumerate() {
+            let (r, c) = (i / cols as usize, i % cols as usize);
+            if !h.is_finite() {
+                return Err(bad(format!(
+                    "sample at row {r}, column {c} is {h}, not a finite number"
+                )));
+            }
+            if h < entry.min || h > entry.max {
+                return Err(bad(format!(
+                    "sample at row {r}, column {c} is {h}, outside the range {}..{} its directory entry gives",
+                    entry.min, entry.max
+                )));
+            }
+        }
+        Ok(TileLevel {
+            cols,
+            rows,
+            heights,
+        })
+    }
+
+    /// The tile holding the cell whose upper-left sample is (row, col), and
+    /// that sample's place in it. A sample on a border between tiles is in
+    /// both; the one with the sample as its upper-left side is chosen.
+    fn locate(&self, row: usize, col: usize) -> (u32, u32, u32, u32) {
+        let t = self.header.tile_cells as usize;
+        let (tiles_x, tiles_z) = self.header.tiles();
+        let tx = ((col / t) as u32).min(tiles_x - 1);
+        let tz = ((row / t) as u32).min(tiles_z - 1);
+        (
+            tx,
+            tz,
+            (row - tz as usize * t) as u32,
+            (col - tx as usize * t) as u32,
+        )
+    }
+
+    /// The sample at (row, col), at full resolution.
+    pub fn get(&self, row: usize, col: usize) -> Result<f32, TiledError> {
+        assert!(
+            row < self.depth() && col < self.width(),
+            "sample ({row}, {col}) out of range"
+        );
+        let (tx, tz, r, c) = self.locate(row, col);
+        Ok(self.tile(tx, tz, 0)?.get(r, c))
+    }
+
+    /// Height at continuous sample coordinates (`col`, `row`) on the
+    /// triangulated surface, clamped to the grid: the same arithmetic as
+    /// `Heightmap::interpolate`, on the full-resolution tile holding the
+    /// cell.
+    pub fn interpolate(&self, col: f64, row: f64) -> Result<f64, TiledError> {
+        let cell = locate_cell(self.width(), self.depth(), col, row);
+        let (tx, tz, r, c) = self.locate(cell.row, cell.col);
+        let tile = self.tile(tx, tz, 0)?;
+        Ok(blend_cell(
+            &cell,
+            [
+                tile.get(r, c),
+                tile.get(r, c + 1),
+                tile.get(r + 1, c),
+                tile.get(r + 1, c + 1),
+            ],
+        ))
+    }
+
+    /// Height of the surface at world (x, z) with the samples placed by
+    /// `placement` (which must be this terrain's size), or None outside the
+    /// terrain: `TerrainInfo::height_at`, reading only the tile it needs.
+    pub fn height_at(
+        &self,
+        placement: &crate::terrain::Placement,
+        x: f64,
+        z: f64,
+    ) -> Result<Option<f32>, TiledError> {
+        debug_assert_eq!(
+            (placement.cols(), placement.rows()),
+            (self.width(), self.depth())
+        );
+        match placement.grid_on_terrain(x, z) {
+            Some(g) => Ok(Some(self.interpolate(g.x, g.y)? as f32)),
+            None => Ok(None),
+        }
+    }
+
+    /// The whole terrain as one heightmap, refused when it has more than
+    /// `max_samples` samples.
+    pub fn to_heightmap(&self, max_samples: u64) -> Result<Heightmap, TiledError> {
+        let (w, d) = (self.width(), self.depth());
+        let samples = w as u64 * d as u64;
+        if samples > max_samples {
+            return Err(TiledError::TooLarge {
+                path: self.path.clone(),
+                width: w as u64,
+                depth: d as u64,
+                samples,
+                limit: max_samples,
+            });
+        }
+        let mut heights = vec![0.0f32; w * d];
+        let (tiles_x, tiles_z) = self.header.tiles();
+        for tz in 0..tiles_z {
+            for tx in 0..tiles_x {
+                // Read around the cache: a whole load would only churn it.
+                let tile = self.read_level(tx, tz, 0)?;
+                let [c0, _, r0, _] = self.header.tile_rect(tx, tz);
+                for (r, row) in tile.heights.chunks_exact(tile.cols as usize).enumerate() {
+                    let start = (r0 as usize + r) * w + c0 as usize;
+                    heights[start..start + row.len()].copy_from_slice(row);
+                }
+            }
+        }
+        Heightmap::from_heights(w, d, heights).map_err(|e| TiledError::Input {
+            path: self.path.clone(),
+            what: e.to_string(),
+        })
+    }
+}
+
+/// Opens `data` as a tiled terrain and reads every tile level and a few
+/// heights from it; true when all of that succeeded. Never panics on any
+/// input: the fuzz target and its regression test call it.
+pub fn fuzz_open(data: &[u8]) -> bool {
+    let Ok(map) = TiledHeightmap::from_bytes(data.to_vec(), Path::new("fuzz-input")) else {
+        return false;
+    };
+    let (tiles_x, tiles_z) = map.header().tiles();
+    // A valid file this small has few tiles; the cap keeps a fuzzer's
+    // header from asking for billions of reads.
+    if u64::from(tiles_x) * u64::from(tiles_z) > 4096 {
+        return false;
+    }
+    for tz in 0..tiles_z {
+        for tx in 0..tiles_x {
+            for level in 0..map.header().levels {
+                if map.tile(tx, tz, level).is_err() {
+                    return false;
+                }
+            }
+        }
+    }
+    let (w, d) = (map.width() as f64, map.depth() as f64);
+    [
+        (0.0, 0.0),
+        (w - 1.0, d - 1.0),
+        (0.5 * w, 0.3 * d),
+        (-5.0, 1e9),
+    ]
+    .iter()
+    .all(|&(c, r)| map.interpolate(c, r).is_ok())
+}
+
+/// `fuzz_open` on `data` with its checksums first made to match (the
+/// header's, the directory's, and each tile level's whose bytes lie in the
+/// input), so that a fuzzer's mutations reach the checks behind them:
+/// sizes, offsets, encodings and samples.
+pub fn fuzz_open_resealed(data: &[u8]) -> bool {
+    let mut b = data.to_vec();
+    if b.len() >= HEADER_BYTES && b[..8] == super::MAGIC {
+        let crc = crc32fast::hash(&b[..60]);
+        b[60..64].copy_from_slice(&crc.to_le_bytes());
+        if let Ok(mut header) = Header::decode(&b, b.len() as u64, Path::new("fuzz-input")) {
+            let start = header.directory_offset as usize;
+            let end = start + header.directory_bytes() as usize;
+            for at in (start..end).step_by(ENTRY_BYTES) {
+                let field = |i: usize, n: usize| {
+                    b[at + i..at + i + n]
+                        .iter()
+                        .rev()
+                        .fold(0u64, |v, &x| (v << 8) | u64::from(x))
+                };
+                let (offset, bytes) = (field(0, 8), field(8, 4));
+                if let Some(stored) = offset
+                    .checked_add(bytes)
+                    .filter(|&e| e <= b.len() as u64)
+                    .map(|e| offset as usize..e as usize)
+                {
+                    let crc = crc32fast::hash(&b[stored]);
+                    b[at + 24..at + 28].copy_from_slice(&crc.to_le_bytes());
+                }
+            }
+            header.directory_crc = crc32fast::hash(&b[start..end]);
+            b[..HEADER_BYTES].copy_from_slice(&header.encode());
+        }
+    }
+    fuzz_open(&b)
+}
