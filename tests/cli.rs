@@ -335,16 +335,23 @@ fn import_writes_a_tiled_terrain_that_height_and_inspect_open() {
         tiled[0]["height"],
         f64::from(info.heightmap().get(343, 402))
     );
-    let inspect = run_ok(&[
-        "inspect".into(),
-        "--heightmap".into(),
-        out.clone(),
-        "--cell-spacing".into(),
-        "74.48,92.15".into(),
-    ]);
-    assert_eq!(inspect["width"], 403);
-    assert_eq!(inspect["min_height"], 236.0);
-    assert_eq!(inspect["patch_cols"], 13);
+    // inspect reads it a tile at a time and reports what it reports for
+    // the source, every patch's Y bounds included.
+    for cells in ["16", "32"] {
+        let inspect = |heightmap: Vec<String>| {
+            let mut args = vec!["inspect".to_string(), "--patches".into()];
+            args.extend(heightmap);
+            args.extend(["--cell-spacing".into(), "74.48,92.15".into()]);
+            args.extend(["--cells-per-patch".into(), cells.into()]);
+            run_ok(&args)
+        };
+        let tiled = inspect(vec!["--heightmap".into(), out.clone()]);
+        let mut source = dem_args();
+        source.truncate(6);
+        assert_eq!(tiled, inspect(source));
+        assert_eq!(tiled["min_height"], 236.0);
+        assert!(tiled["patches"].as_array().unwrap().len() > 100);
+    }
 
     // Heights were fixed at import: mapping options are refused, not
     // silently ignored.
@@ -383,4 +390,60 @@ fn import_writes_a_tiled_terrain_that_height_and_inspect_open() {
         assert!(!dir.path().join("bad.vkt").exists());
         assert!(!dir.path().join(".bad.vkt.partial").exists());
     }
+}
+
+#[test]
+fn generate_writes_a_tiled_terrain_equal_to_its_png_imported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name).display().to_string();
+    let (png, direct, imported) = (path("g.png"), path("g.vkt"), path("i.vkt"));
+    let generate = |out: &str, extra: &[&str]| {
+        let mut args = vec![
+            "generate",
+            "--size",
+            "129",
+            "--droplets",
+            "3000",
+            "--out",
+            out,
+        ];
+        args.extend(extra);
+        let out = vkterrain(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    generate(&png, &[]);
+    let said = generate(&direct, &["--height-scale", "250", "--tile", "32"]);
+    assert!(said.contains("tiled: 32-cell tiles"), "{said}");
+    run_ok(&[
+        "import".into(),
+        png.clone(),
+        "--height-scale".into(),
+        "250".into(),
+        "--tile".into(),
+        "32".into(),
+        "--out".into(),
+        imported.clone(),
+    ]);
+    assert_eq!(
+        std::fs::read(&direct).unwrap(),
+        std::fs::read(&imported).unwrap()
+    );
+    // A PNG holds 0 to 1: its scale is given when it is loaded.
+    let err = run_err(&[
+        "generate",
+        "--size",
+        "9",
+        "--height-scale",
+        "2",
+        "--out",
+        &png,
+    ]);
+    assert!(err.contains("--height-scale applies to a tiled"), "{err}");
+    let err = run_err(&["generate", "--size", "16386", "--out", &png]);
+    assert!(err.contains("write a tiled .vkt for larger"), "{err}");
 }

@@ -7,11 +7,12 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use glam::DVec2;
+use vkterrain::terrain::grid::patch_y_bounds;
 use vkterrain::terrain::heightmap::{Heightmap, HeightmapFormat, LoadOptions};
 use vkterrain::terrain::tiled::{
     self, fuzz_open, level_sample, Encoding, Header, TiledHeightmap, ENTRY_BYTES, HEADER_BYTES,
 };
-use vkterrain::terrain::{Placement, TerrainInfo};
+use vkterrain::terrain::{PatchGrid, Placement, TerrainInfo};
 
 /// Imports `inputs` with `opts` into `out` and returns the report.
 fn import(inputs: &[&Path], opts: &LoadOptions, tile: u32, out: &Path) -> tiled::ImportReport {
@@ -275,6 +276,31 @@ fn srtm_tiles_mosaic_by_name_with_voids_filled_and_sea_where_a_tile_is_missing()
     let again = dir.path().join("again.vkt");
     import(&[&se, &nw, &sw], &opts, 128, &again);
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&again).unwrap());
+}
+
+#[test]
+fn patch_y_bounds_from_tiles_equal_the_in_memory_ones_whether_patches_or_tiles_are_larger() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("rough.r16");
+    let (w, d) = write_r16(&src);
+    let opts = LoadOptions {
+        size: Some((w as u64, d as u64)),
+        ..LoadOptions::default()
+    };
+    let source = Heightmap::load(&src, &opts).unwrap();
+    for tile in [4, 16, 64] {
+        let out = dir.path().join(format!("t{tile}.vkt"));
+        import(&[&src], &opts, tile, &out);
+        let tiled = TiledHeightmap::open(&out).unwrap();
+        for cells in [2, 16, 64] {
+            let grid = PatchGrid::for_size(w, d, cells);
+            assert_eq!(
+                tiled.patch_y_bounds(&grid).unwrap(),
+                patch_y_bounds(&source, &grid, 0.0),
+                "{tile}-cell tiles, {cells}-cell patches"
+            );
+        }
+    }
 }
 
 #[test]

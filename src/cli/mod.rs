@@ -16,7 +16,7 @@ use crate::scene::HeightmapSource;
 use crate::terrain::heightmap::check_tiled_options;
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::tiled::TiledHeightmap;
-use crate::terrain::{PatchId, Placement, Terrain, TerrainInfo};
+use crate::terrain::{PatchGrid, PatchId, Placement, Terrain, TerrainInfo};
 use args::{parse_point, TerrainArgs};
 
 pub mod bench;
@@ -235,19 +235,54 @@ struct PatchReport {
 }
 
 fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
-    let info = load_terrain_info(&cmd.terrain, cmd.cells_per_patch)?;
-    let (min_height, max_height) = info.heightmap().min_max();
+    let mut scene = cmd.terrain.scene()?;
+    if let Some(n) = cmd.cells_per_patch {
+        // Checked first: a bad patch size shouldn't wait for a large file.
+        validate_cells_per_patch(n)?;
+        scene.cells_per_patch = n;
+    }
+    if let HeightmapSource::File(path) = &scene.heightmap {
+        if TiledHeightmap::is_tiled(path) && !scene.load.smooth {
+            // Read a tile at a time: any size.
+            check_tiled_options(path, &scene.load)?;
+            validate_cells_per_patch(scene.cells_per_patch)?;
+            let map = TiledHeightmap::open(path)?;
+            let placement =
+                Placement::new(map.width(), map.depth(), scene.cell_spacing, scene.origin)?;
+            let grid = PatchGrid::for_size(map.width(), map.depth(), scene.cells_per_patch);
+            let bounds = cmd.patches.then(|| map.patch_y_bounds(&grid)).transpose()?;
+            let report = inspect_report(&placement, &grid, map.min_max(), bounds.as_deref());
+            serde_json::to_writer_pretty(&mut *out, &report)?;
+            writeln!(out)?;
+            return Ok(());
+        }
+    }
+    let info = scene.terrain_info()?;
+    let range = info.heightmap().min_max();
     let terrain = Terrain::new(info, 0.0)?;
-    let info = terrain.info();
-    let grid = terrain.grid();
-    let patches = cmd.patches.then(|| {
+    let bounds = cmd.patches.then(|| terrain.y_bounds());
+    let report = inspect_report(terrain.info().placement(), terrain.grid(), range, bounds);
+    serde_json::to_writer_pretty(&mut *out, &report)?;
+    writeln!(out)?;
+    Ok(())
+}
+
+/// What `inspect` reports, from the terrain's placement, grid and height
+/// range, and each patch's Y bounds when they are listed.
+fn inspect_report(
+    placement: &Placement,
+    grid: &PatchGrid,
+    (min_height, max_height): (f32, f32),
+    y_bounds: Option<&[[f32; 2]]>,
+) -> InspectReport {
+    let patches = y_bounds.map(|y_bounds| {
         (0..grid.patch_count())
             .map(|p| {
                 let id: PatchId = grid.patch_id(p);
                 let rect = grid.sample_rect(id);
-                let upper_left = info.sample_position(rect.row0, rect.col0);
-                let lower_right = info.sample_position(rect.row1, rect.col1);
-                let [min_y, max_y] = terrain.y_bounds()[p];
+                let upper_left = placement.sample_position(rect.row0, rect.col0);
+                let lower_right = placement.sample_position(rect.row1, rect.col1);
+                let [min_y, max_y] = y_bounds[p];
                 PatchReport {
                     row: id.row,
                     col: id.col,
@@ -261,22 +296,19 @@ fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
             })
             .collect()
     });
-    let report = InspectReport {
-        width: info.cols(),
-        depth: info.rows(),
+    InspectReport {
+        width: placement.cols(),
+        depth: placement.rows(),
         min_height,
         max_height,
-        cell_spacing: info.spacing().to_array(),
-        world_width: info.world_width(),
-        world_depth: info.world_depth(),
-        cells_per_patch: info.cells_per_patch(),
+        cell_spacing: placement.spacing().to_array(),
+        world_width: placement.world_width(),
+        world_depth: placement.world_depth(),
+        cells_per_patch: grid.cells_per_patch() as u32,
         patch_rows: grid.patch_rows(),
         patch_cols: grid.patch_cols(),
-        control_points: terrain.control_points().len(),
-        indices: terrain.indices().len(),
+        control_points: grid.control_point_count(),
+        indices: grid.patch_count() * 4,
         patches,
-    };
-    serde_json::to_writer_pretty(&mut *out, &report)?;
-    writeln!(out)?;
-    Ok(())
+    }
 }

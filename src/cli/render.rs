@@ -622,32 +622,129 @@ pub struct GenerateCmd {
     /// Noise seed.
     #[arg(long, default_value_t = GeneratorParams::default().seed)]
     pub seed: u64,
-    /// Raindrops simulated by the erosion pass.
-    #[arg(long, default_value_t = GeneratorParams::default().droplets)]
-    pub droplets: u32,
-    /// Where to write the 16-bit PNG.
+    /// Raindrops simulated by the erosion pass (default 250000; over
+    /// 8193 samples a side, 0.02 per sample).
+    #[arg(long)]
+    pub droplets: Option<u32>,
+    /// Where to write it: a 16-bit PNG, or, for a path ending in .vkt, a
+    /// tiled terrain (`import`'s format), which sizes over 8193 need: they
+    /// are generated a band of rows at a time, never whole.
     #[arg(long, value_name = "PATH")]
     pub out: PathBuf,
+    /// Cells per tile side of a tiled output.
+    #[arg(long, value_name = "N", default_value_t = crate::terrain::tiled::DEFAULT_TILE_CELLS)]
+    pub tile: u32,
+    /// Height of the top of the range in a tiled output (its heights are
+    /// fixed when written); a PNG holds 0 to 1, scaled when loaded.
+    #[arg(long, value_name = "S", value_parser = super::args::parse_finite)]
+    pub height_scale: Option<f64>,
 }
 
+/// Largest side of a generated PNG (held whole) and of a tiled output.
+const MAX_PNG_SIZE: usize = 16385;
+const MAX_TILED_SIZE: usize = 65537;
+
 pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
-    if !(2..=16385).contains(&cmd.size) {
-        bail!("--size {} is outside 2..=16385", cmd.size);
+    use crate::terrain::generate::{BandedRows, BANDED_DROPLETS_PER_SAMPLE, WHOLE_MAX_SIZE};
+    use crate::terrain::tiled::{self, IntegerMapping, MemoryRows, RowSource};
+    let tiled_out = cmd
+        .out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vkt"));
+    let max = if tiled_out {
+        MAX_TILED_SIZE
+    } else {
+        MAX_PNG_SIZE
+    };
+    if !(2..=max).contains(&cmd.size) {
+        bail!(
+            "--size {} is outside 2..={max}{}",
+            cmd.size,
+            if tiled_out {
+                ""
+            } else {
+                " for a PNG (write a tiled .vkt for larger)"
+            }
+        );
     }
-    let map = generate_heightmap(&GeneratorParams {
-        size: cmd.size,
-        seed: cmd.seed,
-        droplets: cmd.droplets,
-    })?;
+    if !tiled_out {
+        if cmd.height_scale.is_some() {
+            bail!("--height-scale applies to a tiled (.vkt) output; a PNG's heights are scaled when it is loaded");
+        }
+        let map = generate_heightmap(&GeneratorParams {
+            size: cmd.size,
+            seed: cmd.seed,
+            droplets: cmd.droplets.unwrap_or(GeneratorParams::default().droplets),
+        })?;
+        write_atomically(&cmd.out, |tmp| {
+            write_png16(&map, tmp)
+                .with_context(|| format!("{}: cannot write PNG", cmd.out.display()))
+        })?;
+        writeln!(
+            out,
+            "wrote {} ({}x{})",
+            cmd.out.display(),
+            cmd.size,
+            cmd.size
+        )?;
+        return Ok(());
+    }
+    tiled::validate_tile_cells(cmd.tile)?;
+    let height_scale = cmd.height_scale.unwrap_or(1.0);
+    let mapping = IntegerMapping {
+        scale: height_scale,
+        divisor: 65535.0,
+        offset: 0.0,
+    };
+    let mut source: Box<dyn RowSource> = if cmd.size <= WHOLE_MAX_SIZE {
+        // The same map as the PNG, quantised the same way.
+        let map = generate_heightmap(&GeneratorParams {
+            size: cmd.size,
+            seed: cmd.seed,
+            droplets: cmd.droplets.unwrap_or(GeneratorParams::default().droplets),
+        })?;
+        let heights = map
+            .heights()
+            .iter()
+            .map(|&h| mapping.height((f64::from(h.clamp(0.0, 1.0)) * 65535.0).round() as i64))
+            .collect();
+        let map = crate::terrain::Heightmap::from_heights(cmd.size, cmd.size, heights)?;
+        Box::new(MemoryRows::new(map, Some(mapping)))
+    } else {
+        let density = cmd.droplets.map_or(BANDED_DROPLETS_PER_SAMPLE, |d| {
+            f64::from(d) / (cmd.size as f64 * cmd.size as f64)
+        });
+        Box::new(BandedRows::new(cmd.size, cmd.seed, density, height_scale))
+    };
+    let bar = indicatif::ProgressBar::new(cmd.size as u64).with_style(
+        indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} rows, {eta} left",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    let mut report = None;
     write_atomically(&cmd.out, |tmp| {
-        write_png16(&map, tmp).with_context(|| format!("{}: cannot write PNG", cmd.out.display()))
+        report = Some(
+            tiled::import(source.as_mut(), cmd.tile, tmp, &mut |done, _| {
+                bar.set_position(done)
+            })
+            .with_context(|| format!("{}: generation failed", cmd.out.display()))?,
+        );
+        Ok(())
     })?;
+    bar.finish_and_clear();
+    let report = report.expect("written");
     writeln!(
         out,
-        "wrote {} ({}x{})",
+        "wrote {} ({}x{}, tiled: {}-cell tiles, {} bytes, {:.2} bytes per sample, {:.1} s)",
         cmd.out.display(),
         cmd.size,
-        cmd.size
+        cmd.size,
+        cmd.tile,
+        report.file_bytes,
+        report.bytes_per_sample,
+        report.seconds
     )?;
     Ok(())
 }

@@ -56,13 +56,19 @@ pub struct PatchGrid {
 
 impl PatchGrid {
     pub fn new(info: &TerrainInfo) -> Self {
-        let n = info.cells_per_patch() as usize;
+        Self::for_size(info.cols(), info.rows(), info.cells_per_patch())
+    }
+
+    /// The grid of a `cols` x `rows` terrain (at least 2x2) in patches of
+    /// `cells_per_patch` cells, whether or not its heights are in memory.
+    pub fn for_size(cols: usize, rows: usize, cells_per_patch: u32) -> Self {
+        let n = cells_per_patch as usize;
         PatchGrid {
-            sample_rows: info.rows(),
-            sample_cols: info.cols(),
+            sample_rows: rows,
+            sample_cols: cols,
             cells_per_patch: n,
-            patch_rows: (info.rows() - 1).div_ceil(n),
-            patch_cols: (info.cols() - 1).div_ceil(n),
+            patch_rows: (rows - 1).div_ceil(n),
+            patch_cols: (cols - 1).div_ceil(n),
         }
     }
 

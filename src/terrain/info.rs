@@ -85,6 +85,36 @@ impl Placement {
         self.rows
     }
 
+    /// (dx, dz).
+    pub fn spacing(&self) -> DVec2 {
+        self.spacing
+    }
+
+    /// World extent along x: (cols - 1) * dx.
+    pub fn world_width(&self) -> f64 {
+        (self.cols - 1) as f64 * self.spacing.x
+    }
+
+    /// World extent along z: (rows - 1) * dz.
+    pub fn world_depth(&self) -> f64 {
+        (self.rows - 1) as f64 * self.spacing.y
+    }
+
+    /// Local x of a sample column (relative to the terrain's centre).
+    pub fn local_x(&self, col: usize) -> f64 {
+        -0.5 * self.world_width() + col as f64 * self.spacing.x
+    }
+
+    /// Local z of a sample row (relative to the terrain's centre).
+    pub fn local_z(&self, row: usize) -> f64 {
+        0.5 * self.world_depth() - row as f64 * self.spacing.y
+    }
+
+    /// World (x, z) of sample (row, col).
+    pub fn sample_position(&self, row: usize, col: usize) -> DVec2 {
+        self.origin + DVec2::new(self.local_x(col), self.local_z(row))
+    }
+
     /// Converts a world (x, z) to continuous sample coordinates
     /// (column, row): sample (r, c) is at exactly (c, r).
     ///
@@ -153,27 +183,27 @@ impl TerrainInfo {
 
     /// World extent along x: (cols - 1) * dx.
     pub fn world_width(&self) -> f64 {
-        (self.cols() - 1) as f64 * self.placement.spacing.x
+        self.placement.world_width()
     }
 
     /// World extent along z: (rows - 1) * dz.
     pub fn world_depth(&self) -> f64 {
-        (self.rows() - 1) as f64 * self.placement.spacing.y
+        self.placement.world_depth()
     }
 
     /// Local x of a sample column (relative to the terrain's centre).
     pub fn local_x(&self, col: usize) -> f64 {
-        -0.5 * self.world_width() + col as f64 * self.placement.spacing.x
+        self.placement.local_x(col)
     }
 
     /// Local z of a sample row (relative to the terrain's centre).
     pub fn local_z(&self, row: usize) -> f64 {
-        0.5 * self.world_depth() - row as f64 * self.placement.spacing.y
+        self.placement.local_z(row)
     }
 
     /// World (x, z) of sample (row, col).
     pub fn sample_position(&self, row: usize, col: usize) -> DVec2 {
-        self.placement.origin + DVec2::new(self.local_x(col), self.local_z(row))
+        self.placement.sample_position(row, col)
     }
 
     /// Converts a world (x, z) to continuous sample coordinates

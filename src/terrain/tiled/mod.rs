@@ -108,7 +108,7 @@ pub enum TiledError {
         what: String,
     },
 
-    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole")]
+    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole (--max-samples raises it; streaming a terrain to the GPU a tile at a time is not built yet)")]
     TooLarge {
         path: PathBuf,
         width: u64,

@@ -362,6 +362,54 @@ impl TiledHeightmap {
         }
     }
 
+    /// Min and max height over every sample each patch of `grid` covers
+    /// (borders included), row-major: `grid::patch_y_bounds` with no margin,
+    /// reading each full-resolution tile once.
+    pub fn patch_y_bounds(
+        &self,
+        grid: &crate::terrain::PatchGrid,
+    ) -> Result<Vec<[f32; 2]>, TiledError> {
+        let mut bounds = vec![[f32::INFINITY, f32::NEG_INFINITY]; grid.patch_count()];
+        let (tiles_x, tiles_z) = self.header.tiles();
+        let n = grid.cells_per_patch();
+        for tz in 0..tiles_z {
+            for tx in 0..tiles_x {
+                let tile = self.read_level(tx, tz, 0)?;
+                let [c0, c1, r0, r1] = self.header.tile_rect(tx, tz).map(|v| v as usize);
+                // Patches whose samples meet the tile's: a patch ending on
+                // the tile's first row or column shares that border.
+                let (pr0, pr1) = (
+                    r0.saturating_sub(1) / n,
+                    (r1 / n).min(grid.patch_rows() - 1),
+                );
+                let (pc0, pc1) = (
+                    c0.saturating_sub(1) / n,
+                    (c1 / n).min(grid.patch_cols() - 1),
+                );
+                for pr in pr0..=pr1 {
+                    for pc in pc0..=pc1 {
+                        let id = crate::terrain::PatchId { row: pr, col: pc };
+                        let rect = grid.sample_rect(id);
+                        let (ra, rb) = (rect.row0.max(r0), rect.row1.min(r1));
+                        let (ca, cb) = (rect.col0.max(c0), rect.col1.min(c1));
+                        if ra > rb || ca > cb {
+                            continue;
+                        }
+                        let b = &mut bounds[grid.patch_index(id)];
+                        for r in ra..=rb {
+                            let start = (r - r0) * tile.cols as usize;
+                            let row = &tile.heights[start + ca - c0..=start + cb - c0];
+                            let (lo, hi) = crate::terrain::heightmap::min_max_of(row);
+                            b[0] = b[0].min(lo);
+                            b[1] = b[1].max(hi);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(bounds)
+    }
+
     /// The whole terrain as one heightmap, refused when it has more than
     /// `max_samples` samples.
     pub fn to_heightmap(&self, max_samples: u64) -> Result<Heightmap, TiledError> {
