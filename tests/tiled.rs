@@ -122,6 +122,17 @@ fn raw16_imports_exactly_as_16_bit_codes_and_answers_height_at_like_the_loader()
         }
     }
     assert_eq!((e.min, e.max), (lo, hi));
+    // Each level's error against the full resolution, and 0 at level 0.
+    let full: Vec<f32> = (r0..=r1)
+        .flat_map(|r| (c0..=c1).map(move |c| (r, c)))
+        .map(|(r, c)| source.get(r as usize, c as usize))
+        .collect();
+    assert_eq!(e.error, 0.0);
+    for level in 1..tiled.header().levels {
+        let stored = tiled.entry(3, 2, level).error;
+        assert_eq!(stored, tiled::level_error(&full, (c1 - c0, r1 - r0), level));
+        assert!(stored > 0.0, "rough data: level {level} misses something");
+    }
 
     // height_at at samples, cell interiors, tile borders and outside, with
     // the terrain placed off the world origin.
@@ -394,8 +405,8 @@ fn every_corruption_gives_an_error_naming_the_file_and_the_tile() {
     foreign[0] = b'P';
     expect(&foreign, &["not a tiled terrain"]);
     let mut newer = good.clone();
-    newer[8] = 2;
-    expect(&newer, &["version 2", "import the source heightmap again"]);
+    newer[8] = 3;
+    expect(&newer, &["version 3", "import the source heightmap again"]);
     // A flipped header byte.
     let mut flipped = good.clone();
     flipped[17] ^= 4;

@@ -573,6 +573,7 @@ struct EncodedLevel {
     encoding: Encoding,
     min: f32,
     max: f32,
+    error: f32,
 }
 
 /// Encodes samples as 16-bit codes where `mapping` reproduces every one
@@ -604,6 +605,7 @@ fn encode_level(samples: &[f32], mapping: Option<IntegerMapping>) -> EncodedLeve
         encoding,
         min,
         max,
+        error: 0.0,
     }
 }
 
@@ -618,6 +620,10 @@ fn tile_levels(
 ) -> Vec<EncodedLevel> {
     let [c0, c1, r0, r1] = header.tile_rect(tx, tz);
     let (cells_x, cells_z) = (c1 - c0, r1 - r0);
+    let mut full = Vec::with_capacity((cells_x as usize + 1) * (cells_z as usize + 1));
+    for r in 0..=cells_z as usize {
+        full.extend_from_slice(&band[r * width + c0 as usize..=r * width + c1 as usize]);
+    }
     (0..header.levels)
         .map(|level| {
             let (cols, rows) = (level_side(cells_x, level), level_side(cells_z, level));
@@ -629,7 +635,10 @@ fn tile_levels(
                     (0..cols).map(|j| row[(c0 + level_sample(j, cells_x, level)) as usize]),
                 );
             }
-            encode_level(&samples, mapping)
+            EncodedLevel {
+                error: super::level_error(&full, (cells_x, cells_z), level),
+                ..encode_level(&samples, mapping)
+            }
         })
         .collect()
 }
@@ -729,6 +738,7 @@ pub fn import(
                     min: e.min,
                     max: e.max,
                     crc: crc32fast::hash(&e.bytes),
+                    error: e.error,
                 });
                 offset += e.bytes.len() as u64;
             }

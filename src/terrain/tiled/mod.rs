@@ -5,7 +5,7 @@
 //! `vkterrain import` writes one (`import`), and every `--heightmap` opens
 //! one, recognised by its header (`TiledHeightmap::is_tiled`).
 //!
-//! # Layout (version 1, little-endian throughout)
+//! # Layout (version 2, little-endian throughout)
 //!
 //! ```text
 //! header      HEADER_BYTES bytes at offset 0 (`Header`)
@@ -51,11 +51,11 @@ use std::path::PathBuf;
 /// mangled by a text-mode copy.
 pub const MAGIC: [u8; 8] = *b"VKTERR\r\n";
 /// The layout version this build reads and writes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Size of the header.
 pub const HEADER_BYTES: usize = 64;
 /// Size of one directory entry.
-pub const ENTRY_BYTES: usize = 56;
+pub const ENTRY_BYTES: usize = 64;
 /// Smallest and largest cells per tile side.
 pub const MIN_TILE_CELLS: u32 = 2;
 pub const MAX_TILE_CELLS: u32 = 4096;
@@ -342,6 +342,11 @@ pub struct Entry {
     pub max: f32,
     /// CRC-32 of the stored bytes.
     pub crc: u32,
+    /// Largest difference, over the tile's full-resolution samples, between
+    /// a sample and the level's surface at it (`level_error`); 0 at level
+    /// 0. What drawing the tile at this level instead of its full
+    /// resolution moves a sample by, and what a switch between levels pops.
+    pub error: f32,
 }
 
 impl Entry {
@@ -352,6 +357,8 @@ impl Entry {
         b[16..20].copy_from_slice(&self.min.to_le_bytes());
         b[20..24].copy_from_slice(&self.max.to_le_bytes());
         b[24..28].copy_from_slice(&self.crc.to_le_bytes());
+        b[56..60].copy_from_slice(&self.error.to_le_bytes());
+        // 60..64 reserved, zero.
         match self.encoding {
             Encoding::F32 => b[12..16].copy_from_slice(&0u32.to_le_bytes()),
             Encoding::Codes { base, mapping } => {
@@ -397,7 +404,14 @@ impl Entry {
             min: f32::from_le_bytes(b[16..20].try_into().expect("4 bytes")),
             max: f32::from_le_bytes(b[20..24].try_into().expect("4 bytes")),
             crc: u32_at(b, 24),
+            error: f32::from_le_bytes(b[56..60].try_into().expect("4 bytes")),
         };
+        if !(entry.error.is_finite() && entry.error >= 0.0) {
+            return Err(format!(
+                "level error {} is not a finite, non-negative number",
+                entry.error
+            ));
+        }
         if !(entry.min.is_finite() && entry.max.is_finite() && entry.min <= entry.max) {
             return Err(format!(
                 "height range {}..{} is not finite",
@@ -434,6 +448,49 @@ pub fn level_sample(i: u32, cells: u32, level: u32) -> u32 {
     (i << level).min(cells)
 }
 
+/// Largest difference between a tile's full-resolution samples and its
+/// level `level` surface at them: the level's samples (`level_sample`)
+/// joined into cells split like the reference's (`Heightmap::interpolate`),
+/// a cell at the far edge narrower where `cells` is not a multiple of
+/// `2^level`. `samples` is the tile's `(cells_x + 1) x (cells_z + 1)` full
+/// resolution, row-major.
+pub fn level_error(samples: &[f32], (cells_x, cells_z): (u32, u32), level: u32) -> f32 {
+    if level == 0 {
+        return 0.0;
+    }
+    let stride = cells_x as usize + 1;
+    let step = 1u32 << level;
+    // A coordinate's coarse cell, the cell's ends, and the fraction across.
+    let locate = |v: u32, cells: u32| {
+        let i = (v / step).min(level_side(cells, level) - 2);
+        let (a, b) = (
+            level_sample(i, cells, level),
+            level_sample(i + 1, cells, level),
+        );
+        (a, b, f64::from(v - a) / f64::from(b - a))
+    };
+    let columns: Vec<_> = (0..=cells_x).map(|c| locate(c, cells_x)).collect();
+    let h = |r: u32, c: u32| samples[r as usize * stride + c as usize];
+    let mut worst = 0.0f64;
+    for r in 0..=cells_z {
+        let (r0, r1, t) = locate(r, cells_z);
+        for (c, &(c0, c1, s)) in columns.iter().enumerate() {
+            let cell = crate::terrain::heightmap::CellPoint {
+                row: 0,
+                col: 0,
+                s,
+                t,
+            };
+            let coarse = crate::terrain::heightmap::blend_cell(
+                &cell,
+                [h(r0, c0), h(r0, c1), h(r1, c0), h(r1, c1)],
+            );
+            worst = worst.max((f64::from(h(r, c as u32)) - coarse).abs());
+        }
+    }
+    worst as f32
+}
+
 pub fn validate_tile_cells(n: u32) -> Result<(), TiledError> {
     if n.is_power_of_two() && (MIN_TILE_CELLS..=MAX_TILE_CELLS).contains(&n) {
         Ok(())
@@ -455,6 +512,28 @@ mod tests {
         assert_eq!(level_side(100, 3), 14);
         assert_eq!(level_sample(12, 100, 3), 96);
         assert_eq!(level_sample(13, 100, 3), 100);
+    }
+
+    #[test]
+    fn level_error_is_the_largest_sample_off_the_coarse_surface() {
+        // A 4x2-cell tile: flat but for one raised sample between level 1's
+        // samples, and a plane, which every level reproduces.
+        let mut bump = vec![0.0f32; 5 * 3];
+        bump[5 + 1] = 2.0;
+        assert_eq!(level_error(&bump, (4, 2), 0), 0.0);
+        assert_eq!(level_error(&bump, (4, 2), 1), 2.0);
+        let plane: Vec<f32> = (0..15)
+            .map(|i| (i % 5) as f32 * 0.5 + (i / 5) as f32)
+            .collect();
+        for level in 0..3 {
+            assert!(level_error(&plane, (4, 2), level) < 1e-6);
+        }
+        // A 3-cell side at level 1: samples 0 and 2, then the last, 3,
+        // which follow this ramp exactly; level 2 keeps only 0 and 3 and
+        // misses sample 2 by 14/3 - 2.
+        let ramp = [0.0f32, 1.0, 2.0, 7.0, 0.0, 1.0, 2.0, 7.0];
+        assert!(level_error(&ramp, (3, 1), 1) < 1e-6);
+        assert!((level_error(&ramp, (3, 1), 2) - 8.0 / 3.0).abs() < 1e-6);
     }
 
     #[test]
