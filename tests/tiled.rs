@@ -7,22 +7,40 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use glam::DVec2;
+use vkterrain::scene::{HeightmapSource, Scene};
 use vkterrain::terrain::grid::patch_y_bounds;
 use vkterrain::terrain::heightmap::{Heightmap, HeightmapFormat, LoadOptions};
 use vkterrain::terrain::tiled::{
     self, fuzz_open, level_sample, Encoding, Header, TiledHeightmap, ENTRY_BYTES, HEADER_BYTES,
 };
-use vkterrain::terrain::{PatchGrid, Placement, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, PatchGrid, Placement, TerrainInfo};
 
 /// Imports `inputs` with `opts` into `out` and returns the report.
 fn import(inputs: &[&Path], opts: &LoadOptions, tile: u32, out: &Path) -> tiled::ImportReport {
+    import_with_tables(inputs, opts, tile, 16, out)
+}
+
+/// `import`, storing the error tables of `cells`-cell patches.
+fn import_with_tables(
+    inputs: &[&Path],
+    opts: &LoadOptions,
+    tile: u32,
+    cells: u32,
+    out: &Path,
+) -> tiled::ImportReport {
     let inputs: Vec<PathBuf> = inputs.iter().map(|p| p.to_path_buf()).collect();
     let (mut source, _) = tiled::open_source(&inputs, opts).unwrap();
     let mut rows_seen = 0;
-    let report = tiled::import(source.as_mut(), tile, out, &mut |done, total| {
-        assert!(done > rows_seen && done <= total);
-        rows_seen = done;
-    })
+    let report = tiled::import(
+        source.as_mut(),
+        tile,
+        Some(cells),
+        out,
+        &mut |done, total| {
+            assert!(done > rows_seen && done <= total);
+            rows_seen = done;
+        },
+    )
     .unwrap();
     assert_eq!(
         rows_seen, report.depth as u64,
@@ -174,11 +192,11 @@ fn png_and_float_inputs_import_exactly() {
         ..LoadOptions::default()
     };
     let out = dir.path().join("dem.vkt");
-    let report = import(&[&png], &opts, 64, &out);
+    let report = import_with_tables(&[&png], &opts, 64, 32, &out);
     assert_eq!(report.levels_as_floats, 0);
     assert_eq!((report.min_height, report.max_height), (236.0, 1076.0));
-    // 2 bytes a sample, a third more for the pyramid, and 65^2 samples
-    // stored for each 64^2 cells.
+    // 2 bytes a sample, a third more for the pyramid, 65^2 samples stored
+    // for each 64^2 cells, and 56 bytes of error tables per 32^2 cells.
     assert!(
         (2.6..3.0).contains(&report.bytes_per_sample),
         "{}",
@@ -315,6 +333,56 @@ fn patch_y_bounds_from_tiles_equal_the_in_memory_ones_whether_patches_or_tiles_a
 }
 
 #[test]
+fn stored_error_tables_equal_the_ones_built_at_load_and_come_with_the_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("rough.r16");
+    let (w, d) = write_r16(&src);
+    let opts = LoadOptions {
+        size: Some((w as u64, d as u64)),
+        height_scale: 300.0,
+        ..LoadOptions::default()
+    };
+    let source = Heightmap::load(&src, &opts).unwrap();
+    for (tile, cells) in [(16, 16), (64, 16), (64, 64), (256, 4), (16, 32)] {
+        let out = dir.path().join(format!("t{tile}-{cells}.vkt"));
+        let report = import_with_tables(&[&src], &opts, tile, cells, &out);
+        let tiled = TiledHeightmap::open(&out).unwrap();
+        if tile % cells != 0 {
+            // Tiles that hold no whole number of patches store none.
+            assert_eq!(report.tables_cells_per_patch, None);
+            assert!(tiled.error_tables().unwrap().is_none());
+            continue;
+        }
+        assert_eq!(report.tables_cells_per_patch, Some(cells));
+        let (stored_cells, tess, geomip) = tiled.error_tables().unwrap().unwrap();
+        assert_eq!(stored_cells, cells);
+        let grid = PatchGrid::for_size(w, d, cells);
+        let (want_tess, want_geomip) = ErrorTable::compute_pair(&source, &grid);
+        assert_eq!(tess, want_tess, "{tile}-cell tiles, {cells}-cell patches");
+        assert_eq!(
+            geomip, want_geomip,
+            "{tile}-cell tiles, {cells}-cell patches"
+        );
+
+        // A scene of that patch size gets them with its terrain; another
+        // size builds its own.
+        let mut scene = Scene::default_scene();
+        scene.heightmap = HeightmapSource::File(out.clone());
+        scene.load = LoadOptions::default();
+        scene.cells_per_patch = cells;
+        let info = scene.terrain_info().unwrap();
+        assert_eq!(info.heightmap(), &source);
+        assert_eq!(info.stored_error_tables(), Some(&(want_tess, want_geomip)));
+        scene.cells_per_patch = if cells == 16 { 8 } else { 16 };
+        assert!(scene
+            .terrain_info()
+            .unwrap()
+            .stored_error_tables()
+            .is_none());
+    }
+}
+
+#[test]
 fn the_tile_cache_stays_within_its_budget() {
     let dir = tempfile::tempdir().unwrap();
     let src = dir.path().join("rough.r16");
@@ -361,6 +429,7 @@ fn float_terrain(dir: &Path) -> (PathBuf, Vec<u8>) {
 fn read_all(bytes: &[u8]) -> Result<(), String> {
     let map = TiledHeightmap::from_bytes(bytes.to_vec(), Path::new("bad.vkt"))
         .map_err(|e| e.to_string())?;
+    map.error_tables().map_err(|e| e.to_string())?;
     let (tx, tz) = map.header().tiles();
     for z in 0..tz {
         for x in 0..tx {
@@ -390,7 +459,7 @@ fn every_corruption_gives_an_error_naming_the_file_and_the_tile() {
         bytes[..HEADER_BYTES].copy_from_slice(&h.encode());
     };
     let expect = |bytes: &[u8], words: &[&str]| {
-        let err = read_all(bytes).expect_err("corruption is refused");
+        let err = read_all(bytes).expect_err(&format!("corruption is refused: {words:?}"));
         assert!(err.starts_with("bad.vkt: "), "names the file: {err}");
         for w in words {
             assert!(err.contains(w), "{err:?} should say {w:?}");
@@ -405,12 +474,18 @@ fn every_corruption_gives_an_error_naming_the_file_and_the_tile() {
     foreign[0] = b'P';
     expect(&foreign, &["not a tiled terrain"]);
     let mut newer = good.clone();
-    newer[8] = 3;
-    expect(&newer, &["version 3", "import the source heightmap again"]);
+    newer[8..12].copy_from_slice(&(tiled::VERSION + 1).to_le_bytes());
+    let said = format!("version {}", tiled::VERSION + 1);
+    expect(&newer, &[&said, "import the source heightmap again"]);
     // A flipped header byte.
     let mut flipped = good.clone();
     flipped[17] ^= 4;
     expect(&flipped, &["header", "checksum"]);
+    // A flipped byte in the error tables, which end the file.
+    let mut flipped = good.clone();
+    let last = flipped.len() - 3;
+    flipped[last] ^= 0x40;
+    expect(&flipped, &["error tables", "checksum"]);
     // A flipped directory byte.
     let mut flipped = good.clone();
     flipped[dir_at + 3] ^= 1;

@@ -10,7 +10,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::args::{parse_finite, parse_format, parse_size};
 use crate::output::write_atomically;
 use crate::terrain::heightmap::{HeightmapFormat, LoadOptions, DEFAULT_MAX_SAMPLES};
+use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::tiled::{self, SourceKind, DEFAULT_TILE_CELLS};
+use crate::terrain::DEFAULT_CELLS_PER_PATCH;
 
 #[derive(clap::Args, Debug)]
 pub struct ImportCmd {
@@ -27,6 +29,12 @@ pub struct ImportCmd {
     /// Cells per tile side: a power of two from 2 to 4096.
     #[arg(long, value_name = "N", default_value_t = DEFAULT_TILE_CELLS)]
     pub tile: u32,
+
+    /// Store the error tables of patches this size, so that a terrain
+    /// loaded with it starts without rebuilding them (when tiles hold a
+    /// whole number of such patches).
+    #[arg(long, value_name = "N", default_value_t = DEFAULT_CELLS_PER_PATCH)]
+    pub cells_per_patch: u32,
 
     /// File format of a single input; inferred from its extension when
     /// omitted (.r8 .r16/.raw .png .hgt .f32).
@@ -59,6 +67,7 @@ pub struct ImportCmd {
 
 pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     tiled::validate_tile_cells(cmd.tile)?;
+    validate_cells_per_patch(cmd.cells_per_patch)?;
     let defaults = LoadOptions::default();
     let opts = LoadOptions {
         format: cmd.format,
@@ -77,9 +86,13 @@ pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     );
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
-        let written = tiled::import(source.as_mut(), cmd.tile, tmp, &mut |done, _| {
-            bar.set_position(done)
-        })
+        let written = tiled::import(
+            source.as_mut(),
+            cmd.tile,
+            Some(cmd.cells_per_patch),
+            tmp,
+            &mut |done, _| bar.set_position(done),
+        )
         .with_context(|| format!("{}: import failed", cmd.out.display()))?;
         report = Some(written);
         Ok(())

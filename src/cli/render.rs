@@ -634,6 +634,9 @@ pub struct GenerateCmd {
     /// Cells per tile side of a tiled output.
     #[arg(long, value_name = "N", default_value_t = crate::terrain::tiled::DEFAULT_TILE_CELLS)]
     pub tile: u32,
+    /// Patch size whose error tables a tiled output stores.
+    #[arg(long, value_name = "N", default_value_t = crate::terrain::DEFAULT_CELLS_PER_PATCH)]
+    pub cells_per_patch: u32,
     /// Height of the top of the range in a tiled output (its heights are
     /// fixed when written); a PNG holds 0 to 1, scaled when loaded.
     #[arg(long, value_name = "S", value_parser = super::args::parse_finite)]
@@ -690,6 +693,7 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     tiled::validate_tile_cells(cmd.tile)?;
+    crate::terrain::info::validate_cells_per_patch(cmd.cells_per_patch)?;
     let height_scale = cmd.height_scale.unwrap_or(1.0);
     let mapping = IntegerMapping {
         scale: height_scale,
@@ -726,9 +730,13 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         report = Some(
-            tiled::import(source.as_mut(), cmd.tile, tmp, &mut |done, _| {
-                bar.set_position(done)
-            })
+            tiled::import(
+                source.as_mut(),
+                cmd.tile,
+                Some(cmd.cells_per_patch),
+                tmp,
+                &mut |done, _| bar.set_position(done),
+            )
             .with_context(|| format!("{}: generation failed", cmd.out.display()))?,
         );
         Ok(())

@@ -119,6 +119,14 @@ impl ErrorTable {
         (ErrorTable { errors: tess }, ErrorTable { errors: geomip })
     }
 
+    /// A table from its flat errors (`as_slice`'s layout), as a tiled
+    /// terrain stores it; None unless every error is finite and not
+    /// negative and the levels fill whole patches.
+    pub fn from_flat(errors: Vec<f32>) -> Option<ErrorTable> {
+        (errors.len() % Self::LEVELS == 0 && errors.iter().all(|e| e.is_finite() && *e >= 0.0))
+            .then_some(ErrorTable { errors })
+    }
+
     /// The flat table, ready for upload.
     pub fn as_slice(&self) -> &[f32] {
         &self.errors

@@ -12,6 +12,7 @@
 use glam::DVec2;
 
 use super::error::TerrainError;
+use super::error_table::ErrorTable;
 use super::heightmap::Heightmap;
 
 /// Cells per patch when the caller does not choose.
@@ -25,6 +26,9 @@ pub struct TerrainInfo {
     heightmap: Heightmap,
     cells_per_patch: u32,
     placement: Placement,
+    /// Error tables that came with the heightmap (a tiled terrain stores
+    /// them), for `cells_per_patch`: tess, geomip.
+    error_tables: Option<std::sync::Arc<(ErrorTable, ErrorTable)>>,
 }
 
 /// Where a grid of samples lies in the world: its size, spacing and
@@ -145,7 +149,30 @@ impl TerrainInfo {
             heightmap,
             cells_per_patch,
             placement,
+            error_tables: None,
         })
+    }
+
+    /// Takes the error tables (tess, geomip) of this heightmap and patch
+    /// size as they were computed and stored elsewhere, instead of having
+    /// `Terrain` compute them. They must be `ErrorTable::compute_pair`'s
+    /// result for it.
+    pub fn with_error_tables(self, tess: ErrorTable, geomip: ErrorTable) -> Self {
+        let patches = super::grid::PatchGrid::new(&self).patch_count();
+        assert_eq!(
+            (tess.as_slice().len(), geomip.as_slice().len()),
+            (patches * ErrorTable::LEVELS, patches * ErrorTable::LEVELS),
+            "stored tables have one row per patch"
+        );
+        TerrainInfo {
+            error_tables: Some(std::sync::Arc::new((tess, geomip))),
+            ..self
+        }
+    }
+
+    /// The error tables that came with the heightmap, if any.
+    pub fn stored_error_tables(&self) -> Option<&(ErrorTable, ErrorTable)> {
+        self.error_tables.as_deref()
     }
 
     /// Where the samples lie in the world.

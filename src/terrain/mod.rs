@@ -51,13 +51,17 @@ impl Terrain {
         let y_bounds = grid::patch_y_bounds(info.heightmap(), &grid, y_margin);
         let control_points = grid::control_points(&info, &grid, &y_bounds);
         let indices = grid.indices();
+        let error_tables = match info.stored_error_tables() {
+            Some(tables) => std::sync::OnceLock::from(tables.clone()),
+            None => std::sync::OnceLock::new(),
+        };
         Ok(Terrain {
             info,
             grid,
             y_bounds,
             control_points,
             indices,
-            error_tables: std::sync::OnceLock::new(),
+            error_tables,
         })
     }
 

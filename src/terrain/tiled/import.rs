@@ -19,6 +19,7 @@ use super::{
     Header, TiledError, TiledHeightmap, HEADER_BYTES, MAX_SIDE,
 };
 use crate::terrain::heightmap::{integer_height, Heightmap, HeightmapFormat, LoadOptions};
+use crate::terrain::{ErrorTable, PatchGrid};
 
 /// The mapping from integer samples to heights that the integer loaders
 /// use: `h = scale * v / divisor + offset`, in f64, rounded once to f32.
@@ -562,6 +563,8 @@ pub struct ImportReport {
     /// Largest difference between a stored height and its input: 0, the
     /// storage is exact.
     pub max_error: f32,
+    /// The patch size whose error tables are stored, if any.
+    pub tables_cells_per_patch: Option<u32>,
     pub file_bytes: u64,
     pub bytes_per_sample: f64,
     pub seconds: f64,
@@ -644,13 +647,16 @@ fn tile_levels(
 }
 
 /// Reads `source` and writes it to `out` as a tiled terrain of
-/// `tile_cells`-cell tiles. `progress(rows_done, rows)` is called after
+/// `tile_cells`-cell tiles, with the error tables of
+/// `tables_cells_per_patch`-cell patches where tiles hold a whole number
+/// of them. `progress(rows_done, rows)` is called after
 /// each row of tiles. On an error the file is left partly written: the
 /// command writes it under a temporary name and renames it when complete
 /// (`output::write_atomically`).
 pub fn import(
     source: &mut dyn RowSource,
     tile_cells: u32,
+    tables_cells_per_patch: Option<u32>,
     out: &Path,
     progress: &mut dyn FnMut(u64, u64),
 ) -> Result<ImportReport, TiledError> {
@@ -672,6 +678,7 @@ pub fn import(
         max_height: f32::NEG_INFINITY,
         directory_offset: 0,
         directory_crc: 0,
+        tables: None,
     };
     let (tiles_x, tiles_z) = header.tiles();
     debug_assert_eq!(tiles_x, tile_count(header.width, tile_cells));
@@ -695,26 +702,44 @@ pub fn import(
         levels_as_codes: 0,
         levels_as_floats: 0,
         max_error: 0.0,
+        tables_cells_per_patch: None,
         file_bytes: 0,
         bytes_per_sample: 0.0,
         seconds: 0.0,
     };
     let t = tile_cells as usize;
-    // Rows r0..=r0 + T of the terrain; the last is the next band's first.
-    let mut band = vec![0.0f32; (t + 1) * width];
-    let mut filled = 0usize;
+    // Rows r0..=r1 + 1 of the terrain: the row after the band lets the
+    // error tables interpolate across its last row as they would on the
+    // whole map. The band's last rows are the next band's first.
+    let mut band = vec![0.0f32; (t + 2) * width];
+    let mut loaded = 0usize;
     let mapping = source.mapping();
+    let tables_cells = tables_cells_per_patch.filter(|&n| tile_cells % n == 0);
+    let (mut tess_table, mut geomip_table) = (Vec::new(), Vec::new());
     for tz in 0..tiles_z {
         let [_, _, r0, r1] = header.tile_rect(0, tz);
-        let rows = (r1 - r0) as usize + 1;
+        let (r0, r1) = (r0 as usize, r1 as usize);
+        let rows = r1 - r0 + 1;
         if tz > 0 {
-            band.copy_within(t * width..(t + 1) * width, 0);
+            let previous = r0 - t;
+            band.copy_within(t * width..(loaded - previous) * width, 0);
         }
-        for r in filled.max(r0 as usize)..=r1 as usize {
-            let local = r - r0 as usize;
+        let last = (r1 + 1).min(depth - 1);
+        for r in loaded..=last {
+            let local = r - r0;
             source.read_row(&mut band[local * width..(local + 1) * width])?;
         }
-        filled = r1 as usize + 1;
+        loaded = last + 1;
+        if let Some(cells) = tables_cells {
+            let map_rows = last - r0 + 1;
+            let map = Heightmap::from_heights(width, map_rows, band[..map_rows * width].to_vec())
+                .map_err(|e| TiledError::Load(Box::new(e)))?;
+            let grid = PatchGrid::for_size(width, map_rows, cells);
+            let (tess, geomip) = ErrorTable::compute_pair(&map, &grid);
+            let keep = (r1 - r0).div_ceil(cells as usize) * grid.patch_cols() * ErrorTable::LEVELS;
+            tess_table.extend_from_slice(&tess.as_slice()[..keep]);
+            geomip_table.extend_from_slice(&geomip.as_slice()[..keep]);
+        }
         let band_rows = &band[..rows * width];
         let encoded: Vec<Vec<EncodedLevel>> = (0..tiles_x)
             .into_par_iter()
@@ -743,7 +768,7 @@ pub fn import(
                 offset += e.bytes.len() as u64;
             }
         }
-        progress(filled as u64, depth as u64);
+        progress(r1 as u64 + 1, depth as u64);
     }
     let directory: Vec<u8> = entries
         .iter()
@@ -752,6 +777,22 @@ pub fn import(
     file.write_all(&directory).map_err(io)?;
     header.directory_offset = offset;
     header.directory_crc = crc32fast::hash(&directory);
+    offset += directory.len() as u64;
+    if let Some(cells) = tables_cells {
+        let tables: Vec<u8> = tess_table
+            .iter()
+            .chain(&geomip_table)
+            .flat_map(|e| e.to_le_bytes())
+            .collect();
+        debug_assert_eq!(tables.len() as u64, header.tables_bytes(cells));
+        file.write_all(&tables).map_err(io)?;
+        header.tables = Some(super::TablesAt {
+            offset,
+            cells_per_patch: cells,
+            crc: crc32fast::hash(&tables),
+        });
+        offset += tables.len() as u64;
+    }
     let mut file = file.into_inner().map_err(|e| io(e.into_error()))?;
     file.seek(SeekFrom::Start(0)).map_err(io)?;
     file.write_all(&header.encode()).map_err(io)?;
@@ -759,7 +800,8 @@ pub fn import(
     drop(file);
     report.min_height = header.min_height;
     report.max_height = header.max_height;
-    report.file_bytes = offset + directory.len() as u64;
+    report.file_bytes = offset;
+    report.tables_cells_per_patch = tables_cells;
     report.bytes_per_sample = report.file_bytes as f64 / (width as f64 * depth as f64);
     report.seconds = started.elapsed().as_secs_f64();
     Ok(report)

@@ -5,13 +5,15 @@
 //! `vkterrain import` writes one (`import`), and every `--heightmap` opens
 //! one, recognised by its header (`TiledHeightmap::is_tiled`).
 //!
-//! # Layout (version 2, little-endian throughout)
+//! # Layout (version 3, little-endian throughout)
 //!
 //! ```text
 //! header      HEADER_BYTES bytes at offset 0 (`Header`)
 //! tile data   the encoded samples of every tile level, in any order
 //! directory   one ENTRY_BYTES entry per tile level (`Entry`), tile rows
 //!             top to bottom, tiles left to right, levels finest first
+//! tables      optional: the error tables of one patch size (`ErrorTable`),
+//!             the tess path's then the geomip path's, patches row-major
 //! ```
 //!
 //! **Tiles.** With `T` cells per tile, tile (tx, tz) covers sample columns
@@ -32,9 +34,16 @@
 //! is stored as floats. Heights read back are therefore exactly the heights
 //! imported.
 //!
+//! **Error tables.** Building a terrain's error tables reads every sample
+//! and takes seconds on a large map, so the importer stores them for one
+//! patch size (`--cells-per-patch`, when tiles are a whole number of
+//! patches), computed on the same samples as `ErrorTable::compute_pair`
+//! would at load: a terrain loaded with that patch size starts without
+//! rebuilding them.
+//!
 //! **Integrity.** The header carries a magic number, a format version and
-//! a CRC-32 of itself; the directory and every tile level carry their own
-//! CRC-32. A reader checks the header and directory when it opens a file
+//! a CRC-32 of itself; the directory, the tables and every tile level carry
+//! their own CRC-32. A reader checks the header and directory when it opens a file
 //! and each tile level when it reads it, and names the tile in any error.
 
 mod import;
@@ -43,7 +52,9 @@ mod reader;
 pub use import::{
     import, open_source, ImportReport, IntegerMapping, MemoryRows, RowSource, SourceKind,
 };
-pub use reader::{fuzz_open, fuzz_open_resealed, TileLevel, TiledHeightmap, DEFAULT_CACHE_BYTES};
+pub use reader::{
+    fuzz_open, fuzz_open_resealed, StoredTables, TileLevel, TiledHeightmap, DEFAULT_CACHE_BYTES,
+};
 
 use std::path::PathBuf;
 
@@ -51,9 +62,11 @@ use std::path::PathBuf;
 /// mangled by a text-mode copy.
 pub const MAGIC: [u8; 8] = *b"VKTERR\r\n";
 /// The layout version this build reads and writes.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Size of the header.
-pub const HEADER_BYTES: usize = 64;
+pub const HEADER_BYTES: usize = 80;
+/// Where the header's own checksum sits: its last four bytes.
+const HEADER_CRC_AT: usize = HEADER_BYTES - 4;
 /// Size of one directory entry.
 pub const ENTRY_BYTES: usize = 64;
 /// Smallest and largest cells per tile side.
@@ -98,6 +111,9 @@ pub enum TiledError {
 
     #[error("{path}: corrupt tiled terrain directory: {what}")]
     Directory { path: PathBuf, what: String },
+
+    #[error("{path}: corrupt tiled terrain error tables: {what}")]
+    Tables { path: PathBuf, what: String },
 
     #[error("{path}: tile ({tx}, {tz}) level {level}: {what}")]
     Tile {
@@ -159,9 +175,29 @@ pub struct Header {
     pub max_height: f32,
     pub directory_offset: u64,
     pub directory_crc: u32,
+    /// The stored error tables, if any.
+    pub tables: Option<TablesAt>,
+}
+
+/// Where a tiled terrain's error tables are, and for which patch size.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TablesAt {
+    pub offset: u64,
+    pub cells_per_patch: u32,
+    pub crc: u32,
 }
 
 impl Header {
+    /// Bytes of the error tables for patches of `cells_per_patch` cells.
+    pub fn tables_bytes(&self, cells_per_patch: u32) -> u64 {
+        let grid = crate::terrain::PatchGrid::for_size(
+            self.width as usize,
+            self.depth as usize,
+            cells_per_patch,
+        );
+        2 * grid.patch_count() as u64 * crate::terrain::ErrorTable::LEVELS as u64 * 4
+    }
+
     /// Tiles across and down.
     pub fn tiles(&self) -> (u32, u32) {
         (
@@ -217,9 +253,14 @@ impl Header {
         b[36..40].copy_from_slice(&self.max_height.to_le_bytes());
         b[40..48].copy_from_slice(&self.directory_offset.to_le_bytes());
         b[48..52].copy_from_slice(&self.directory_crc.to_le_bytes());
-        // 52..60 reserved, zero.
-        let crc = crc32fast::hash(&b[..60]);
-        b[60..64].copy_from_slice(&crc.to_le_bytes());
+        if let Some(t) = self.tables {
+            b[52..60].copy_from_slice(&t.offset.to_le_bytes());
+            b[60..64].copy_from_slice(&t.cells_per_patch.to_le_bytes());
+            b[64..68].copy_from_slice(&t.crc.to_le_bytes());
+        }
+        // 68..76 reserved, zero.
+        let crc = crc32fast::hash(&b[..HEADER_CRC_AT]);
+        b[HEADER_CRC_AT..].copy_from_slice(&crc.to_le_bytes());
         b
     }
 
@@ -253,8 +294,8 @@ impl Header {
                 b.len()
             )));
         }
-        let stored_crc = u32_at(b, 60);
-        if crc32fast::hash(&b[..60]) != stored_crc {
+        let stored_crc = u32_at(b, HEADER_CRC_AT);
+        if crc32fast::hash(&b[..HEADER_CRC_AT]) != stored_crc {
             return Err(bad("checksum mismatch".into()));
         }
         let header_bytes = u32_at(b, 12);
@@ -272,7 +313,14 @@ impl Header {
             max_height: f32::from_le_bytes(b[36..40].try_into().expect("4 bytes")),
             directory_offset: u64::from_le_bytes(b[40..48].try_into().expect("8 bytes")),
             directory_crc: u32_at(b, 48),
+            tables: None,
         };
+        let tables_offset = u64::from_le_bytes(b[52..60].try_into().expect("8 bytes"));
+        let tables = (tables_offset != 0).then(|| TablesAt {
+            offset: tables_offset,
+            cells_per_patch: u32_at(b, 60),
+            crc: u32_at(b, 64),
+        });
         let (w, d) = (u64::from(header.width), u64::from(header.depth));
         if w < 2 || d < 2 || w > MAX_SIDE || d > MAX_SIDE {
             return Err(bad(format!(
@@ -301,14 +349,34 @@ impl Header {
             .directory_offset
             .checked_add(header.directory_bytes())
             .filter(|&end| header.directory_offset >= HEADER_BYTES as u64 && end <= file_len);
-        if end.is_none() {
+        let Some(directory_end) = end else {
             return Err(bad(format!(
                 "the directory ({} bytes at offset {}) does not lie inside the file of {file_len} bytes (truncated?)",
                 header.directory_bytes(),
                 header.directory_offset
             )));
+        };
+        if let Some(t) = tables {
+            let n = t.cells_per_patch;
+            if crate::terrain::info::validate_cells_per_patch(n).is_err()
+                || header.tile_cells % n != 0
+            {
+                return Err(bad(format!(
+                    "error tables for {n}-cell patches, which {}-cell tiles cannot hold",
+                    header.tile_cells
+                )));
+            }
+            let bytes = header.tables_bytes(n);
+            if !(t.offset >= directory_end
+                && t.offset.checked_add(bytes).is_some_and(|e| e <= file_len))
+            {
+                return Err(bad(format!(
+                    "the error tables ({bytes} bytes at offset {}) do not lie after the directory inside the file of {file_len} bytes (truncated?)",
+                    t.offset
+                )));
+            }
         }
-        Ok(header)
+        Ok(Header { tables, ..header })
     }
 }
 
@@ -547,6 +615,7 @@ mod tests {
             max_height: 812.25,
             directory_offset: 4096,
             directory_crc: 0xdead_beef,
+            tables: None,
         };
         let path = std::path::Path::new("t.vkt");
         let bytes = header.encode();
@@ -556,6 +625,23 @@ mod tests {
         assert_eq!(header.tile_rect(3, 2), [768, 1024, 512, 699]);
         assert_eq!(header.level_size(3, 2, 0), (257, 188));
         assert_eq!(header.level_size(3, 2, 8), (2, 2));
+        let with_tables = Header {
+            tables: Some(TablesAt {
+                offset: len,
+                cells_per_patch: 32,
+                crc: 7,
+            }),
+            ..header
+        };
+        let tables_end = len + with_tables.tables_bytes(32);
+        assert_eq!(
+            Header::decode(&with_tables.encode(), tables_end, path).unwrap(),
+            with_tables
+        );
+        let err = Header::decode(&with_tables.encode(), tables_end - 1, path)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("error tables"), "{err}");
         let mut flipped = bytes;
         flipped[20] ^= 1;
         let err = Header::decode(&flipped, len, path).unwrap_err().to_string();

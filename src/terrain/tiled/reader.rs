@@ -8,10 +8,14 @@ use std::sync::{Arc, Mutex};
 
 use super::{Encoding, Entry, Header, TiledError, ENTRY_BYTES, HEADER_BYTES};
 use crate::terrain::heightmap::{blend_cell, locate_cell, Heightmap};
+use crate::terrain::ErrorTable;
 
 /// Decoded tile levels a reader keeps by default: 64 MiB, 256 full tiles
 /// of 257^2 samples.
 pub const DEFAULT_CACHE_BYTES: usize = 64 << 20;
+
+/// Error tables as stored: (cells per patch, tess table, geomip table).
+pub type StoredTables = (u32, ErrorTable, ErrorTable);
 
 /// What a reader reads from: a file, or bytes in memory (tests, fuzzing).
 trait Source: Read + Seek + Send {}
@@ -343,6 +347,38 @@ impl TiledHeightmap {
         ))
     }
 
+    /// The error tables stored at import, with the patch size they are
+    /// for: (cells per patch, the tess path's table, the geomip path's).
+    pub fn error_tables(&self) -> Result<Option<StoredTables>, TiledError> {
+        let Some(at) = self.header.tables else {
+            return Ok(None);
+        };
+        let bad = |what: String| TiledError::Tables {
+            path: self.path.clone(),
+            what,
+        };
+        let mut bytes = vec![0u8; self.header.tables_bytes(at.cells_per_patch) as usize];
+        {
+            let mut source = self.source.lock().expect("source lock");
+            source
+                .seek(SeekFrom::Start(at.offset))
+                .and_then(|_| source.read_exact(&mut bytes))
+                .map_err(|e| bad(format!("cannot read them: {e}")))?;
+        }
+        if crc32fast::hash(&bytes) != at.crc {
+            return Err(bad("checksum mismatch".into()));
+        }
+        let mut errors: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        let geomip = errors.split_off(errors.len() / 2);
+        match (ErrorTable::from_flat(errors), ErrorTable::from_flat(geomip)) {
+            (Some(tess), Some(geomip)) => Ok(Some((at.cells_per_patch, tess, geomip))),
+            _ => Err(bad("an error is negative or not a finite number".into())),
+        }
+    }
+
     /// Height of the surface at world (x, z) with the samples placed by
     /// `placement` (which must be this terrain's size), or None outside the
     /// terrain: `TerrainInfo::height_at`, reading only the tile it needs.
@@ -451,6 +487,9 @@ pub fn fuzz_open(data: &[u8]) -> bool {
     let Ok(map) = TiledHeightmap::from_bytes(data.to_vec(), Path::new("fuzz-input")) else {
         return false;
     };
+    if map.error_tables().is_err() {
+        return false;
+    }
     let (tiles_x, tiles_z) = map.header().tiles();
     // A valid file this small has few tiles; the cap keeps a fuzzer's
     // header from asking for billions of reads.
@@ -484,9 +523,16 @@ pub fn fuzz_open(data: &[u8]) -> bool {
 pub fn fuzz_open_resealed(data: &[u8]) -> bool {
     let mut b = data.to_vec();
     if b.len() >= HEADER_BYTES && b[..8] == super::MAGIC {
-        let crc = crc32fast::hash(&b[..60]);
-        b[60..64].copy_from_slice(&crc.to_le_bytes());
+        let crc_at = HEADER_BYTES - 4;
+        let crc = crc32fast::hash(&b[..crc_at]);
+        b[crc_at..HEADER_BYTES].copy_from_slice(&crc.to_le_bytes());
         if let Ok(mut header) = Header::decode(&b, b.len() as u64, Path::new("fuzz-input")) {
+            if let Some(mut t) = header.tables {
+                let start = t.offset as usize;
+                let end = start + header.tables_bytes(t.cells_per_patch) as usize;
+                t.crc = crc32fast::hash(&b[start..end]);
+                header.tables = Some(t);
+            }
             let start = header.directory_offset as usize;
             let end = start + header.directory_bytes() as usize;
             for at in (start..end).step_by(ENTRY_BYTES) {
