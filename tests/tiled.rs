@@ -49,8 +49,14 @@ fn import_with_tables(
     report
 }
 
-/// A rough 16-bit map with a remainder on both axes: 203x150 samples.
-fn write_r16(path: &Path) -> (usize, usize) {
+/// A rough 16-bit map with a remainder on both axes, 203x150 samples,
+/// written to `dir/rough.r16`: its path, load options mapping it with
+/// `height_scale` and `height_offset`, and its size.
+fn rough_r16(
+    dir: &Path,
+    height_scale: f64,
+    height_offset: f64,
+) -> (PathBuf, LoadOptions, (usize, usize)) {
     let (w, d) = (203usize, 150usize);
     let bytes: Vec<u8> = (0..w * d)
         .flat_map(|i| {
@@ -59,8 +65,15 @@ fn write_r16(path: &Path) -> (usize, usize) {
             (v as u16).to_le_bytes()
         })
         .collect();
-    std::fs::write(path, bytes).unwrap();
-    (w, d)
+    let path = dir.join("rough.r16");
+    std::fs::write(&path, bytes).unwrap();
+    let opts = LoadOptions {
+        size: Some((w as u64, d as u64)),
+        height_scale,
+        height_offset,
+        ..LoadOptions::default()
+    };
+    (path, opts, (w, d))
 }
 
 /// Every sample of every level of `tiled` against the loaded source.
@@ -96,14 +109,7 @@ fn assert_exact(tiled: &TiledHeightmap, source: &Heightmap) {
 #[test]
 fn raw16_imports_exactly_as_16_bit_codes_and_answers_height_at_like_the_loader() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("rough.r16");
-    let (w, d) = write_r16(&src);
-    let opts = LoadOptions {
-        size: Some((w as u64, d as u64)),
-        height_scale: 1234.5,
-        height_offset: -17.25,
-        ..LoadOptions::default()
-    };
+    let (src, opts, (w, d)) = rough_r16(dir.path(), 1234.5, -17.25);
     let out = dir.path().join("rough.vkt");
     let report = import(&[&src], &opts, 16, &out);
     assert_eq!((report.width, report.depth), (w, d));
@@ -310,12 +316,7 @@ fn srtm_tiles_mosaic_by_name_with_voids_filled_and_sea_where_a_tile_is_missing()
 #[test]
 fn patch_y_bounds_from_tiles_equal_the_in_memory_ones_whether_patches_or_tiles_are_larger() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("rough.r16");
-    let (w, d) = write_r16(&src);
-    let opts = LoadOptions {
-        size: Some((w as u64, d as u64)),
-        ..LoadOptions::default()
-    };
+    let (src, opts, (w, d)) = rough_r16(dir.path(), 1.0, 0.0);
     let source = Heightmap::load(&src, &opts).unwrap();
     for tile in [4, 16, 64] {
         let out = dir.path().join(format!("t{tile}.vkt"));
@@ -335,13 +336,7 @@ fn patch_y_bounds_from_tiles_equal_the_in_memory_ones_whether_patches_or_tiles_a
 #[test]
 fn stored_error_tables_equal_the_ones_built_at_load_and_come_with_the_scene() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("rough.r16");
-    let (w, d) = write_r16(&src);
-    let opts = LoadOptions {
-        size: Some((w as u64, d as u64)),
-        height_scale: 300.0,
-        ..LoadOptions::default()
-    };
+    let (src, opts, (w, d)) = rough_r16(dir.path(), 300.0, 0.0);
     let source = Heightmap::load(&src, &opts).unwrap();
     for (tile, cells) in [(16, 16), (64, 16), (64, 64), (256, 4), (16, 32)] {
         let out = dir.path().join(format!("t{tile}-{cells}.vkt"));
@@ -385,12 +380,7 @@ fn stored_error_tables_equal_the_ones_built_at_load_and_come_with_the_scene() {
 #[test]
 fn the_tile_cache_stays_within_its_budget() {
     let dir = tempfile::tempdir().unwrap();
-    let src = dir.path().join("rough.r16");
-    let (w, d) = write_r16(&src);
-    let opts = LoadOptions {
-        size: Some((w as u64, d as u64)),
-        ..LoadOptions::default()
-    };
+    let (src, opts, (w, d)) = rough_r16(dir.path(), 1.0, 0.0);
     let out = dir.path().join("rough.vkt");
     import(&[&src], &opts, 16, &out);
     // Three full tiles' worth (17^2 floats each).

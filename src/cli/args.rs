@@ -147,24 +147,8 @@ pub struct TerrainArgs {
     #[arg(long, value_name = "PATH")]
     pub heightmap: Option<PathBuf>,
 
-    /// File format; inferred from the extension when omitted
-    /// (.r8 .r16/.raw .png .hgt .f32).
-    #[arg(long, value_parser = parse_format)]
-    pub format: Option<HeightmapFormat>,
-
-    /// Samples across and down for headerless files, e.g. 403x344; square
-    /// files are inferred.
-    #[arg(long, value_name = "WxD", value_parser = parse_size)]
-    pub size: Option<(u64, u64)>,
-
-    /// Height of the format's largest value (255, 65535, or 32767 for .hgt);
-    /// for float input, the factor applied to each sample.
-    #[arg(long, value_name = "S", value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_scale: Option<f64>,
-
-    /// Added to every height after scaling.
-    #[arg(long, value_name = "O", value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_offset: Option<f64>,
+    #[command(flatten)]
+    pub samples: SampleArgs,
 
     /// World distance between samples along x and z (one number for both).
     #[arg(long, value_name = "X[,Z]", value_parser = parse_spacing)]
@@ -186,6 +170,39 @@ pub struct TerrainArgs {
     /// allocating).
     #[arg(long, value_name = "N")]
     pub max_samples: Option<u64>,
+}
+
+/// How a heightmap file's samples are read and mapped to heights.
+#[derive(Args, Clone, Debug)]
+pub struct SampleArgs {
+    /// File format; inferred from the extension when omitted
+    /// (.r8 .r16/.raw .png .hgt .f32).
+    #[arg(long, value_parser = parse_format)]
+    pub format: Option<HeightmapFormat>,
+
+    /// Samples across and down for headerless files, e.g. 403x344; square
+    /// files are inferred.
+    #[arg(long, value_name = "WxD", value_parser = parse_size)]
+    pub size: Option<(u64, u64)>,
+
+    /// Height of the format's largest value (255, 65535, or 32767 for .hgt);
+    /// for float input, the factor applied to each sample.
+    #[arg(long, value_name = "S", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_scale: Option<f64>,
+
+    /// Added to every height after scaling.
+    #[arg(long, value_name = "O", value_parser = parse_finite, allow_negative_numbers = true)]
+    pub height_offset: Option<f64>,
+}
+
+impl SampleArgs {
+    /// Applies the options given over `load`'s.
+    pub fn apply(&self, load: &mut LoadOptions) {
+        load.format = self.format.or(load.format);
+        load.size = self.size.or(load.size);
+        load.height_scale = self.height_scale.unwrap_or(load.height_scale);
+        load.height_offset = self.height_offset.unwrap_or(load.height_offset);
+    }
 }
 
 pub fn parse_format(s: &str) -> Result<HeightmapFormat, String> {
@@ -220,10 +237,7 @@ impl TerrainArgs {
             scene.pixel_error = Some(crate::scene::DEFAULT_PIXEL_ERROR);
         }
         let load = &mut scene.load;
-        load.format = self.format.or(load.format);
-        load.size = self.size.or(load.size);
-        load.height_scale = self.height_scale.unwrap_or(load.height_scale);
-        load.height_offset = self.height_offset.unwrap_or(load.height_offset);
+        self.samples.apply(load);
         load.smooth |= self.smooth;
         load.luminance |= self.luminance;
         load.max_samples = self.max_samples.unwrap_or(load.max_samples);

@@ -7,9 +7,9 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::args::{parse_finite, parse_format, parse_size};
+use super::args::SampleArgs;
 use crate::output::write_atomically;
-use crate::terrain::heightmap::{HeightmapFormat, LoadOptions, DEFAULT_MAX_SAMPLES};
+use crate::terrain::heightmap::{LoadOptions, DEFAULT_MAX_SAMPLES};
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::tiled::{self, SourceKind, DEFAULT_TILE_CELLS};
 use crate::terrain::DEFAULT_CELLS_PER_PATCH;
@@ -36,24 +36,8 @@ pub struct ImportCmd {
     #[arg(long, value_name = "N", default_value_t = DEFAULT_CELLS_PER_PATCH)]
     pub cells_per_patch: u32,
 
-    /// File format of a single input; inferred from its extension when
-    /// omitted (.r8 .r16/.raw .png .hgt .f32).
-    #[arg(long, value_parser = parse_format)]
-    pub format: Option<HeightmapFormat>,
-
-    /// Samples across and down for headerless files, e.g. 403x344; square
-    /// files are inferred.
-    #[arg(long, value_name = "WxD", value_parser = parse_size)]
-    pub size: Option<(u64, u64)>,
-
-    /// Height of the format's largest value (255, 65535, or 32767 for .hgt);
-    /// for float input, the factor applied to each sample.
-    #[arg(long, value_name = "S", value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_scale: Option<f64>,
-
-    /// Added to every height after scaling.
-    #[arg(long, value_name = "O", value_parser = parse_finite, allow_negative_numbers = true)]
-    pub height_offset: Option<f64>,
+    #[command(flatten)]
+    pub samples: SampleArgs,
 
     /// Accept colour PNGs by converting them to luminance (loaded whole).
     #[arg(long)]
@@ -68,16 +52,12 @@ pub struct ImportCmd {
 pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     tiled::validate_tile_cells(cmd.tile)?;
     validate_cells_per_patch(cmd.cells_per_patch)?;
-    let defaults = LoadOptions::default();
-    let opts = LoadOptions {
-        format: cmd.format,
-        size: cmd.size,
-        height_scale: cmd.height_scale.unwrap_or(defaults.height_scale),
-        height_offset: cmd.height_offset.unwrap_or(defaults.height_offset),
-        smooth: false,
+    let mut opts = LoadOptions {
         luminance: cmd.luminance,
         max_samples: cmd.max_samples,
+        ..LoadOptions::default()
     };
+    cmd.samples.apply(&mut opts);
     let (mut source, kind) = tiled::open_source(&cmd.inputs, &opts)?;
     let bar = ProgressBar::new(source.depth() as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} rows, {eta} left")

@@ -56,22 +56,35 @@ fn gradient_noise(seed: u64, x: f64, y: f64) -> f64 {
 /// (0: never), in about [-1, 1]. Tileable textures use a period that
 /// divides their size.
 pub(crate) fn periodic_noise(seed: u64, x: f64, y: f64, period: i64) -> f64 {
+    let wrap = |i: i64| if period > 0 { i.rem_euclid(period) } else { i };
+    lattice_noise(x, y, |i, j, dx, dy| {
+        let angle = (lattice_hash(seed, wrap(i), wrap(j)) >> 11) as f64 / (1u64 << 53) as f64
+            * std::f64::consts::TAU;
+        angle.cos() * dx + angle.sin() * dy
+    })
+}
+
+/// The hash that picks a lattice point's gradient.
+#[inline]
+fn lattice_hash(seed: u64, i: i64, j: i64) -> u64 {
+    let mut h = seed
+        ^ (i as u64).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)
+        ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    h ^= h >> 31;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 29;
+    h
+}
+
+/// Gradient noise at (x, y): `grad(i, j, dx, dy)` is lattice point
+/// (i, j)'s gradient dotted with the offset from it, blended over the
+/// cell with a quintic fade (continuous second derivative, no grid
+/// creases); in about [-1, 1].
+#[inline]
+fn lattice_noise(x: f64, y: f64, grad: impl Fn(i64, i64, f64, f64) -> f64) -> f64 {
     let (x0, y0) = (x.floor(), y.floor());
     let (fx, fy) = (x - x0, y - y0);
     let (ix, iy) = (x0 as i64, y0 as i64);
-    let wrap = |i: i64| if period > 0 { i.rem_euclid(period) } else { i };
-    let grad = |i: i64, j: i64, dx: f64, dy: f64| {
-        let (i, j) = (wrap(i), wrap(j));
-        let mut h = seed
-            ^ (i as u64).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)
-            ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        h ^= h >> 31;
-        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h ^= h >> 29;
-        let angle = (h >> 11) as f64 / (1u64 << 53) as f64 * std::f64::consts::TAU;
-        angle.cos() * dx + angle.sin() * dy
-    };
-    // Quintic fade: continuous second derivative, no grid creases.
     let fade = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
     let (u, v) = (fade(fx), fade(fy));
     let a = grad(ix, iy, fx, fy);
@@ -346,28 +359,10 @@ fn table_noise(seed: u64, x: f64, y: f64) -> f64 {
             (a.cos(), a.sin())
         })
     });
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let (ix, iy) = (x0 as i64, y0 as i64);
-    let grad = |i: i64, j: i64, dx: f64, dy: f64| {
-        let mut h = seed
-            ^ (i as u64).wrapping_mul(0x8CB9_2BA7_2F3D_8DD7)
-            ^ (j as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        h ^= h >> 31;
-        h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        h ^= h >> 29;
-        let (gx, gy) = table[(h >> 56) as usize];
+    lattice_noise(x, y, |i, j, dx, dy| {
+        let (gx, gy) = table[(lattice_hash(seed, i, j) >> 56) as usize];
         gx * dx + gy * dy
-    };
-    let fade = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
-    let (u, v) = (fade(fx), fade(fy));
-    let a = grad(ix, iy, fx, fy);
-    let b = grad(ix + 1, iy, fx - 1.0, fy);
-    let c = grad(ix, iy + 1, fx, fy - 1.0);
-    let d = grad(ix + 1, iy + 1, fx - 1.0, fy - 1.0);
-    let top = a + u * (b - a);
-    let bottom = c + u * (d - c);
-    (top + v * (bottom - top)) * std::f64::consts::SQRT_2
+    })
 }
 
 /// Rows of the banded generator in memory, by global row.
