@@ -101,6 +101,12 @@ const _: () = assert!(DRAW_COMMAND_BYTES == 20);
 
 const PUSH_SIZE: u32 = 32;
 
+/// Draws one frame may list for a terrain of `patches` patches: the tess
+/// path's batches (at most one per patch) and its full-resolution patches.
+fn list_capacity(patches: u64) -> u64 {
+    2 * patches
+}
+
 /// The pyramid's levels over a `width` x `height` depth: level l has
 /// ceil(size / 2^(l+1)) texels a side, down to 1x1. Mirror of
 /// `level_size` in glsl/occlusion.comp.
@@ -283,10 +289,9 @@ impl Occlusion {
         Ok(())
     }
 
-    /// Draws one frame may list: the tess path's batches (at most one per
-    /// patch) and its full-resolution patches.
+    /// Draws one frame may list (`list_capacity`).
     fn list_capacity(&self) -> usize {
-        2 * self.patches
+        list_capacity(self.patches as u64) as usize
     }
 
     /// The indirect commands of the listed draws for `phase`: the buffer,
@@ -561,15 +566,17 @@ impl Culling {
                     &format!("terrain.occlusion.{name}[{i}]"),
                 )
             };
-            // Room for two draws a patch (see `list_capacity`).
+            // A patch range (two u32) per listed draw, and a command per
+            // listed draw for each of the two passes.
+            let capacity = list_capacity(patches);
             let draw_patches = list(
                 "draw_patches",
-                2 * 8 * patches,
+                capacity * size_of::<[u32; 2]>() as u64,
                 vk::BufferUsageFlags::empty(),
             )?;
             let commands = list(
                 "draw_commands",
-                2 * 2 * patches * DRAW_COMMAND_BYTES,
+                2 * capacity * DRAW_COMMAND_BYTES,
                 vk::BufferUsageFlags::INDIRECT_BUFFER,
             )?;
             for (binding, buffer) in [
