@@ -12,11 +12,9 @@ use clap::{Parser, Subcommand};
 use glam::DVec2;
 use serde::Serialize;
 
-use crate::scene::HeightmapSource;
-use crate::terrain::heightmap::check_tiled_options;
+use crate::scene::Scene;
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::tiled::TiledHeightmap;
-use crate::terrain::{PatchGrid, PatchId, Placement, Terrain, TerrainInfo};
+use crate::terrain::{PatchGrid, PatchId, Placement, Terrain};
 use args::{parse_point, TerrainArgs};
 
 pub mod bench;
@@ -122,15 +120,16 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
     }
 }
 
-/// Loads the terrain the arguments name and places it in the world.
-pub fn load_terrain_info(args: &TerrainArgs, cells_per_patch: Option<u32>) -> Result<TerrainInfo> {
+/// The scene the arguments name, with `cells_per_patch` in place of its
+/// own when given.
+fn scene_with_patches(args: &TerrainArgs, cells_per_patch: Option<u32>) -> Result<Scene> {
     let mut scene = args.scene()?;
     if let Some(n) = cells_per_patch {
         // Checked first: a bad patch size shouldn't wait for a large file.
         validate_cells_per_patch(n)?;
         scene.cells_per_patch = n;
     }
-    Ok(scene.terrain_info()?)
+    Ok(scene)
 }
 
 #[derive(Serialize)]
@@ -146,38 +145,30 @@ fn height(cmd: HeightCmd, out: &mut dyn Write) -> Result<()> {
         None => cmd.at.clone(),
     };
     let scene = cmd.terrain.scene()?;
-    if let HeightmapSource::File(path) = &scene.heightmap {
-        if TiledHeightmap::is_tiled(path) && !scene.load.smooth {
-            // Only the tiles the points fall in are read (smoothing needs
-            // the whole map, loaded below).
-            check_tiled_options(path, &scene.load)?;
-            let map = TiledHeightmap::open(path)?;
-            let placement =
-                Placement::new(map.width(), map.depth(), scene.cell_spacing, scene.origin)?;
-            let answers = points
-                .iter()
-                .map(|p| {
-                    Ok(HeightAnswer {
-                        x: p.x,
-                        z: p.y,
-                        height: map.height_at(&placement, p.x, p.y)?,
-                    })
+    let answers: Vec<HeightAnswer> = match scene.open_tiled()? {
+        // Only the tiles the points fall in are read.
+        Some((map, placement)) => points
+            .iter()
+            .map(|p| {
+                Ok(HeightAnswer {
+                    x: p.x,
+                    z: p.y,
+                    height: map.height_at(&placement, p.x, p.y)?,
                 })
-                .collect::<Result<Vec<_>>>()?;
-            serde_json::to_writer_pretty(&mut *out, &answers)?;
-            writeln!(out)?;
-            return Ok(());
+            })
+            .collect::<Result<_>>()?,
+        None => {
+            let info = scene.terrain_info()?;
+            points
+                .iter()
+                .map(|p| HeightAnswer {
+                    x: p.x,
+                    z: p.y,
+                    height: info.height_at(p.x, p.y),
+                })
+                .collect()
         }
-    }
-    let info = scene.terrain_info()?;
-    let answers: Vec<HeightAnswer> = points
-        .iter()
-        .map(|p| HeightAnswer {
-            x: p.x,
-            z: p.y,
-            height: info.height_at(p.x, p.y),
-        })
-        .collect();
+    };
     serde_json::to_writer_pretty(&mut *out, &answers)?;
     writeln!(out)?;
     Ok(())
@@ -235,33 +226,23 @@ struct PatchReport {
 }
 
 fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
-    let mut scene = cmd.terrain.scene()?;
-    if let Some(n) = cmd.cells_per_patch {
-        // Checked first: a bad patch size shouldn't wait for a large file.
-        validate_cells_per_patch(n)?;
-        scene.cells_per_patch = n;
-    }
-    if let HeightmapSource::File(path) = &scene.heightmap {
-        if TiledHeightmap::is_tiled(path) && !scene.load.smooth {
-            // Read a tile at a time: any size.
-            check_tiled_options(path, &scene.load)?;
+    let scene = scene_with_patches(&cmd.terrain, cmd.cells_per_patch)?;
+    let report = match scene.open_tiled()? {
+        // Read a tile at a time: any size.
+        Some((map, placement)) => {
             validate_cells_per_patch(scene.cells_per_patch)?;
-            let map = TiledHeightmap::open(path)?;
-            let placement =
-                Placement::new(map.width(), map.depth(), scene.cell_spacing, scene.origin)?;
             let grid = PatchGrid::for_size(map.width(), map.depth(), scene.cells_per_patch);
             let bounds = cmd.patches.then(|| map.patch_y_bounds(&grid)).transpose()?;
-            let report = inspect_report(&placement, &grid, map.min_max(), bounds.as_deref());
-            serde_json::to_writer_pretty(&mut *out, &report)?;
-            writeln!(out)?;
-            return Ok(());
+            inspect_report(&placement, &grid, map.min_max(), bounds.as_deref())
         }
-    }
-    let info = scene.terrain_info()?;
-    let range = info.heightmap().min_max();
-    let terrain = Terrain::new(info, 0.0)?;
-    let bounds = cmd.patches.then(|| terrain.y_bounds());
-    let report = inspect_report(terrain.info().placement(), terrain.grid(), range, bounds);
+        None => {
+            let info = scene.terrain_info()?;
+            let range = info.heightmap().min_max();
+            let terrain = Terrain::new(info, 0.0)?;
+            let bounds = cmd.patches.then(|| terrain.y_bounds());
+            inspect_report(terrain.info().placement(), terrain.grid(), range, bounds)
+        }
+    };
     serde_json::to_writer_pretty(&mut *out, &report)?;
     writeln!(out)?;
     Ok(())

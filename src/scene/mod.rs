@@ -19,7 +19,8 @@ pub use material::{
 use crate::terrain::camera::Camera;
 use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::{
-    DistanceLod, Heightmap, HeightmapError, HeightmapFormat, LoadOptions, TerrainError, TerrainInfo,
+    DistanceLod, Heightmap, HeightmapError, HeightmapFormat, LoadOptions, Placement, TerrainError,
+    TerrainInfo,
 };
 
 /// The default scene file.
@@ -193,32 +194,47 @@ impl Scene {
         }
     }
 
+    /// The scene's heightmap opened tile by tile, and where its samples lie,
+    /// when it is a tiled terrain (`vkterrain import`) read as it is
+    /// stored; None for any other heightmap, and for a tiled one the scene
+    /// smooths, which needs it whole. Options that would change its
+    /// heights are refused.
+    pub fn open_tiled(&self) -> Result<Option<(TiledHeightmap, Placement)>, SceneError> {
+        let HeightmapSource::File(path) = &self.heightmap else {
+            return Ok(None);
+        };
+        if self.load.smooth || !TiledHeightmap::is_tiled(path) {
+            return Ok(None);
+        }
+        crate::terrain::heightmap::check_tiled_options(path, &self.load)?;
+        let tiled = TiledHeightmap::open(path).map_err(HeightmapError::from)?;
+        let placement =
+            Placement::new(tiled.width(), tiled.depth(), self.cell_spacing, self.origin)?;
+        Ok(Some((tiled, placement)))
+    }
+
     /// The heightmap placed in the world. A tiled terrain that stores the
     /// error tables of the scene's patch size brings them along, so they
     /// are not rebuilt.
     pub fn terrain_info(&self) -> Result<TerrainInfo, SceneError> {
         crate::terrain::info::validate_cells_per_patch(self.cells_per_patch)?;
-        if let HeightmapSource::File(path) = &self.heightmap {
-            if TiledHeightmap::is_tiled(path) && !self.load.smooth {
-                crate::terrain::heightmap::check_tiled_options(path, &self.load)?;
-                let tiled = TiledHeightmap::open(path).map_err(HeightmapError::from)?;
-                let heightmap = tiled
-                    .to_heightmap(self.load.max_samples)
-                    .map_err(HeightmapError::from)?;
-                let tables = tiled.error_tables().map_err(HeightmapError::from)?;
-                let info = TerrainInfo::new(
-                    heightmap,
-                    self.cell_spacing,
-                    self.cells_per_patch,
-                    self.origin,
-                )?;
-                return Ok(match tables {
-                    Some((cells, tess, geomip)) if cells == self.cells_per_patch => {
-                        info.with_error_tables(tess, geomip)
-                    }
-                    _ => info,
-                });
-            }
+        if let Some((tiled, _)) = self.open_tiled()? {
+            let heightmap = tiled
+                .to_heightmap(self.load.max_samples)
+                .map_err(HeightmapError::from)?;
+            let tables = tiled.error_tables().map_err(HeightmapError::from)?;
+            let info = TerrainInfo::new(
+                heightmap,
+                self.cell_spacing,
+                self.cells_per_patch,
+                self.origin,
+            )?;
+            return Ok(match tables {
+                Some((cells, tess, geomip)) if cells == self.cells_per_patch => {
+                    info.with_error_tables(tess, geomip)
+                }
+                _ => info,
+            });
         }
         let heightmap = self.load_heightmap()?;
         Ok(TerrainInfo::new(

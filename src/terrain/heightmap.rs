@@ -91,8 +91,20 @@ impl HeightmapFormat {
         Ok(format)
     }
 
+    /// The largest sample value of the integer headerless formats, which
+    /// maps to `height_scale`; None for floats, and for PNG, whose bit
+    /// depth decides it.
+    pub(crate) fn integer_max(self) -> Option<f64> {
+        match self {
+            HeightmapFormat::Raw8 => Some(255.0),
+            HeightmapFormat::Raw16 | HeightmapFormat::Raw16Be => Some(65535.0),
+            HeightmapFormat::Hgt => Some(32767.0),
+            HeightmapFormat::F32 | HeightmapFormat::Png => None,
+        }
+    }
+
     /// Bytes per sample of the headerless formats; None for PNG.
-    fn raw_sample_bytes(self) -> Option<u64> {
+    pub(crate) fn raw_sample_bytes(self) -> Option<u64> {
         match self {
             HeightmapFormat::Raw8 => Some(1),
             HeightmapFormat::Raw16 | HeightmapFormat::Raw16Be | HeightmapFormat::Hgt => Some(2),
@@ -198,7 +210,7 @@ impl Heightmap {
                 actual: heights.len() as u64 * 4,
             });
         }
-        check_finite(&path, width, &heights)?;
+        check_finite(&path, width, 0, &heights)?;
         Ok(Heightmap {
             width,
             depth,
@@ -289,7 +301,7 @@ impl Heightmap {
             }
         };
         // A huge scale can overflow f32 even from valid input.
-        check_finite(path, width, &heights)?;
+        check_finite(path, width, 0, &heights)?;
         let map = Heightmap {
             width,
             depth,
@@ -449,12 +461,19 @@ pub fn blend_cell(cell: &CellPoint, [a, b, c, d]: [f32; 4]) -> f64 {
     (1.0 - u - v) * p + u * q + v * w
 }
 
-fn check_finite(path: &Path, width: usize, heights: &[f32]) -> Result<(), HeightmapError> {
+/// Refuses the first non-finite height of rows `first_row..` of a map
+/// `width` samples wide, naming its position.
+pub(crate) fn check_finite(
+    path: &Path,
+    width: usize,
+    first_row: usize,
+    heights: &[f32],
+) -> Result<(), HeightmapError> {
     match heights.iter().position(|h| !h.is_finite()) {
         None => Ok(()),
         Some(i) => Err(HeightmapError::NonFinite {
             path: path.to_path_buf(),
-            row: (i / width) as u64,
+            row: (first_row + i / width) as u64,
             col: (i % width) as u64,
             value: heights[i],
         }),
@@ -619,19 +638,7 @@ fn decode_raw(
     opts: &LoadOptions,
     path: &Path,
 ) -> Result<Vec<f32>, HeightmapError> {
-    let heights = match format {
-        HeightmapFormat::Raw8 => bytes
-            .par_iter()
-            .map(|&v| map_integer(f64::from(v), 255.0, opts))
-            .collect(),
-        HeightmapFormat::Raw16 => bytes
-            .par_chunks_exact(2)
-            .map(|b| map_integer(f64::from(u16::from_le_bytes([b[0], b[1]])), 65535.0, opts))
-            .collect(),
-        HeightmapFormat::Raw16Be => bytes
-            .par_chunks_exact(2)
-            .map(|b| map_integer(f64::from(u16::from_be_bytes([b[0], b[1]])), 65535.0, opts))
-            .collect(),
+    match format {
         HeightmapFormat::Hgt => {
             let raw: Vec<i16> = bytes
                 .chunks_exact(2)
@@ -640,11 +647,42 @@ fn decode_raw(
             let filled = fill_hgt_voids(&raw, width).ok_or(HeightmapError::AllVoid {
                 path: path.to_path_buf(),
             })?;
-            filled
+            let max = format.integer_max().expect("an integer format");
+            Ok(filled
                 .par_iter()
-                .map(|&v| map_integer(v, 32767.0, opts))
-                .collect()
+                .map(|&v| map_integer(v, max, opts))
+                .collect())
         }
+        _ => decode_raw_rows(bytes, format, width, 0, opts, path),
+    }
+}
+
+/// Heights of whole rows of a headerless raw8, raw16, raw16be or f32 file,
+/// the first of them row `first_row` of the map (.hgt is not read by rows:
+/// its voids are filled from the whole map). A non-finite float sample is
+/// an error naming its position.
+pub(crate) fn decode_raw_rows(
+    bytes: &[u8],
+    format: HeightmapFormat,
+    width: usize,
+    first_row: usize,
+    opts: &LoadOptions,
+    path: &Path,
+) -> Result<Vec<f32>, HeightmapError> {
+    let max = format.integer_max().unwrap_or(1.0);
+    let heights = match format {
+        HeightmapFormat::Raw8 => bytes
+            .par_iter()
+            .map(|&v| map_integer(f64::from(v), max, opts))
+            .collect(),
+        HeightmapFormat::Raw16 => bytes
+            .par_chunks_exact(2)
+            .map(|b| map_integer(f64::from(u16::from_le_bytes([b[0], b[1]])), max, opts))
+            .collect(),
+        HeightmapFormat::Raw16Be => bytes
+            .par_chunks_exact(2)
+            .map(|b| map_integer(f64::from(u16::from_be_bytes([b[0], b[1]])), max, opts))
+            .collect(),
         HeightmapFormat::F32 => {
             let raw: Vec<f32> = bytes
                 .chunks_exact(4)
@@ -652,12 +690,14 @@ fn decode_raw(
                 .collect();
             // Non-finite input is an error in the data, reported with its
             // position, not something a mapping should hide.
-            check_finite(path, width, &raw)?;
+            check_finite(path, width, first_row, &raw)?;
             raw.par_iter()
                 .map(|&v| (opts.height_scale * f64::from(v) + opts.height_offset) as f32)
                 .collect()
         }
-        HeightmapFormat::Png => unreachable!("PNG is decoded by decode_png"),
+        HeightmapFormat::Hgt | HeightmapFormat::Png => {
+            unreachable!("{format} is not read by rows")
+        }
     };
     Ok(heights)
 }

@@ -1,7 +1,8 @@
 //! Writing a tiled terrain from a heightmap read row by row.
 //!
-//! The importer holds one band of `T + 1` sample rows (a row of tiles and
-//! the border row it shares with the next), never the whole terrain: raw
+//! The importer holds one band of `T + 2` sample rows (a row of tiles, the
+//! border row it shares with the next, and the row after that, which the
+//! error tables read), never the whole terrain: raw
 //! files and non-interlaced grayscale PNGs are read a row at a time, and a
 //! mosaic of SRTM tiles one row of `.hgt` files at a time. Other inputs
 //! (a single `.hgt`, an interlaced or colour PNG) are loaded whole by the
@@ -15,10 +16,13 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::{
-    level_count, level_sample, level_side, tile_count, validate_tile_cells, Encoding, Entry,
-    Header, TiledError, TiledHeightmap, HEADER_BYTES, MAX_SIDE,
+    level_count, level_sample, level_side, validate_tile_cells, Encoding, Entry, Header,
+    TiledError, TiledHeightmap, HEADER_BYTES, MAX_SIDE,
 };
-use crate::terrain::heightmap::{integer_height, Heightmap, HeightmapFormat, LoadOptions};
+use crate::terrain::heightmap::{
+    check_finite, decode_raw_rows, headerless_shape, integer_height, Heightmap, HeightmapFormat,
+    LoadOptions,
+};
 use crate::terrain::{ErrorTable, PatchGrid};
 
 /// The mapping from integer samples to heights that the integer loaders
@@ -135,56 +139,18 @@ impl RowSource for RawRows {
         self.reader
             .read_exact(&mut self.bytes)
             .map_err(|source| TiledError::io(&self.path, source))?;
-        let opts = &self.opts;
-        let int = |v: u16, max: f64| {
-            integer_height(f64::from(v), max, opts.height_scale, opts.height_offset)
-        };
-        match self.format {
-            HeightmapFormat::Raw8 => {
-                for (o, &v) in out.iter_mut().zip(&self.bytes) {
-                    *o = int(u16::from(v), 255.0);
-                }
-            }
-            HeightmapFormat::Raw16 => {
-                for (o, b) in out.iter_mut().zip(self.bytes.chunks_exact(2)) {
-                    *o = int(u16::from_le_bytes([b[0], b[1]]), 65535.0);
-                }
-            }
-            HeightmapFormat::Raw16Be => {
-                for (o, b) in out.iter_mut().zip(self.bytes.chunks_exact(2)) {
-                    *o = int(u16::from_be_bytes([b[0], b[1]]), 65535.0);
-                }
-            }
-            HeightmapFormat::F32 => {
-                for (col, (o, b)) in out.iter_mut().zip(self.bytes.chunks_exact(4)).enumerate() {
-                    let v = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-                    let h = (opts.height_scale * f64::from(v) + opts.height_offset) as f32;
-                    if !v.is_finite() || !h.is_finite() {
-                        return Err(TiledError::Input {
-                            path: self.path.clone(),
-                            what: format!(
-                                "sample at row {}, column {col} is {v}, which maps to {h}, not a finite number",
-                                self.row
-                            ),
-                        });
-                    }
-                    *o = h;
-                }
-            }
-            HeightmapFormat::Png | HeightmapFormat::Hgt => {
-                unreachable!("RawRows reads headerless formats only")
-            }
-        }
+        let (path, width, row) = (self.path.as_path(), self.width, self.row);
+        let heights = decode_raw_rows(&self.bytes, self.format, width, row, &self.opts, path)
+            .and_then(|h| check_finite(path, width, row, &h).map(|()| h))
+            .map_err(|e| TiledError::Load(Box::new(e)))?;
+        out.copy_from_slice(&heights);
         self.row += 1;
         Ok(())
     }
     fn mapping(&self) -> Option<IntegerMapping> {
-        let max = match self.format {
-            HeightmapFormat::Raw8 => 255.0,
-            HeightmapFormat::F32 => return None,
-            _ => 65535.0,
-        };
-        Some(IntegerMapping::of(max, &self.opts))
+        self.format
+            .integer_max()
+            .map(|max| IntegerMapping::of(max, &self.opts))
     }
 }
 
@@ -310,6 +276,11 @@ fn parse_srtm_name(path: &Path) -> Option<(i32, i32)> {
 
 impl SrtmMosaic {
     fn new(files: Vec<PathBuf>, opts: &LoadOptions) -> Result<Self, TiledError> {
+        let opts = LoadOptions {
+            format: Some(HeightmapFormat::Hgt),
+            size: None,
+            ..opts.clone()
+        };
         let mut tiles = BTreeMap::new();
         let mut n = None;
         for path in files {
@@ -323,16 +294,9 @@ impl SrtmMosaic {
             let len = std::fs::metadata(&path)
                 .map_err(|source| TiledError::io(&path, source))?
                 .len();
-            let side = match len {
-                2_884_802 => 1201,
-                25_934_402 => 3601,
-                _ => {
-                    return Err(TiledError::Input {
-                        path,
-                        what: format!("an SRTM .hgt file must be 1201x1201 or 3601x3601 samples, but it has {len} bytes"),
-                    })
-                }
-            };
+            // The .hgt loader's own size check, from the length alone.
+            let (side, _) = headerless_shape(&path, HeightmapFormat::Hgt, &opts, len)
+                .map_err(|e| TiledError::Load(Box::new(e)))?;
             if *n.get_or_insert(side) != side {
                 return Err(TiledError::Input {
                     path,
@@ -363,16 +327,15 @@ impl SrtmMosaic {
             lon_count: (lon_max - lon_min + 1) as usize,
             row: 0,
             band: None,
-            opts: LoadOptions {
-                format: Some(HeightmapFormat::Hgt),
-                size: None,
-                ..opts.clone()
-            },
+            opts,
         })
     }
 
     fn mapping_of(&self) -> IntegerMapping {
-        IntegerMapping::of(32767.0, &self.opts)
+        let max = HeightmapFormat::Hgt
+            .integer_max()
+            .expect("an integer format");
+        IntegerMapping::of(max, &self.opts)
     }
 }
 
@@ -493,20 +456,20 @@ pub fn open_source(
             let map = Heightmap::load(path, opts).map_err(loader_error)?;
             Ok((Box::new(MemoryRows::new(map, mapping)), SourceKind::Whole))
         };
-    if TiledHeightmap::is_tiled(path) {
-        let map = TiledHeightmap::open(path)?.to_heightmap(opts.max_samples)?;
-        return Ok((Box::new(MemoryRows::new(map, None)), SourceKind::Whole));
-    }
-    let format = match opts.format {
-        Some(f) => f,
-        None => HeightmapFormat::from_path(path).map_err(loader_error)?,
-    };
     if opts.smooth {
         return Err(TiledError::Input {
             path: path.to_path_buf(),
             what: "smoothing is not applied on import; import the heightmap as it is".into(),
         });
     }
+    if TiledHeightmap::is_tiled(path) {
+        // Re-tiling: the loader reads it whole (and refuses mapping options).
+        return whole(None);
+    }
+    let format = match opts.format {
+        Some(f) => f,
+        None => HeightmapFormat::from_path(path).map_err(loader_error)?,
+    };
     match format {
         HeightmapFormat::Png => match png_rows(path, opts)? {
             Some(rows) => Ok((Box::new(rows), SourceKind::Streamed)),
@@ -514,21 +477,20 @@ pub fn open_source(
             // not heights as stored, so the loader converts them whole.
             None => whole(None),
         },
-        HeightmapFormat::Hgt => whole(Some(IntegerMapping::of(32767.0, opts))),
+        HeightmapFormat::Hgt => whole(
+            HeightmapFormat::Hgt
+                .integer_max()
+                .map(|max| IntegerMapping::of(max, opts)),
+        ),
         raw => {
             // The loader's own checks of the size against the file length,
             // without reading more than one sample.
             let len = std::fs::metadata(path)
                 .map_err(|source| TiledError::io(path, source))?
                 .len();
-            let (width, depth) = crate::terrain::heightmap::headerless_shape(path, raw, opts, len)
-                .map_err(loader_error)?;
+            let (width, depth) = headerless_shape(path, raw, opts, len).map_err(loader_error)?;
             let file = std::fs::File::open(path).map_err(|source| TiledError::io(path, source))?;
-            let bytes_per_sample = match raw {
-                HeightmapFormat::Raw8 => 1,
-                HeightmapFormat::F32 => 4,
-                _ => 2,
-            };
+            let bytes_per_sample = raw.raw_sample_bytes().expect("a headerless format") as usize;
             Ok((
                 Box::new(RawRows {
                     path: path.to_path_buf(),
@@ -623,21 +585,21 @@ fn tile_levels(
 ) -> Vec<EncodedLevel> {
     let [c0, c1, r0, r1] = header.tile_rect(tx, tz);
     let (cells_x, cells_z) = (c1 - c0, r1 - r0);
-    let mut full = Vec::with_capacity((cells_x as usize + 1) * (cells_z as usize + 1));
-    for r in 0..=cells_z as usize {
-        full.extend_from_slice(&band[r * width + c0 as usize..=r * width + c1 as usize]);
-    }
+    let stride = cells_x as usize + 1;
+    let full: Vec<f32> = (0..=cells_z as usize)
+        .flat_map(|r| &band[r * width + c0 as usize..r * width + c0 as usize + stride])
+        .copied()
+        .collect();
     (0..header.levels)
         .map(|level| {
             let (cols, rows) = (level_side(cells_x, level), level_side(cells_z, level));
-            let mut samples = Vec::with_capacity(cols as usize * rows as usize);
-            for i in 0..rows {
-                let r = level_sample(i, cells_z, level) as usize;
-                let row = &band[r * width..(r + 1) * width];
-                samples.extend(
-                    (0..cols).map(|j| row[(c0 + level_sample(j, cells_x, level)) as usize]),
-                );
-            }
+            let samples: Vec<f32> = (0..rows)
+                .flat_map(|i| {
+                    let row = level_sample(i, cells_z, level) as usize * stride;
+                    (0..cols).map(move |j| row + level_sample(j, cells_x, level) as usize)
+                })
+                .map(|k| full[k])
+                .collect();
             EncodedLevel {
                 error: super::level_error(&full, (cells_x, cells_z), level),
                 ..encode_level(&samples, mapping)
@@ -681,7 +643,6 @@ pub fn import(
         tables: None,
     };
     let (tiles_x, tiles_z) = header.tiles();
-    debug_assert_eq!(tiles_x, tile_count(header.width, tile_cells));
     let io = |source| TiledError::Write {
         path: out.to_path_buf(),
         source,
@@ -690,23 +651,7 @@ pub fn import(
     file.write_all(&[0u8; HEADER_BYTES]).map_err(io)?;
     let mut offset = HEADER_BYTES as u64;
     let mut entries = vec![None; header.entry_count() as usize];
-    let mut report = ImportReport {
-        width,
-        depth,
-        tile_cells,
-        tiles_x,
-        tiles_z,
-        levels: header.levels,
-        min_height: 0.0,
-        max_height: 0.0,
-        levels_as_codes: 0,
-        levels_as_floats: 0,
-        max_error: 0.0,
-        tables_cells_per_patch: None,
-        file_bytes: 0,
-        bytes_per_sample: 0.0,
-        seconds: 0.0,
-    };
+    let (mut levels_as_codes, mut levels_as_floats) = (0, 0);
     let t = tile_cells as usize;
     // Rows r0..=r1 + 1 of the terrain: the row after the band lets the
     // error tables interpolate across its last row as they would on the
@@ -753,8 +698,8 @@ pub fn import(
                     header.max_height = header.max_height.max(e.max);
                 }
                 match e.encoding {
-                    Encoding::F32 => report.levels_as_floats += 1,
-                    Encoding::Codes { .. } => report.levels_as_codes += 1,
+                    Encoding::F32 => levels_as_floats += 1,
+                    Encoding::Codes { .. } => levels_as_codes += 1,
                 }
                 entries[header.entry_index(tx as u32, tz, level as u32)] = Some(Entry {
                     offset,
@@ -798,11 +743,21 @@ pub fn import(
     file.write_all(&header.encode()).map_err(io)?;
     file.sync_all().map_err(io)?;
     drop(file);
-    report.min_height = header.min_height;
-    report.max_height = header.max_height;
-    report.file_bytes = offset;
-    report.tables_cells_per_patch = tables_cells;
-    report.bytes_per_sample = report.file_bytes as f64 / (width as f64 * depth as f64);
-    report.seconds = started.elapsed().as_secs_f64();
-    Ok(report)
+    Ok(ImportReport {
+        width,
+        depth,
+        tile_cells,
+        tiles_x,
+        tiles_z,
+        levels: header.levels,
+        min_height: header.min_height,
+        max_height: header.max_height,
+        levels_as_codes,
+        levels_as_floats,
+        max_error: 0.0,
+        tables_cells_per_patch: tables_cells,
+        file_bytes: offset,
+        bytes_per_sample: offset as f64 / (width as f64 * depth as f64),
+        seconds: started.elapsed().as_secs_f64(),
+    })
 }

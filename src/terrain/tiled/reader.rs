@@ -229,6 +229,16 @@ impl TiledHeightmap {
         self.cache.lock().expect("cache lock").bytes
     }
 
+    /// `len` bytes of the file from `offset` (which the header or the
+    /// directory placed inside it).
+    fn read_at(&self, offset: u64, len: usize) -> std::io::Result<Vec<u8>> {
+        let mut bytes = vec![0u8; len];
+        let mut source = self.source.lock().expect("source lock");
+        source.seek(SeekFrom::Start(offset))?;
+        source.read_exact(&mut bytes)?;
+        Ok(bytes)
+    }
+
     /// Tile (tx, tz) at `level`, read and checked on first use.
     pub fn tile(&self, tx: u32, tz: u32, level: u32) -> Result<Arc<TileLevel>, TiledError> {
         let (tiles_x, tiles_z) = self.header.tiles();
@@ -257,14 +267,9 @@ impl TiledHeightmap {
             what,
         };
         let entry = *self.entry(tx, tz, level);
-        let mut bytes = vec![0u8; entry.bytes as usize];
-        {
-            let mut source = self.source.lock().expect("source lock");
-            source
-                .seek(SeekFrom::Start(entry.offset))
-                .and_then(|_| source.read_exact(&mut bytes))
-                .map_err(|e| bad(format!("cannot read its samples: {e}")))?;
-        }
+        let bytes = self
+            .read_at(entry.offset, entry.bytes as usize)
+            .map_err(|e| bad(format!("cannot read its samples: {e}")))?;
         if crc32fast::hash(&bytes) != entry.crc {
             return Err(bad("checksum mismatch in its samples".into()));
         }
@@ -357,14 +362,12 @@ impl TiledHeightmap {
             path: self.path.clone(),
             what,
         };
-        let mut bytes = vec![0u8; self.header.tables_bytes(at.cells_per_patch) as usize];
-        {
-            let mut source = self.source.lock().expect("source lock");
-            source
-                .seek(SeekFrom::Start(at.offset))
-                .and_then(|_| source.read_exact(&mut bytes))
-                .map_err(|e| bad(format!("cannot read them: {e}")))?;
-        }
+        let bytes = self
+            .read_at(
+                at.offset,
+                self.header.tables_bytes(at.cells_per_patch) as usize,
+            )
+            .map_err(|e| bad(format!("cannot read them: {e}")))?;
         if crc32fast::hash(&bytes) != at.crc {
             return Err(bad("checksum mismatch".into()));
         }
