@@ -23,7 +23,7 @@ void main() {
     int cells_across = int(frame.spacing_size.z) - 1;
     int cell = gl_VertexIndex / 6;
     ivec2 sample_cr = ivec2(cell % cells_across, cell / cells_across) + CORNER[gl_VertexIndex % 6];
-    float h = texelFetch(heightmap, sample_cr, 0).r;
+    float h = fetch_sample(sample_cr);
 #ifdef DISPLACE
     h += layer_displacement(vec2(sample_cr), h);
 #endif

@@ -30,7 +30,7 @@ ivec2 clamp_sample(ivec2 offset) {
 
 // The height drawn at a sample: the heightmap's, plus what the layers add.
 float displaced(ivec2 sample_cr) {
-    float h = texelFetch(heightmap, sample_cr, 0).r;
+    float h = fetch_sample(sample_cr);
 #ifdef DISPLACE
     h += layer_displacement(vec2(sample_cr), h);
 #endif

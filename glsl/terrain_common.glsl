@@ -60,13 +60,79 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with
 // texelFetch (linear filtering of R32_SFLOAT is optional in Vulkan, and
-// the surface between samples is triangles, not bilinear).
+// the surface between samples is triangles, not bilinear). A streamed
+// terrain binds its base level here instead: every 2^base_level-th
+// sample and the last, in each direction.
 layout(set = 0, binding = BINDING_HEIGHTMAP) uniform sampler2D heightmap;
+
+// Whether heights are streamed (see render::streaming): tiles resident at
+// full resolution are layers of `pages`, found through `page_table`, and
+// every other tile reads the base level. The streamed terrain's shape is
+// constant for a pipeline.
+layout(constant_id = SPEC_STREAMED) const bool STREAMED = false;
+layout(constant_id = SPEC_STREAMED + 1) const int STREAM_TILE_CELLS = 1;
+layout(constant_id = SPEC_STREAMED + 2) const int STREAM_BASE_LEVEL = 0;
+layout(constant_id = SPEC_STREAMED + 3) const int STREAM_TILES_X = 1;
+layout(constant_id = SPEC_STREAMED + 4) const int STREAM_TILES_Z = 1;
+layout(set = 0, binding = BINDING_PAGES) uniform sampler2DArray pages;
+layout(std430, set = 0, binding = BINDING_PAGE_TABLE) readonly buffer PageTable {
+    uint page_table[];
+};
 
 // Local (x, z) to continuous sample coordinates (column, row).
 // Mirror: TerrainInfo::world_to_grid (there with the world origin added).
 vec2 local_to_grid(vec2 xz) {
     return vec2((xz.x - frame.grid.x) * frame.grid.z, (frame.grid.y - xz.y) * frame.grid.w);
+}
+
+// The height at a fraction st across a cell with samples a (upper left),
+// b (upper right), c (lower left) and d (lower right), split along the
+// diagonal from b to c: triangles ABC and DCB. Mirror: heightmap::blend_cell.
+float blend_cell(vec2 st, float a, float b, float c, float d) {
+    bool lower = st.x + st.y > 1.0;
+    vec3 h = lower ? vec3(d, c, b) : vec3(a, b, c);
+    vec2 uv = lower ? 1.0 - st : st;
+    return (1.0 - uv.x - uv.y) * h.x + uv.x * h.y + uv.y * h.z;
+}
+
+// A streamed terrain's base-level surface at sample s: the base's samples
+// joined into cells split like the reference's, the last cell of a row or
+// column narrower where the grid is not a multiple of 2^level. A sample
+// the base keeps reads it exactly. Mirror: tiled::level_surface.
+float base_height(ivec2 s, int level) {
+    ivec2 last = ivec2(frame.spacing_size.zw) - 1;
+    int step = 1 << level;
+    ivec2 side = (last + step - 1) / step + 1;
+    ivec2 i = min(s / step, side - 2);
+    ivec2 lo = i * step;
+    ivec2 hi = min(lo + step, last);
+    float a = texelFetch(heightmap, i, 0).r;
+    if (all(equal(s, lo))) {
+        return a;
+    }
+    vec2 st = vec2(s - lo) / vec2(hi - lo);
+    float b = texelFetch(heightmap, i + ivec2(1, 0), 0).r;
+    float c = texelFetch(heightmap, i + ivec2(0, 1), 0).r;
+    float d = texelFetch(heightmap, i + ivec2(1, 1), 0).r;
+    return blend_cell(st, a, b, c, d);
+}
+
+// The height drawn at sample (column, row) s. Streamed: a sample on a
+// border between tiles belongs to the tile before it (left, above), so
+// every sample has one value whichever tile asks, and the surface stays
+// watertight between a resident tile and one drawn from the base level.
+// Mirror: render::residency::streamed_sample.
+float fetch_sample(ivec2 s) {
+    if (!STREAMED) {
+        return texelFetch(heightmap, s, 0).r;
+    }
+    ivec2 tiles = ivec2(STREAM_TILES_X, STREAM_TILES_Z);
+    ivec2 tile = min(max(s - 1, ivec2(0)) / STREAM_TILE_CELLS, tiles - 1);
+    uint layer = page_table[tile.y * tiles.x + tile.x];
+    if (layer != PAGE_NOT_RESIDENT) {
+        return texelFetch(pages, ivec3(s - tile * STREAM_TILE_CELLS, int(layer)), 0).r;
+    }
+    return base_height(s, STREAM_BASE_LEVEL);
 }
 
 // Height on the triangulated surface at continuous sample coordinates,
@@ -79,14 +145,11 @@ float sample_height(vec2 g) {
     vec2 p = clamp(g, vec2(0.0), size - 1.0);
     ivec2 cell = min(ivec2(p), ivec2(size) - 2);
     vec2 st = p - vec2(cell);
-    float a = texelFetch(heightmap, cell, 0).r;
-    float b = texelFetch(heightmap, cell + ivec2(1, 0), 0).r;
-    float c = texelFetch(heightmap, cell + ivec2(0, 1), 0).r;
-    float d = texelFetch(heightmap, cell + ivec2(1, 1), 0).r;
-    bool lower = st.x + st.y > 1.0;
-    vec3 h = lower ? vec3(d, c, b) : vec3(a, b, c);
-    vec2 uv = lower ? 1.0 - st : st;
-    return (1.0 - uv.x - uv.y) * h.x + uv.x * h.y + uv.y * h.z;
+    float a = fetch_sample(cell);
+    float b = fetch_sample(cell + ivec2(1, 0));
+    float c = fetch_sample(cell + ivec2(0, 1));
+    float d = fetch_sample(cell + ivec2(1, 1));
+    return blend_cell(st, a, b, c, d);
 }
 
 // Local (x, z) of continuous sample coordinates. Mirror:

@@ -78,6 +78,19 @@ pub const MAX_LIGHTS: u32 = 3;
 pub const SPEC_LAYER_COUNT: u32 = 0;
 /// Specialisation constant: number of blend maps (blend-map mode).
 pub const SPEC_BLEND_MAP_COUNT: u32 = 1;
+/// Specialisation constant: 1 when heights are streamed (the heightmap
+/// binding then holds the base level, and tiles come from the page pool).
+/// The streamed terrain's cells a tile, base level and tiles across and
+/// down follow it as ids SPEC_STREAMED + 1 to + 4.
+pub const SPEC_STREAMED: u32 = 2;
+
+/// 2D array of streamed full-resolution tiles, one a layer.
+pub const BINDING_PAGES: u32 = 19;
+/// Storage buffer of the page table: one word a tile, its layer in the
+/// page pool or `PAGE_NOT_RESIDENT`.
+pub const BINDING_PAGE_TABLE: u32 = 20;
+/// Page table entry of a tile drawn from the base level.
+pub const PAGE_NOT_RESIDENT: u32 = 0xFFFF_FFFF;
 
 /// Storage buffer of inputs of the GLSL mirror check (compute, tests only).
 pub const BINDING_MIRROR_CASES: u32 = 2;
@@ -151,6 +164,10 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("MAX_LIGHTS", MAX_LIGHTS.to_string()),
         ("SPEC_LAYER_COUNT", SPEC_LAYER_COUNT.to_string()),
         ("SPEC_BLEND_MAP_COUNT", SPEC_BLEND_MAP_COUNT.to_string()),
+        ("SPEC_STREAMED", SPEC_STREAMED.to_string()),
+        ("BINDING_PAGES", BINDING_PAGES.to_string()),
+        ("BINDING_PAGE_TABLE", BINDING_PAGE_TABLE.to_string()),
+        ("PAGE_NOT_RESIDENT", uint(PAGE_NOT_RESIDENT)),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),
         ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),

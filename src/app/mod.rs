@@ -329,6 +329,7 @@ impl Graphics {
                 // Line pipelines are cheap to have ready for F2.
                 wireframe: device.caps.fill_mode_non_solid,
                 samples,
+                stream: None,
             },
         )
         .context("preparing the terrain for the GPU")?;

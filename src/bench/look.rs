@@ -81,6 +81,7 @@ pub fn measure(
             paths: vec![settings.path],
             wireframe: false,
             samples,
+            stream: None,
         };
         let (renderer, headless) =
             offscreen(gpu, &terrain, &appearance, &options, (width, height))?;

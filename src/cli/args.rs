@@ -286,9 +286,15 @@ pub struct FeatureArgs {
     pub without: Vec<Feature>,
 
     /// Refuse to allocate more than this much GPU memory, with an error
-    /// naming the resource that would exceed it.
+    /// naming the resource that would exceed it. A streamed terrain sizes
+    /// its pool of resident tiles to fit.
     #[arg(long, value_name = "MIB", value_parser = parse_budget)]
     pub gpu_memory_budget: Option<u64>,
+
+    /// Upload a tiled terrain (from `vkterrain import`) whole, as other
+    /// heightmaps are, instead of streaming its tiles within the budget.
+    #[arg(long)]
+    pub no_streaming: bool,
 
     /// Make the device fail, to see how it is reported: `device-lost[@N]`
     /// reports the Nth queue submission (default 1, uploads included) and

@@ -293,3 +293,26 @@ fn inspect_report(
         patches,
     }
 }
+
+/// How `scene`'s terrain streams: for a tiled terrain file, unless
+/// `stream` is off, the configuration the renderer streams it with, and
+/// `terrain`'s Y bounds widened for its base level. None for every other
+/// heightmap.
+pub fn stream_config(
+    scene: &Scene,
+    stream: bool,
+    terrain: &mut Terrain,
+) -> Result<Option<crate::render::StreamConfig>> {
+    if !stream {
+        return Ok(None);
+    }
+    let Some((tiled, _)) = scene.open_tiled()? else {
+        return Ok(None);
+    };
+    let crate::scene::HeightmapSource::File(path) = &scene.heightmap else {
+        return Ok(None);
+    };
+    let config = crate::render::StreamConfig::new(path.clone());
+    terrain.widen_y_bounds_to_blocks(1 << config.shape(&tiled).base_level);
+    Ok(Some(config))
+}

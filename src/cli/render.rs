@@ -18,7 +18,7 @@ use crate::output::{save_png, write_atomically};
 use crate::render::settings::{measurement_notes, sample_count};
 use crate::render::{
     offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
-    RendererOptions, Shading,
+    RendererOptions, Shading, StreamStats,
 };
 use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
@@ -353,6 +353,10 @@ pub struct FrameStats {
     /// The largest error the error LOD's choice expects on screen, in
     /// pixels; null for the distance LOD and brute.
     pub predicted_max_px: Option<f32>,
+    /// What streaming did for the frame (null for a terrain uploaded
+    /// whole): tiles resident, uploaded, evicted, and the largest error a
+    /// tile drawn from the base level adds.
+    pub stream: Option<StreamStats>,
     pub cpu_ms: f64,
     pub gpu_memory_bytes: u64,
     pub gpu_memory: BTreeMap<String, u64>,
@@ -401,6 +405,8 @@ pub struct Picture {
     pub width: u32,
     pub height: u32,
     pub samples: Option<u32>,
+    /// Stream a tiled terrain (rather than upload it whole).
+    pub stream: bool,
 }
 
 /// Everything one headless render produces.
@@ -434,7 +440,8 @@ pub fn render_scene(
     let appearance = Appearance::load(scene, &info)?;
     let material_ms = ms(started);
     let started = std::time::Instant::now();
-    let terrain = Terrain::new(info, appearance.y_margin())?;
+    let mut terrain = Terrain::new(info, appearance.y_margin())?;
+    let stream = super::stream_config(scene, picture.stream, &mut terrain)?;
     let bounds_ms = ms(started);
     let ((frame, mut stats, notes), validation) = with_gpu(gpu, |gpu| {
         let mut notes = Vec::new();
@@ -447,6 +454,7 @@ pub fn render_scene(
             paths: vec![settings.path],
             wireframe: settings.wireframe,
             samples,
+            stream,
         };
         let (mut renderer, mut headless) =
             offscreen(gpu, &terrain, &appearance, &options, (width, height))
@@ -479,6 +487,7 @@ pub fn render_scene(
             patches_occluded: frame.measurements.occlusion.map(|o| o.patches_occluded),
             culling_gpu_ms: frame.measurements.occlusion.and_then(|o| o.culling_ms),
             predicted_max_px: renderer.predicted_max_px(),
+            stream: renderer.stream_stats(),
             cpu_ms: frame.cpu_ms,
             gpu_memory_bytes: gpu_memory.values().sum(),
             gpu_memory,
@@ -522,6 +531,7 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
             width: cmd.size.width,
             height: cmd.size.height,
             samples: view.samples,
+            stream: !view.features.no_streaming,
         },
         &view.features.gpu_options(cmd.validate),
     )?;

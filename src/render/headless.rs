@@ -44,6 +44,9 @@ pub fn offscreen(
     options: &RendererOptions,
     (width, height): (u32, u32),
 ) -> Result<(TerrainRenderer, Headless)> {
+    // The target first: a streamed terrain's pool takes what the memory
+    // budget leaves.
+    let headless = Headless::new(gpu, width, height, options.samples)?;
     let renderer = TerrainRenderer::with_appearance(
         gpu,
         terrain,
@@ -52,15 +55,16 @@ pub fn offscreen(
         1,
         options,
     )?;
-    Ok((
-        renderer,
-        Headless::new(gpu, width, height, options.samples)?,
-    ))
+    Ok((renderer, headless))
 }
 
 /// An offscreen target and the command buffer that draws into it. Dropping
 /// it waits for the device to go idle first.
 pub struct Headless {
+    /// Whether a frame of a streamed terrain first waits until what its
+    /// view needs is resident (one-shot renders); off, frames draw with
+    /// what has arrived, as the window does (flythroughs).
+    pub wait_for_residency: bool,
     commands: CommandSlots,
     target: OffscreenTarget,
     device: Device,
@@ -71,6 +75,7 @@ impl Headless {
     pub fn new(gpu: &Gpu, width: u32, height: u32, samples: u32) -> Result<Self> {
         let device = &gpu.device;
         Ok(Headless {
+            wait_for_residency: true,
             target: OffscreenTarget::new(device, width, height, samples)?,
             commands: device.create_command_slots(1, "headless.commands")?,
             device: device.clone(),
@@ -85,11 +90,14 @@ impl Headless {
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<HeadlessFrame> {
-        let start = Instant::now();
         let views = self.target.views();
         let view = FrameView::new(terrain, camera, views.extent.width, views.extent.height);
-        let patches_in_frustum = view.patches_in_frustum(terrain);
         // The one slot's last frame has completed: `render` waits for it.
+        if self.wait_for_residency {
+            renderer.settle(0, &view)?;
+        }
+        let start = Instant::now();
+        let patches_in_frustum = view.patches_in_frustum(terrain);
         renderer.prepare(0, terrain, &view, settings)?;
         let rec = self.commands.begin(0)?;
         self.target.record_begin(&rec);

@@ -8,10 +8,12 @@ use std::mem::{offset_of, size_of};
 
 use ash::vk;
 
+use super::residency::StreamShape;
 use crate::material::{Appearance, Material, TexelFormat, TextureArray};
 use crate::shader_constants::{
     BINDING_BLEND_MAPS, BINDING_DIFFUSE_MAPS, BINDING_HEIGHT_MAPS, BINDING_LIGHTMAP,
     BINDING_MATERIAL, BINDING_NORMAL_MAPS, MAX_LAYERS, SPEC_BLEND_MAP_COUNT, SPEC_LAYER_COUNT,
+    SPEC_STREAMED,
 };
 use crate::shader_variants::{Placing, Shading};
 use crate::terrain::TerrainInfo;
@@ -100,6 +102,9 @@ pub struct ShaderVariant {
     pub triplanar: bool,
     pub layer_count: u32,
     pub blend_map_count: u32,
+    /// How heights are streamed from a tiled terrain (`streaming`), if
+    /// they are.
+    pub stream: Option<StreamShape>,
 }
 
 impl ShaderVariant {
@@ -116,6 +121,7 @@ impl ShaderVariant {
             blend_map_count: m
                 .and_then(|m| m.blend_maps.as_ref())
                 .map_or(1, |b| b.layers),
+            stream: None,
         }
     }
 
@@ -147,11 +153,22 @@ impl ShaderVariant {
         }
     }
 
-    /// Values of constant ids 0.. (SPEC_LAYER_COUNT, SPEC_BLEND_MAP_COUNT).
-    pub fn specialization(&self) -> [u32; 2] {
-        let mut s = [0; 2];
+    /// Values of constant ids 0.. (SPEC_LAYER_COUNT, SPEC_BLEND_MAP_COUNT,
+    /// then SPEC_STREAMED and the streamed terrain's shape: tile cells,
+    /// base level, tiles across and down).
+    pub fn specialization(&self) -> [u32; 7] {
+        let mut s = [0; 7];
         s[SPEC_LAYER_COUNT as usize] = self.layer_count;
         s[SPEC_BLEND_MAP_COUNT as usize] = self.blend_map_count;
+        if let Some(shape) = self.stream {
+            s[SPEC_STREAMED as usize..][..5].copy_from_slice(&[
+                1,
+                shape.tile_cells,
+                shape.base_level,
+                shape.tiles_x,
+                shape.tiles_z,
+            ]);
+        }
         s
     }
 }

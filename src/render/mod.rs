@@ -6,8 +6,10 @@ pub mod material;
 pub mod mirror;
 pub mod occlusion;
 pub mod renderer;
+pub mod residency;
 pub mod settings;
 pub mod shaders;
+pub mod streaming;
 pub mod uniforms;
 pub mod view;
 
@@ -16,5 +18,6 @@ pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 pub use settings::{
     sample_count, with_fallback, LodMetric, RenderPath, RenderSettings, Shading, DEFAULT_SAMPLES,
 };
+pub use streaming::{StreamConfig, StreamStats};
 pub use uniforms::FrameUniforms;
 pub use view::FrameView;

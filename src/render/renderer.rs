@@ -27,18 +27,21 @@ use ash::vk;
 
 use super::material::{GpuAppearance, ShaderVariant};
 use super::occlusion::{ListedDraw, Occlusion, DRAW_COMMAND_BYTES};
+use super::residency::StreamShape;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
+use super::streaming::{StreamConfig, StreamStats, Streamer};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
 use crate::material::Appearance;
 use crate::shader_constants::{
-    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP,
-    BINDING_VISIBILITY, OCCLUSION_PHASE_ALL, OCCLUSION_PHASE_CULLED, OCCLUSION_PHASE_FIRST,
-    OCCLUSION_PHASE_SECOND,
+    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP, BINDING_PAGES,
+    BINDING_PAGE_TABLE, BINDING_VISIBILITY, OCCLUSION_PHASE_ALL, OCCLUSION_PHASE_CULLED,
+    OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND,
 };
 use crate::shader_variants::{Placing, Shader};
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
+use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
 use crate::vk::commands::{Recorder, RenderingPart};
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
@@ -75,6 +78,10 @@ pub struct RendererOptions {
     /// Samples per pixel of the targets it draws into (see
     /// `settings::sample_count`).
     pub samples: u32,
+    /// Stream heights from a tiled terrain file instead of uploading the
+    /// terrain's heightmap whole (see `streaming`). The terrain's Y bounds
+    /// must allow for the base level (`Terrain::widen_y_bounds_to_blocks`).
+    pub stream: Option<StreamConfig>,
 }
 
 impl RendererOptions {
@@ -84,6 +91,7 @@ impl RendererOptions {
             paths,
             wireframe: false,
             samples: 1,
+            stream: None,
         }
     }
 }
@@ -195,8 +203,13 @@ pub struct TerrainRenderer {
     _sets: DescriptorSets,
     pipeline_layout: PipelineLayout,
     set_layout: DescriptorSetLayout,
-    /// Read through the frames' sets.
+    /// Read through the frames' sets: the heightmap, or a streamed
+    /// terrain's base level.
     _heightmap: Image,
+    /// Heights streamed from a tiled terrain; with none, a one-layer pool
+    /// and an empty page table stand in its bindings.
+    streamer: Option<Streamer>,
+    _no_stream: Option<(Image, Buffer)>,
     sampler: Sampler,
     /// Material layers, blend maps and lightmap, as the scene needs.
     appearance: GpuAppearance,
@@ -267,9 +280,19 @@ impl TerrainRenderer {
         check_device(device, terrain, options)?;
         let samples = sample_count_flag(options.samples);
         let info = terrain.info();
-        let heightmap = upload_heightmap(device, info, "terrain.heightmap")?;
+        // A streamed terrain's base level takes the heightmap's binding
+        // once the pool is made (after the paths, which count against the
+        // memory budget first).
+        let heightmap = match options.stream {
+            None => upload_heightmap(device, info, "terrain.heightmap")?,
+            Some(_) => device.upload_r32f_image("terrain.heightmap.placeholder", 1, 1, &[0.0])?,
+        };
         let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
-        let appearance = GpuAppearance::new(device, appearance, info)?;
+        let mut appearance = GpuAppearance::new(device, appearance, info)?;
+        appearance.variant.stream = match &options.stream {
+            Some(config) => Some(stream_shape(config)?),
+            None => None,
+        };
         // With tessellation the layout has the tess path's bindings, so the
         // path can be built later (`ensure`) on the same sets.
         let layout = DescriptorPlan::new(device.caps.tessellation_shader, &appearance);
@@ -294,6 +317,25 @@ impl TerrainRenderer {
         )?;
         let sky = create_sky_pipeline(device, &pipeline_layout, color_format, samples)?;
         let frames = build_frames(device, &sets, (&heightmap, &sampler), &appearance)?;
+        let no_stream = (
+            device.create_layer_pool("terrain.stream.pages.unused", 1, 1)?,
+            device.create_host_buffer(
+                "terrain.stream.page_table.unused",
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                &[0u8; 16],
+            )?,
+        );
+        for frame in &frames {
+            device.write_sampled_image(frame.set, BINDING_PAGES, &no_stream.0, &sampler);
+            let size = no_stream.1.desc.size;
+            device.write_buffer(
+                frame.set,
+                BINDING_PAGE_TABLE,
+                vk::DescriptorType::STORAGE_BUFFER,
+                &no_stream.1,
+                size,
+            );
+        }
         let uniforms: Vec<&Buffer> = frames.iter().map(|f| &f.uniforms).collect();
         let occlusion = Occlusion::new(
             device,
@@ -313,6 +355,8 @@ impl TerrainRenderer {
             pipeline_layout,
             set_layout,
             _heightmap: heightmap,
+            streamer: None,
+            _no_stream: Some(no_stream),
             sampler,
             appearance,
             sky,
@@ -326,7 +370,51 @@ impl TerrainRenderer {
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
         }
+        if let Some(config) = &options.stream {
+            let streamer = Streamer::new(device, info, config, renderer.frames.len())?;
+            for (slot, frame) in renderer.frames.iter().enumerate() {
+                device.write_sampled_image(
+                    frame.set,
+                    BINDING_HEIGHTMAP,
+                    streamer.base(),
+                    &renderer.sampler,
+                );
+                streamer.write_bindings(frame.set, slot, &renderer.sampler);
+            }
+            renderer.streamer = Some(streamer);
+            renderer._no_stream = None;
+        }
         Ok(renderer)
+    }
+
+    /// What streaming did in the last prepared frame; None for a terrain
+    /// uploaded whole.
+    pub fn stream_stats(&self) -> Option<StreamStats> {
+        self.streamer.as_ref().map(Streamer::stats)
+    }
+
+    /// A streamed terrain's page table as the next frame will draw with
+    /// it: per tile (row-major), its layer in the pool or
+    /// `PAGE_NOT_RESIDENT`.
+    pub fn stream_page_table(&self) -> Option<&[u32]> {
+        self.streamer.as_ref().map(Streamer::page_table)
+    }
+
+    /// Tiles sent back to the base level since the start (streamed
+    /// terrains).
+    pub fn stream_evictions(&self) -> Option<u64> {
+        self.streamer.as_ref().map(Streamer::evictions)
+    }
+
+    /// For a streamed terrain, reads and uploads what `view` needs until
+    /// it is resident (or the pool holds what helps most), waiting on the
+    /// disk: what a one-shot render does before it draws. Slot `slot` must
+    /// be idle. Returns the tiles uploaded (0 for a terrain uploaded whole).
+    pub fn settle(&mut self, slot: usize, view: &FrameView) -> Result<u32> {
+        match self.streamer.as_mut() {
+            Some(streamer) => streamer.settle(slot, view),
+            None => Ok(0),
+        }
     }
 
     /// Builds what drawing `path` (with line pipelines when `wireframe`)
@@ -488,6 +576,9 @@ impl TerrainRenderer {
             });
         }
         self.frames[slot].settings = Some(*settings);
+        if let Some(streamer) = self.streamer.as_mut() {
+            streamer.prepare(slot, view)?;
+        }
         let uniforms = FrameUniforms::new(terrain, view, settings);
         self.frames[slot]
             .uniforms
@@ -636,6 +727,9 @@ impl TerrainRenderer {
         let clear_color = settings.clear_color;
         frame.queries.reset(rec);
         frame.queries.begin_timing(rec);
+        if let Some(streamer) = &self.streamer {
+            streamer.record(rec, slot);
+        }
         if cull {
             let occlusion = &self.occlusion;
             occlusion.record_start(rec, slot)?;
@@ -874,7 +968,7 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
     let info = terrain.info();
     let (cols, rows) = (info.cols() as u32, info.rows() as u32);
     let limit = device.caps.max_image_dimension_2d;
-    if cols > limit || rows > limit {
+    if options.stream.is_none() && (cols > limit || rows > limit) {
         return Err(VkError::Unsupported(format!(
             "heightmap of {cols}x{rows} samples exceeds this device's largest image ({limit}x{limit})"
         )));
@@ -950,6 +1044,12 @@ pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) 
     device.upload_r32f_image(name, cols, rows, info.heightmap().heights())
 }
 
+/// How the terrain file `config` names streams.
+fn stream_shape(config: &StreamConfig) -> Result<StreamShape> {
+    let tiled = TiledHeightmap::open(&config.path).map_err(|e| VkError::Stream(e.to_string()))?;
+    Ok(config.shape(&tiled))
+}
+
 /// Brute draws 6 vertices per cell, counted by a signed index in GLSL.
 fn brute_vertex_count(terrain: &Terrain) -> u64 {
     let info = terrain.info();
@@ -979,10 +1079,21 @@ impl DescriptorPlan {
                     vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
                     stages,
                 ),
+                (
+                    BINDING_PAGES,
+                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                    stages,
+                ),
+                (
+                    BINDING_PAGE_TABLE,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    stages,
+                ),
             ],
             pool_sizes: vec![
                 (vk::DescriptorType::UNIFORM_BUFFER, 1),
-                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
+                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
+                (vk::DescriptorType::STORAGE_BUFFER, 1),
             ],
         };
         if tess {

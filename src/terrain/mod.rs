@@ -101,6 +101,32 @@ impl Terrain {
             .get_or_init(|| ErrorTable::compute_pair(self.info.heightmap(), &self.grid))
     }
 
+    /// Widens each patch's Y bounds to those of the square block of
+    /// `block_cells` cells (aligned to multiples of it) that holds it. A
+    /// surface drawn from every `block_cells`-th sample then still lies
+    /// inside every patch's bounds: its cells span whole blocks, and their
+    /// corners are samples of the block. A no-op for blocks no larger than
+    /// a patch.
+    pub fn widen_y_bounds_to_blocks(&mut self, block_cells: u32) {
+        let cpp = self.grid.cells_per_patch();
+        let per_block = block_cells as usize / cpp;
+        if per_block <= 1 {
+            return;
+        }
+        let (cols, rows) = (self.grid.patch_cols(), self.grid.patch_rows());
+        let (blocks_x, blocks_z) = (cols.div_ceil(per_block), rows.div_ceil(per_block));
+        let mut blocks = vec![[f32::INFINITY, f32::NEG_INFINITY]; blocks_x * blocks_z];
+        let block_of = |p: usize| (p / cols / per_block) * blocks_x + (p % cols) / per_block;
+        for (p, b) in self.y_bounds.iter().enumerate() {
+            let block = &mut blocks[block_of(p)];
+            *block = [block[0].min(b[0]), block[1].max(b[1])];
+        }
+        for (p, b) in self.y_bounds.iter_mut().enumerate() {
+            *b = blocks[block_of(p)];
+        }
+        self.control_points = grid::control_points(&self.info, &self.grid, &self.y_bounds);
+    }
+
     /// A patch's corners in local coordinates at their sample heights.
     pub fn patch_corners(&self, id: PatchId) -> [Vec3; 4] {
         grid::patch_corners(&self.info, &self.grid, id)

@@ -120,7 +120,13 @@ impl Device {
         image: &Image,
         sampler: &Sampler,
     ) {
-        self.write_image_view(set, binding, image.view(), sampler);
+        self.write_image_view(
+            set,
+            binding,
+            image.view(),
+            sampler,
+            vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        );
     }
 
     /// Points a combined-image-sampler binding at `target`'s depth, read in
@@ -132,7 +138,13 @@ impl Device {
         target: &TargetViews,
         sampler: &Sampler,
     ) {
-        self.write_image_view(set, binding, target.depth_view, sampler);
+        self.write_image_view(
+            set,
+            binding,
+            target.depth_view,
+            sampler,
+            vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+        );
     }
 
     fn write_image_view(
@@ -141,11 +153,12 @@ impl Device {
         binding: u32,
         view: vk::ImageView,
         sampler: &Sampler,
+        layout: vk::ImageLayout,
     ) {
         let info = [vk::DescriptorImageInfo::default()
             .image_view(view)
             .sampler(sampler.raw())
-            .image_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)];
+            .image_layout(layout)];
         let write = vk::WriteDescriptorSet::default()
             .dst_set(set.0)
             .dst_binding(binding)

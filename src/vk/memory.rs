@@ -566,3 +566,148 @@ impl Device {
         Ok(image)
     }
 }
+
+/// One region of a `Recorder::copy_to_layers`: `width` x `height` texels
+/// from `offset` bytes into the staging buffer, into the top-left corner
+/// of array layer `layer`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LayerCopy {
+    pub offset: u64,
+    pub layer: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Device {
+    /// A 2D array image of `layers` layers of `side` x `side` R32_SFLOAT
+    /// texels that shaders sample and copies write (see
+    /// `Recorder::copy_to_layers`), in SHADER_READ_ONLY_OPTIMAL. Its
+    /// contents start undefined.
+    pub fn create_layer_pool(&self, name: &str, side: u32, layers: u32) -> Result<Image> {
+        let image = self.create_image_array(
+            ImageDesc {
+                extent: vk::Extent2D {
+                    width: side,
+                    height: side,
+                },
+                format: vk::Format::R32_SFLOAT,
+                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+                aspect: vk::ImageAspectFlags::COLOR,
+                samples: vk::SampleCountFlags::TYPE_1,
+            },
+            1,
+            layers,
+            vk::ImageViewType::TYPE_2D_ARRAY,
+            name,
+        )?;
+        self.one_shot(&format!("{name}.layout"), |rec| {
+            rec.transition_images(&[Transition {
+                image: image.raw(),
+                aspect: vk::ImageAspectFlags::COLOR,
+                from: UNDEFINED_NONE,
+                to: SAMPLED,
+            }]);
+        })?;
+        Ok(image)
+    }
+}
+
+type LayoutScope = (vk::ImageLayout, vk::PipelineStageFlags2, vk::AccessFlags2);
+const UNDEFINED_NONE: LayoutScope = (
+    vk::ImageLayout::UNDEFINED,
+    vk::PipelineStageFlags2::NONE,
+    vk::AccessFlags2::NONE,
+);
+/// Sampled by any graphics stage.
+const SAMPLED: LayoutScope = (
+    vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL,
+    vk::PipelineStageFlags2::ALL_GRAPHICS,
+    vk::AccessFlags2::SHADER_SAMPLED_READ,
+);
+/// Written by a copy.
+const COPIED: LayoutScope = (
+    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+    vk::PipelineStageFlags2::COPY,
+    vk::AccessFlags2::TRANSFER_WRITE,
+);
+
+impl Recorder<'_> {
+    /// One barrier moving each array layer in `layers` (one at a time, so
+    /// the others stay readable) from `from` to `to`.
+    fn layer_barriers(
+        &self,
+        image: vk::Image,
+        layers: impl IntoIterator<Item = u32>,
+        (from, to): (LayoutScope, LayoutScope),
+    ) {
+        let barriers: Vec<vk::ImageMemoryBarrier2> = layers
+            .into_iter()
+            .map(|layer| {
+                vk::ImageMemoryBarrier2::default()
+                    .image(image)
+                    .subresource_range(
+                        subresource_range(vk::ImageAspectFlags::COLOR)
+                            .base_array_layer(layer)
+                            .layer_count(1),
+                    )
+                    .old_layout(from.0)
+                    .src_stage_mask(from.1)
+                    .src_access_mask(from.2)
+                    .new_layout(to.0)
+                    .dst_stage_mask(to.1)
+                    .dst_access_mask(to.2)
+            })
+            .collect();
+        // SAFETY: the image belongs to this device and `cmd` is recording
+        // outside rendering.
+        unsafe {
+            self.device.ash().cmd_pipeline_barrier2(
+                self.cmd,
+                &vk::DependencyInfo::default().image_memory_barriers(&barriers),
+            )
+        };
+    }
+
+    /// Copies `regions` of `staging` into layers of `pool` (from
+    /// `create_layer_pool`), outside rendering: each written layer leaves
+    /// SHADER_READ_ONLY_OPTIMAL after every earlier command's reads of it,
+    /// and is back before any later one's.
+    pub fn copy_to_layers(&self, staging: &Buffer, pool: &Image, regions: &[LayerCopy]) {
+        if regions.is_empty() {
+            return;
+        }
+        let layers: Vec<u32> = regions.iter().map(|r| r.layer).collect();
+        self.layer_barriers(pool.raw(), layers.iter().copied(), (SAMPLED, COPIED));
+        let copies: Vec<vk::BufferImageCopy> = regions
+            .iter()
+            .map(|r| {
+                vk::BufferImageCopy::default()
+                    .buffer_offset(r.offset)
+                    .image_subresource(
+                        vk::ImageSubresourceLayers::default()
+                            .aspect_mask(vk::ImageAspectFlags::COLOR)
+                            .base_array_layer(r.layer)
+                            .layer_count(1),
+                    )
+                    .image_extent(vk::Extent3D {
+                        width: r.width,
+                        height: r.height,
+                        depth: 1,
+                    })
+            })
+            .collect();
+        // SAFETY: the staging buffer holds every region's texels at its
+        // offset (the caller wrote them), each region lies inside the
+        // pool, and the barrier above orders the copy after earlier reads.
+        unsafe {
+            self.device.ash().cmd_copy_buffer_to_image(
+                self.cmd,
+                staging.raw(),
+                pool.raw(),
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &copies,
+            )
+        };
+        self.layer_barriers(pool.raw(), layers, (COPIED, SAMPLED));
+    }
+}

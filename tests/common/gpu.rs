@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use glam::DVec3;
 use vkterrain::material::Appearance;
 use vkterrain::render::{
-    offscreen, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions,
+    offscreen, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, StreamConfig,
     TerrainRenderer,
 };
 use vkterrain::terrain::camera::Camera;
@@ -119,8 +119,39 @@ impl GpuScene {
             paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
             wireframe,
             samples,
+            stream: None,
         };
-        let (renderer, headless) = offscreen(&gpu, &terrain, appearance, &options, (width, height))
+        Self::with_options(gpu, terrain, appearance, &options, (width, height))
+    }
+
+    /// A plain scene streamed as `stream` says, drawn single-sampled.
+    pub fn streamed(terrain: Terrain, stream: StreamConfig, width: u32, height: u32) -> Self {
+        let options = RendererOptions {
+            stream: Some(stream),
+            ..RendererOptions::single_sample(vec![
+                RenderPath::Tess,
+                RenderPath::Geomip,
+                RenderPath::Brute,
+            ])
+        };
+        let gpu = open_gpu(None);
+        Self::with_options(
+            gpu,
+            terrain,
+            &Appearance::default(),
+            &options,
+            (width, height),
+        )
+    }
+
+    fn with_options(
+        gpu: Gpu,
+        terrain: Terrain,
+        appearance: &Appearance,
+        options: &RendererOptions,
+        (width, height): (u32, u32),
+    ) -> Self {
+        let (renderer, headless) = offscreen(&gpu, &terrain, appearance, options, (width, height))
             .expect("renderer and offscreen target");
         GpuScene {
             gpu: Some(gpu),
@@ -144,6 +175,18 @@ impl GpuScene {
             .expect("render");
         self.assert_clean("rendering");
         frame
+    }
+
+    pub fn renderer(&self) -> &TerrainRenderer {
+        self.renderer
+            .as_ref()
+            .expect("the renderer lives until the scene drops")
+    }
+
+    /// Whether frames of a streamed terrain first wait until what their
+    /// view needs is resident (one-shot renders do; flythroughs don't).
+    pub fn wait_for_residency(&mut self, wait: bool) {
+        self.headless.as_mut().unwrap().wait_for_residency = wait;
     }
 
     pub fn gpu(&self) -> &Gpu {

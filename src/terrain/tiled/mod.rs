@@ -527,8 +527,32 @@ pub fn level_error(samples: &[f32], (cells_x, cells_z): (u32, u32), level: u32) 
         return 0.0;
     }
     let stride = cells_x as usize + 1;
+    let h = |r: u32, c: u32| samples[r as usize * stride + c as usize];
+    let mut worst = 0.0f64;
+    for r in 0..=cells_z {
+        for c in 0..=cells_x {
+            let coarse = level_surface((cells_x, cells_z), level, (c, r), h);
+            worst = worst.max((f64::from(h(r, c)) - coarse).abs());
+        }
+    }
+    worst as f32
+}
+
+/// The level-`level` surface of a grid of `cells` (across, down) cells at
+/// its sample (col, row): the level's samples (`level_sample`) joined into
+/// cells split like the reference's (`Heightmap::interpolate`), a cell at
+/// the far edge narrower where the cells are not a multiple of
+/// `2^level`. `full(row, col)` reads the grid's full-resolution samples,
+/// of which the level keeps some. A sample the level keeps is returned
+/// exactly. Mirror: glsl/terrain_common.glsl `base_height`.
+pub fn level_surface(
+    (cells_x, cells_z): (u32, u32),
+    level: u32,
+    (col, row): (u32, u32),
+    full: impl Fn(u32, u32) -> f32,
+) -> f64 {
     let step = 1u32 << level;
-    // A coordinate's coarse cell, the cell's ends, and the fraction across.
+    // A coordinate's coarse cell ends, and the fraction across.
     let locate = |v: u32, cells: u32| {
         let i = (v / step).min(level_side(cells, level) - 2);
         let (a, b) = (
@@ -537,26 +561,18 @@ pub fn level_error(samples: &[f32], (cells_x, cells_z): (u32, u32), level: u32) 
         );
         (a, b, f64::from(v - a) / f64::from(b - a))
     };
-    let columns: Vec<_> = (0..=cells_x).map(|c| locate(c, cells_x)).collect();
-    let h = |r: u32, c: u32| samples[r as usize * stride + c as usize];
-    let mut worst = 0.0f64;
-    for r in 0..=cells_z {
-        let (r0, r1, t) = locate(r, cells_z);
-        for (c, &(c0, c1, s)) in columns.iter().enumerate() {
-            let cell = crate::terrain::heightmap::CellPoint {
-                row: 0,
-                col: 0,
-                s,
-                t,
-            };
-            let coarse = crate::terrain::heightmap::blend_cell(
-                &cell,
-                [h(r0, c0), h(r0, c1), h(r1, c0), h(r1, c1)],
-            );
-            worst = worst.max((f64::from(h(r, c as u32)) - coarse).abs());
-        }
-    }
-    worst as f32
+    let (c0, c1, s) = locate(col, cells_x);
+    let (r0, r1, t) = locate(row, cells_z);
+    let cell = crate::terrain::heightmap::CellPoint {
+        row: 0,
+        col: 0,
+        s,
+        t,
+    };
+    crate::terrain::heightmap::blend_cell(
+        &cell,
+        [full(r0, c0), full(r0, c1), full(r1, c0), full(r1, c1)],
+    )
 }
 
 pub fn validate_tile_cells(n: u32) -> Result<(), TiledError> {

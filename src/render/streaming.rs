@@ -1,0 +1,520 @@
+//! Heights streamed from a tiled terrain file (`terrain::tiled`) to the
+//! GPU, within a memory budget. The shaders read them through an
+//! indirection this module owns (glsl/terrain_common.glsl `fetch_sample`):
+//!
+//! - the **base level** (every `2^base_level`-th sample), one image, always
+//!   resident, uploaded whole at the start;
+//! - a **page pool**: an array image of `tile_cells + 1` square layers, one
+//!   full-resolution tile each;
+//! - a **page table** per frame in flight: per tile, its layer or none.
+//!
+//! Which tiles are resident is `residency`'s policy. Tiles are read and
+//! decoded on background threads; each frame takes what has arrived (up to
+//! `upload_bytes_per_frame`), copies it into a staging buffer of its own,
+//! and records the copies into the pool before its draws. A swap happens
+//! within one frame: the new table and the new layer contents arrive
+//! together, and a barrier keeps the copy after earlier frames' reads. A
+//! frame never waits on disk; a one-shot render calls `settle`, which does.
+
+use std::collections::VecDeque;
+use std::path::PathBuf;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use ash::vk;
+use glam::Vec3;
+
+use super::residency::{Load, Residency, StreamShape};
+use super::view::FrameView;
+use crate::shader_constants::{BINDING_PAGES, BINDING_PAGE_TABLE};
+use crate::terrain::tiled::{level_sample, TiledError, TiledHeightmap};
+use crate::terrain::TerrainInfo;
+use crate::vk::commands::Recorder;
+use crate::vk::descriptors::DescriptorSet;
+use crate::vk::memory::{Buffer, Image, LayerCopy};
+use crate::vk::owned::Sampler;
+use crate::vk::{Device, Result, VkError};
+
+/// Samples a side of the base level may have at most, by default: 2049^2
+/// f32 is 16 MiB.
+pub const DEFAULT_BASE_MAX_SIDE: u32 = 2049;
+/// Bytes of tiles one frame uploads at most, by default.
+pub const DEFAULT_UPLOAD_BYTES_PER_FRAME: u64 = 8 << 20;
+/// Threads reading tiles, by default.
+pub const DEFAULT_LOADER_THREADS: usize = 2;
+/// Under a memory budget, what the pool leaves free for what is allocated
+/// after it (the occlusion pyramid, pipelines built later, a resized
+/// window's targets): this fraction of the budget, and at least
+/// `MIN_HEADROOM_BYTES`. Render targets made before the renderer are
+/// already counted.
+pub const HEADROOM_FRACTION: u64 = 16;
+pub const MIN_HEADROOM_BYTES: u64 = 16 << 20;
+
+/// Where a streamed terrain comes from and how it streams.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StreamConfig {
+    /// The tiled terrain file.
+    pub path: PathBuf,
+    /// Largest side of the always-resident base level, in samples.
+    pub base_max_side: u32,
+    /// Bytes of tiles one frame uploads at most.
+    pub upload_bytes_per_frame: u64,
+    pub loader_threads: usize,
+    /// Layers of the page pool; by default as many as there are tiles (or
+    /// the device allows), fewer where the memory budget says so.
+    pub layers: Option<u32>,
+}
+
+impl StreamConfig {
+    pub fn new(path: PathBuf) -> Self {
+        StreamConfig {
+            path,
+            base_max_side: DEFAULT_BASE_MAX_SIDE,
+            upload_bytes_per_frame: DEFAULT_UPLOAD_BYTES_PER_FRAME,
+            loader_threads: DEFAULT_LOADER_THREADS,
+            layers: None,
+        }
+    }
+
+    /// How the terrain file at `path` streams under this configuration.
+    pub fn shape(&self, tiled: &TiledHeightmap) -> StreamShape {
+        StreamShape::new(
+            tiled.width() as u32,
+            tiled.depth() as u32,
+            tiled.header().tile_cells,
+            self.base_max_side,
+        )
+    }
+}
+
+/// What streaming did in one frame, and where it stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct StreamStats {
+    /// Tiles uploaded by this frame and their bytes.
+    pub uploaded_tiles: u32,
+    pub upload_bytes: u64,
+    /// Tiles this frame sent back to the base level.
+    pub evicted_tiles: u32,
+    /// The largest change an upload made on screen, at most: the uploaded
+    /// tiles' base-level errors seen from the view, in pixels.
+    pub pop_px: f32,
+    /// Tiles resident after this frame, and the pool's layers.
+    pub resident_tiles: u32,
+    pub layers: u32,
+    /// Reads in flight and tiles read but not uploaded yet.
+    pub loads_in_flight: u32,
+    pub waiting_uploads: u32,
+    /// The largest error, in pixels, of a tile the view needs that the
+    /// frame drew from the base level (0: everything needed is resident).
+    pub missing_px: f32,
+}
+
+/// A tile read from disk: its full-resolution samples, row-major.
+type Loaded = (Load, std::result::Result<Vec<f32>, TiledError>);
+
+/// Background threads reading tiles in the order asked.
+struct Loader {
+    requests: Option<Sender<Load>>,
+    results: Receiver<Loaded>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl Loader {
+    fn new(path: &std::path::Path, shape: StreamShape, threads: usize) -> Result<Self> {
+        let (requests, jobs) = mpsc::channel::<Load>();
+        let jobs = Arc::new(Mutex::new(jobs));
+        let (done, results) = mpsc::channel();
+        let mut handles = Vec::new();
+        for i in 0..threads.max(1) {
+            // Each thread has its own file handle; the reader's cache is
+            // off, as every tile is read once per upload.
+            let reader = TiledHeightmap::open(path)
+                .map_err(|e| VkError::Stream(e.to_string()))?
+                .with_cache_bytes(0);
+            let (jobs, done) = (Arc::clone(&jobs), done.clone());
+            let handle = std::thread::Builder::new()
+                .name(format!("tile-loader-{i}"))
+                .spawn(move || loop {
+                    let next = jobs.lock().map(|j| j.recv());
+                    let Ok(Ok(load)) = next else { break };
+                    let tx = (load.tile % shape.tiles_x as usize) as u32;
+                    let tz = (load.tile / shape.tiles_x as usize) as u32;
+                    let tile = reader.tile(tx, tz, 0).map(|t| t.heights.clone());
+                    if done.send((load, tile)).is_err() {
+                        break;
+                    }
+                })
+                .map_err(|e| VkError::Stream(format!("starting a tile loader: {e}")))?;
+            handles.push(handle);
+        }
+        Ok(Loader {
+            requests: Some(requests),
+            results,
+            threads: handles,
+        })
+    }
+
+    fn request(&self, load: Load) -> Result<()> {
+        self.requests
+            .as_ref()
+            .and_then(|r| r.send(load).ok())
+            .ok_or_else(|| VkError::Stream("the tile loaders stopped".into()))
+    }
+}
+
+impl Drop for Loader {
+    fn drop(&mut self) {
+        // Closing the queue ends each thread after its current read.
+        self.requests = None;
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The streamed heights on the GPU and the residency behind them.
+pub struct Streamer {
+    shape: StreamShape,
+    residency: Residency,
+    /// Per tile: the base level's error against full resolution, and its
+    /// box in terrain-local coordinates (centre, half extents).
+    base_errors: Vec<f32>,
+    boxes: Vec<(Vec3, Vec3)>,
+    base: Image,
+    pool: Image,
+    /// Per frame slot: the page table it draws with, the staging buffer
+    /// its uploads come from, and the copies `record` makes.
+    tables: Vec<Buffer>,
+    staging: Vec<Buffer>,
+    copies: Vec<Vec<LayerCopy>>,
+    loader: Loader,
+    /// Tiles read and waiting for a frame to upload them.
+    arrived: VecDeque<(Load, Vec<f32>)>,
+    stats: StreamStats,
+    device: Device,
+}
+
+impl Streamer {
+    /// Opens `config.path` for a terrain whose CPU model is `info`, uploads
+    /// its base level and makes a pool as large as the configuration and
+    /// the device's memory budget allow, for `frames` frames in flight.
+    pub fn new(
+        device: &Device,
+        info: &TerrainInfo,
+        config: &StreamConfig,
+        frames: usize,
+    ) -> Result<Self> {
+        let stream = |e: TiledError| VkError::Stream(e.to_string());
+        let tiled = TiledHeightmap::open(&config.path).map_err(stream)?;
+        if (tiled.width(), tiled.depth()) != (info.cols(), info.rows()) {
+            return Err(VkError::Stream(format!(
+                "{} holds {}x{} samples, the terrain drawn {}x{}",
+                config.path.display(),
+                tiled.width(),
+                tiled.depth(),
+                info.cols(),
+                info.rows()
+            )));
+        }
+        let shape = config.shape(&tiled);
+        let base = upload_base(device, &tiled, &shape)?;
+        let mut base_errors = Vec::with_capacity(shape.tile_total());
+        let mut boxes = Vec::with_capacity(shape.tile_total());
+        for tz in 0..shape.tiles_z {
+            for tx in 0..shape.tiles_x {
+                base_errors.push(tiled.entry(tx, tz, shape.base_level).error);
+                let full = tiled.entry(tx, tz, 0);
+                let ((c0, r0), (w, d)) = shape.tile_rect(tx, tz);
+                let lo = Vec3::new(
+                    info.local_x(c0 as usize) as f32,
+                    full.min,
+                    info.local_z((r0 + d) as usize) as f32,
+                );
+                let hi = Vec3::new(
+                    info.local_x((c0 + w) as usize) as f32,
+                    full.max,
+                    info.local_z(r0 as usize) as f32,
+                );
+                boxes.push((0.5 * (lo + hi), 0.5 * (hi - lo)));
+            }
+        }
+        let side = shape.page_side();
+        let layer_bytes = 4 * u64::from(side) * u64::from(side);
+        let staging_bytes = config.upload_bytes_per_frame.max(layer_bytes);
+        let mut staging = Vec::new();
+        let mut tables = Vec::new();
+        let table_words = shape.tile_total();
+        for i in 0..frames {
+            staging.push(device.create_host_buffer(
+                &format!("terrain.stream.staging[{i}]"),
+                vk::BufferUsageFlags::TRANSFER_SRC,
+                &vec![0u8; staging_bytes as usize],
+            )?);
+            tables.push(device.create_host_buffer(
+                &format!("terrain.stream.page_table[{i}]"),
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytemuck::cast_slice(&vec![0u32; table_words]),
+            )?);
+        }
+        let mut layers = config
+            .layers
+            .unwrap_or(shape.tile_total() as u32)
+            .min(shape.tile_total() as u32)
+            .min(device.caps.max_image_array_layers);
+        if let Some(budget) = device.memory_budget() {
+            let headroom = (budget / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES);
+            let free = budget.saturating_sub(device.memory_in_use() + headroom);
+            layers = layers.min((free / layer_bytes) as u32);
+        }
+        if layers == 0 {
+            return Err(VkError::Stream(format!(
+                "no room for one {side}x{side} tile of {} under the GPU memory budget \
+                 (--gpu-memory-budget) once the base level and {} MiB of headroom are held",
+                config.path.display(),
+                device
+                    .memory_budget()
+                    .map_or(0, |b| (b / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES) >> 20)
+            )));
+        }
+        let pool = device.create_layer_pool("terrain.stream.pages", side, layers)?;
+        drop(tiled);
+        Ok(Streamer {
+            shape,
+            residency: Residency::new(shape.tile_total(), layers),
+            base_errors,
+            boxes,
+            base,
+            pool,
+            tables,
+            staging,
+            copies: vec![Vec::new(); frames],
+            loader: Loader::new(&config.path, shape, config.loader_threads)?,
+            arrived: VecDeque::new(),
+            stats: StreamStats::default(),
+            device: device.clone(),
+        })
+    }
+
+    pub fn shape(&self) -> StreamShape {
+        self.shape
+    }
+
+    /// The base level, bound where the heightmap is.
+    pub fn base(&self) -> &Image {
+        &self.base
+    }
+
+    /// Points slot `slot`'s set at the pool and its page table.
+    pub fn write_bindings(&self, set: DescriptorSet, slot: usize, sampler: &Sampler) {
+        let table = &self.tables[slot];
+        self.device
+            .write_sampled_image(set, BINDING_PAGES, &self.pool, sampler);
+        self.device.write_buffer(
+            set,
+            BINDING_PAGE_TABLE,
+            vk::DescriptorType::STORAGE_BUFFER,
+            table,
+            table.desc.size,
+        );
+    }
+
+    /// What the last prepared frame did.
+    pub fn stats(&self) -> StreamStats {
+        self.stats
+    }
+
+    /// Each tile's priority from `view`: its base-level error over its
+    /// box's distance, in pixels; 0 outside the frustum.
+    fn priorities(&self, view: &FrameView) -> Vec<f32> {
+        self.boxes
+            .iter()
+            .zip(&self.base_errors)
+            .map(|(&(centre, extents), &error)| {
+                let rel = centre - view.eye_local;
+                if error <= 0.0 || view.frustum.aabb_outside(rel, extents) {
+                    return 0.0;
+                }
+                let d = (rel.abs() - extents).max(Vec3::ZERO).length();
+                error * view.pixels_per_radian / d.max(f32::MIN_POSITIVE)
+            })
+            .collect()
+    }
+
+    /// Takes what the loaders finished, without waiting (with `wait`,
+    /// waits up to that long for the first).
+    fn collect(&mut self, wait: Option<Duration>) -> Result<()> {
+        let mut next = match wait {
+            Some(timeout) => match self.loader.results.recv_timeout(timeout) {
+                Ok(r) => Some(r),
+                Err(RecvTimeoutError::Timeout) => None,
+                Err(RecvTimeoutError::Disconnected) => {
+                    return Err(VkError::Stream("the tile loaders stopped".into()))
+                }
+            },
+            None => self.loader.results.try_recv().ok(),
+        };
+        while let Some((load, tile)) = next {
+            match tile {
+                Ok(heights) => self.arrived.push_back((load, heights)),
+                Err(e) => {
+                    self.residency.cancelled(load);
+                    return Err(VkError::Stream(e.to_string()));
+                }
+            }
+            next = self.loader.results.try_recv().ok();
+        }
+        Ok(())
+    }
+
+    /// Places arrived tiles into slot `slot`'s staging buffer while they
+    /// fit, updating the residency, and returns the copies to record.
+    fn stage(&mut self, slot: usize, priorities: &[f32]) -> Result<Vec<LayerCopy>> {
+        let mut copies = Vec::new();
+        let capacity = self.staging[slot].desc.size;
+        let mut offset = 0u64;
+        let staging = self.staging[slot]
+            .mapped_mut()
+            .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
+        while let Some((load, heights)) = self.arrived.front() {
+            let bytes = 4 * heights.len() as u64;
+            if offset + bytes > capacity {
+                break;
+            }
+            let tx = (load.tile % self.shape.tiles_x as usize) as u32;
+            let tz = (load.tile / self.shape.tiles_x as usize) as u32;
+            let (_, (w, d)) = self.shape.tile_rect(tx, tz);
+            staging[offset as usize..(offset + bytes) as usize]
+                .copy_from_slice(bytemuck::cast_slice(heights));
+            copies.push(LayerCopy {
+                offset,
+                layer: load.layer,
+                width: w + 1,
+                height: d + 1,
+            });
+            let placed = self.residency.arrived(*load);
+            self.stats.uploaded_tiles += 1;
+            self.stats.upload_bytes += bytes;
+            self.stats.evicted_tiles += u32::from(placed.evicted.is_some());
+            self.stats.pop_px = self.stats.pop_px.max(priorities[load.tile]);
+            offset += bytes;
+            self.arrived.pop_front();
+        }
+        Ok(copies)
+    }
+
+    /// Starts the loads this view needs most, keeping at most two frames'
+    /// uploads read or in flight.
+    fn request(&mut self, priorities: &[f32], frame_tiles: usize) -> Result<()> {
+        let busy = self.residency.loads_in_flight();
+        let room = (2 * frame_tiles).saturating_sub(busy);
+        for load in self.residency.plan(priorities, room) {
+            self.loader.request(load)?;
+        }
+        Ok(())
+    }
+
+    /// Tiles one frame's staging buffer holds.
+    fn frame_tiles(&self, slot: usize) -> usize {
+        let side = u64::from(self.shape.page_side());
+        (self.staging[slot].desc.size / (4 * side * side)).max(1) as usize
+    }
+
+    /// Sets slot `slot` (whose last frame has completed) up for a frame
+    /// seen as `view`: uploads what has arrived, asks for what the view
+    /// needs, and writes the slot's page table. Never waits on disk.
+    pub fn prepare(&mut self, slot: usize, view: &FrameView) -> Result<()> {
+        self.stats = StreamStats::default();
+        self.collect(None)?;
+        let priorities = self.priorities(view);
+        self.copies[slot] = self.stage(slot, &priorities)?;
+        self.request(&priorities, self.frame_tiles(slot))?;
+        self.finish_frame(slot)
+    }
+
+    /// Loads and uploads (with its own submissions) until everything
+    /// `view` needs is resident, or the pool holds what helps it most:
+    /// what a one-shot render does before its frame. Slot `slot` must be
+    /// idle. Returns the tiles uploaded.
+    pub fn settle(&mut self, slot: usize, view: &FrameView) -> Result<u32> {
+        let priorities = self.priorities(view);
+        let frame_tiles = self.frame_tiles(slot);
+        let mut uploaded = 0;
+        loop {
+            self.request(&priorities, frame_tiles)?;
+            if self.residency.loads_in_flight() == 0 && self.arrived.is_empty() {
+                return Ok(uploaded);
+            }
+            self.collect(Some(Duration::from_millis(100)))?;
+            let copies = self.stage(slot, &priorities)?;
+            if copies.is_empty() {
+                continue;
+            }
+            uploaded += copies.len() as u32;
+            let (staging, pool) = (&self.staging[slot], &self.pool);
+            self.device.one_shot("terrain.stream.settle", |rec| {
+                rec.copy_to_layers(staging, pool, &copies)
+            })?;
+        }
+    }
+
+    fn finish_frame(&mut self, slot: usize) -> Result<()> {
+        let table = self.tables[slot]
+            .mapped_mut()
+            .ok_or_else(|| VkError::Unsupported("page table memory is not host-mapped".into()))?;
+        table.copy_from_slice(bytemuck::cast_slice(self.residency.page_table()));
+        self.stats.resident_tiles = self.residency.resident_tiles() as u32;
+        self.stats.layers = self.residency.layers();
+        self.stats.loads_in_flight = self.residency.loads_in_flight() as u32;
+        self.stats.waiting_uploads = self.arrived.len() as u32;
+        self.stats.missing_px = self.residency.missing_px();
+        Ok(())
+    }
+
+    /// Records slot `slot`'s uploads (outside rendering, before its draws).
+    pub fn record(&self, rec: &Recorder, slot: usize) {
+        rec.copy_to_layers(&self.staging[slot], &self.pool, &self.copies[slot]);
+    }
+
+    /// The page table's entries: per tile, its layer or
+    /// `PAGE_NOT_RESIDENT`.
+    pub fn page_table(&self) -> &[u32] {
+        self.residency.page_table()
+    }
+
+    /// Evictions since the start.
+    pub fn evictions(&self) -> u64 {
+        self.residency.evictions()
+    }
+}
+
+/// The base level of `tiled` as one image: each tile's level
+/// `shape.base_level`, placed where its samples fall in the whole.
+fn upload_base(device: &Device, tiled: &TiledHeightmap, shape: &StreamShape) -> Result<Image> {
+    let (w, h) = shape.base_size();
+    let mut texels = vec![0f32; w as usize * h as usize];
+    let step = shape.tile_cells >> shape.base_level;
+    for tz in 0..shape.tiles_z {
+        for tx in 0..shape.tiles_x {
+            let level = tiled
+                .tile(tx, tz, shape.base_level)
+                .map_err(|e| VkError::Stream(e.to_string()))?;
+            for r in 0..level.rows {
+                let row = (tz * step + r) as usize;
+                let start = row * w as usize + (tx * step) as usize;
+                texels[start..start + level.cols as usize].copy_from_slice(
+                    &level.heights[(r * level.cols) as usize..][..level.cols as usize],
+                );
+            }
+        }
+    }
+    // Every tile's level samples are the whole's: tiles start on multiples
+    // of 2^base_level, and a tile's last sample is a multiple too or the
+    // terrain's last.
+    debug_assert_eq!(
+        level_sample(w - 1, shape.cols - 1, shape.base_level),
+        shape.cols - 1
+    );
+    device.upload_r32f_image("terrain.stream.base", w, h, &texels)
+}

@@ -1,0 +1,270 @@
+//! Streamed terrains on a real Vulkan device: small imported terrains with
+//! tiny tiles and a tiny pool, so eviction and re-streaming happen here.
+//! With room for every tile the image is the whole-terrain renderer's,
+//! pixel for pixel; under a tight pool a flythrough has no holes or cracks
+//! in any frame; the base level drawn matches its CPU mirror. Validation
+//! is on and counted after the device is destroyed.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::gpu::*;
+use glam::DVec2;
+use vkterrain::render::residency::StreamShape;
+use vkterrain::render::{LodMetric, RenderPath, RenderSettings, Shading, StreamConfig};
+use vkterrain::shader_constants::PAGE_NOT_RESIDENT;
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::generate::{generate, GeneratorParams};
+use vkterrain::terrain::tiled::{self, MemoryRows};
+use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
+
+const TILE: u32 = 16;
+const CELLS_PER_PATCH: u32 = 16;
+/// Base sides of at most 17 samples: every 16th sample of the 257x201 map.
+const BASE_MAX_SIDE: u32 = 17;
+
+/// Eroded hills, 257x201 samples (a remainder tile down), 0 to 60 m.
+fn hills() -> Heightmap {
+    let square = generate(&GeneratorParams {
+        size: 257,
+        seed: 11,
+        droplets: 4000,
+    })
+    .unwrap();
+    Heightmap::from_fn(257, 201, |r, c| 60.0 * square.get(r, c)).unwrap()
+}
+
+fn info(map: Heightmap) -> TerrainInfo {
+    TerrainInfo::new(map, DVec2::new(2.0, 2.0), CELLS_PER_PATCH, DVec2::ZERO).unwrap()
+}
+
+/// `map` imported into `dir` with 16-cell tiles.
+fn imported(map: &Heightmap, dir: &Path) -> PathBuf {
+    let out = dir.join("hills.vkt");
+    let mut rows = MemoryRows::new(map.clone(), None);
+    tiled::import(&mut rows, TILE, Some(CELLS_PER_PATCH), &out, &mut |_, _| {}).unwrap();
+    out
+}
+
+fn config(path: PathBuf, layers: Option<u32>) -> StreamConfig {
+    StreamConfig {
+        base_max_side: BASE_MAX_SIDE,
+        layers,
+        ..StreamConfig::new(path)
+    }
+}
+
+/// The terrain's CPU model with its Y bounds widened for the base level.
+fn streamed_terrain(map: &Heightmap) -> Terrain {
+    let mut terrain = Terrain::new(info(map.clone()), 0.0).unwrap();
+    terrain.widen_y_bounds_to_blocks(1 << shape().base_level);
+    terrain
+}
+
+fn shape() -> StreamShape {
+    StreamShape::new(257, 201, TILE, BASE_MAX_SIDE)
+}
+
+fn cameras() -> Vec<(&'static str, Camera)> {
+    vec![
+        ("top", camera([0.0, 600.0, 0.0], [0.0, 0.0, 0.0], 60.0)),
+        (
+            "oblique",
+            camera([-260.0, 120.0, -200.0], [0.0, 20.0, 0.0], 55.0),
+        ),
+        (
+            "low",
+            camera([200.0, 45.0, 150.0], [-40.0, 15.0, -20.0], 70.0),
+        ),
+    ]
+}
+
+fn settings(path: RenderPath, shading: Shading) -> RenderSettings {
+    RenderSettings {
+        path,
+        lod_metric: LodMetric::Error(1.0),
+        shading,
+        clear_color: [0.0; 3],
+        ..RenderSettings::default()
+    }
+}
+
+#[test]
+fn with_room_for_every_tile_the_image_is_the_resident_renderers() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let map = hills();
+    let path = imported(&map, dir.path());
+    let (w, h) = (320, 200);
+    let mut whole = GpuScene::new(Terrain::new(info(map.clone()), 0.0).unwrap(), w, h, false);
+    let mut streamed = GpuScene::streamed(streamed_terrain(&map), config(path, None), w, h);
+    for (view, cam) in cameras() {
+        for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
+            let s = settings(path, Shading::Lit);
+            let expected = whole.render(&cam, &s);
+            let frame = streamed.render(&cam, &s);
+            let stats = streamed.renderer().stream_stats().unwrap();
+            assert_eq!(
+                stats.missing_px, 0.0,
+                "{view}/{path:?}: every tile in view is resident"
+            );
+            assert!(stats.resident_tiles > 0, "{view}/{path:?}: {stats:?}");
+            let differing = frame
+                .readback
+                .rgba
+                .chunks_exact(4)
+                .zip(expected.readback.rgba.chunks_exact(4))
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(
+                differing, 0,
+                "{view}/{path:?}: pixels differ from the resident image"
+            );
+        }
+    }
+    whole.finish();
+    streamed.finish();
+}
+
+#[test]
+fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let map = hills();
+    let layers = 6;
+    let stream = StreamConfig {
+        // Two tiles a frame, so arrivals spread over frames.
+        upload_bytes_per_frame: 2 * 4 * u64::from((TILE + 1) * (TILE + 1)),
+        ..config(imported(&map, dir.path()), Some(layers))
+    };
+    let (w, h) = (320, 200);
+    let mut scene = GpuScene::streamed(streamed_terrain(&map), stream, w, h);
+    // A flythrough never waits on the disk.
+    scene.wait_for_residency(false);
+    let flat = settings(RenderPath::Tess, Shading::Flat);
+    let (mut uploads, mut most_resident) = (0, 0);
+    // Low along the terrain and back again, then a cut to a view from
+    // above: tiles leave the pool and come back.
+    let mut path: Vec<Camera> = (0..=16)
+        .chain((0..=16).rev())
+        .map(|i| {
+            let x = -220.0 + 27.5 * f64::from(i);
+            camera([x, 70.0, -150.0], [x + 40.0, 10.0, 0.0], 60.0)
+        })
+        .collect();
+    path.push(camera([0.0, 520.0, 0.0], [0.0, 0.0, 0.0], 60.0));
+    for (i, cam) in path.iter().enumerate() {
+        let frame = scene.render(cam, &flat);
+        let stats = scene.renderer().stream_stats().unwrap();
+        uploads += stats.uploaded_tiles;
+        most_resident = most_resident.max(stats.resident_tiles);
+        let rgba = &frame.readback.rgba;
+        let covered = rgba.chunks_exact(4).filter(|p| p[0] > 128).count();
+        assert!(
+            covered > (w * h / 10) as usize,
+            "frame {i}: the terrain covers {covered} pixels"
+        );
+        let holes = enclosed_background(rgba, w as usize, h as usize, |p| p[0] < 128);
+        if !holes.is_empty() {
+            frame
+                .rgba_image()
+                .save(format!("stream-frame-{i}-cracks.png"))
+                .unwrap();
+        }
+        assert!(
+            holes.is_empty(),
+            "frame {i}: {} background pixels inside the terrain, first at {:?} ({stats:?})",
+            holes.len(),
+            &holes[..holes.len().min(5)]
+        );
+    }
+    let evictions = scene.renderer().stream_evictions().unwrap();
+    assert_eq!(most_resident, layers, "the pool fills");
+    assert!(evictions >= 4, "only {evictions} tiles were evicted");
+    assert!(
+        u64::from(uploads) >= u64::from(layers) + evictions,
+        "{uploads} uploads for {evictions} evictions"
+    );
+    scene.finish();
+}
+
+#[test]
+fn the_base_level_drawn_matches_its_cpu_mirror() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let map = hills();
+    let path = imported(&map, dir.path());
+    let (w, h) = (320, 200);
+    let mut streamed = GpuScene::streamed(streamed_terrain(&map), config(path, Some(2)), w, h);
+    let brute = settings(RenderPath::Brute, Shading::Flat);
+    let (_, cam) = cameras().remove(1);
+    // Lit by the normals the heights give, in one colour (height colours
+    // would follow each terrain's own height range).
+    let lit = RenderSettings {
+        shading: Shading::LodColors,
+        ..brute
+    };
+    let frame = streamed.render(&cam, &lit);
+    let table = streamed.renderer().stream_page_table().unwrap().to_vec();
+    assert_eq!(
+        table.iter().filter(|&&l| l != PAGE_NOT_RESIDENT).count(),
+        2,
+        "two tiles resident, the rest drawn from the base level"
+    );
+    streamed.finish();
+    // The heights the GPU should have drawn, by the Rust mirror, drawn
+    // whole.
+    let shape = shape();
+    let mirror = Heightmap::from_fn(257, 201, |r, c| {
+        shape.streamed_sample(
+            |t| table[t] != PAGE_NOT_RESIDENT,
+            |row, col| map.get(row as usize, col as usize),
+            (c as u32, r as u32),
+        )
+    })
+    .unwrap();
+    let mut whole = GpuScene::new(Terrain::new(info(mirror), 0.0).unwrap(), w, h, false);
+    let expected = whole.render(&cam, &lit);
+    let full = whole_render(&map, &cam, &lit);
+    whole.finish();
+    let differing = |a: &[u8], b: &[u8]| {
+        a.chunks_exact(4)
+            .zip(b.chunks_exact(4))
+            .filter(|(a, b)| a != b)
+            .count()
+    };
+    let against_mirror = differing(&frame.readback.rgba, &expected.readback.rgba);
+    let against_full = differing(&frame.readback.rgba, &full);
+    assert!(
+        against_full > 1000,
+        "the base level should show: only {against_full} pixels differ from full resolution"
+    );
+    if against_mirror != 0 {
+        frame.rgba_image().save("stream-mirror-gpu.png").unwrap();
+        image::RgbaImage::from_raw(w, h, expected.readback.rgba.clone())
+            .unwrap()
+            .save("stream-mirror-cpu.png")
+            .unwrap();
+    }
+    assert_eq!(against_mirror, 0, "pixels differ from the mirror's image");
+}
+
+/// `map` drawn whole from `cam`: its RGBA pixels.
+fn whole_render(map: &Heightmap, cam: &Camera, s: &RenderSettings) -> Vec<u8> {
+    let mut scene = GpuScene::new(
+        Terrain::new(info(map.clone()), 0.0).unwrap(),
+        320,
+        200,
+        false,
+    );
+    let rgba = scene.render(cam, s).readback.rgba;
+    scene.finish();
+    rgba
+}
