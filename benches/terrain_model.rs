@@ -51,20 +51,20 @@ fn bench(c: &mut Criterion) {
     group.sample_size(10);
 
     group.throughput(Throughput::Bytes(bytes));
-    let mut dst = vec![0.0f32; info.heightmap().heights().len()];
+    let mut dst = vec![0.0f32; info.whole().heights().len()];
     group.bench_function("memcpy_heightmap_bytes", |b| {
         b.iter(|| {
-            dst.copy_from_slice(black_box(info.heightmap().heights()));
+            dst.copy_from_slice(black_box(info.whole().heights()));
             black_box(&dst);
         })
     });
     group.bench_function("y_bounds", |b| {
-        b.iter(|| black_box(patch_y_bounds(black_box(info.heightmap()), &grid, 0.0)))
+        b.iter(|| black_box(patch_y_bounds(black_box(info.whole()), &grid, 0.0)))
     });
 
     group.throughput(Throughput::Elements(grid.patch_count() as u64));
     group.bench_function("error_table", |b| {
-        b.iter(|| black_box(ErrorTable::compute(black_box(info.heightmap()), &grid)))
+        b.iter(|| black_box(ErrorTable::compute(black_box(info.whole()), &grid)))
     });
 
     const QUERIES: usize = 1 << 20;

@@ -71,7 +71,7 @@ fn the_grazing_view_is_low_and_level() {
     let info = dem_info(32);
     let v = named_views(&info)[0].camera;
     let ground = f64::from(info.clamped_height_at(v.eye.x, v.eye.z));
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     // 3 % of the relief plus one cell above the ground.
     let lift = 0.03 * f64::from(hi - lo) + info.spacing().max_element();
     assert!(
@@ -88,7 +88,7 @@ fn the_flythrough_is_a_smooth_closed_loop_above_the_ground() {
         let frames = flythrough(&info, 200);
         assert_eq!(frames.len(), 200);
         let size = info.world_width().max(info.world_depth());
-        let (lo, hi) = info.heightmap().min_max();
+        let (lo, hi) = info.min_max();
         let steps: Vec<glam::DVec3> = frames
             .iter()
             .zip(frames.iter().cycle().skip(1))

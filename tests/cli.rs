@@ -331,10 +331,7 @@ fn import_writes_a_tiled_terrain_that_height_and_inspect_open() {
     source.truncate(6);
     assert_eq!(tiled, query(source));
     assert_eq!(tiled[3]["height"], serde_json::Value::Null);
-    assert_eq!(
-        tiled[0]["height"],
-        f64::from(info.heightmap().get(343, 402))
-    );
+    assert_eq!(tiled[0]["height"], f64::from(info.whole().get(343, 402)));
     // inspect reads it a tile at a time and reports what it reports for
     // the source, every patch's Y bounds included.
     for cells in ["16", "32"] {

@@ -123,11 +123,7 @@ fn tables_for(
 ) -> ((ErrorTable, ErrorTable), PatchGrid, TerrainInfo) {
     let info = TerrainInfo::new(map, DVec2::new(1.0, 1.0), cells_per_patch, DVec2::ZERO).unwrap();
     let grid = PatchGrid::new(&info);
-    (
-        ErrorTable::compute_pair(info.heightmap(), &grid),
-        grid,
-        info,
-    )
+    (ErrorTable::compute_pair(info.whole(), &grid), grid, info)
 }
 
 fn table_for(map: Heightmap, cells_per_patch: u32) -> (ErrorTable, PatchGrid, TerrainInfo) {

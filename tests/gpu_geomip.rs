@@ -7,6 +7,7 @@ mod common;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec3};
+use vkterrain::bench::error::enclosed_background;
 use vkterrain::render::{FrameView, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
@@ -46,7 +47,7 @@ fn check_path(name: &str, terrain: Terrain) {
         return;
     }
     let info = terrain.info().clone();
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     let size = info.world_width().max(info.world_depth());
     let d0 = (size / 60.0) as f32;
     let mut scene = GpuScene::new(terrain, 256, 192, false);

@@ -24,7 +24,7 @@ fn glsl_formulas_match_their_rust_mirrors() {
     }
     let gpu = Gpu::new(true).expect("a Vulkan device (set VKTERRAIN_SKIP_GPU=1 to skip)");
     let terrain = dem_terrain(32, DVec2::ZERO);
-    let map = terrain.info().heightmap().clone();
+    let map = terrain.info().whole().clone();
     let (lo, hi) = map.min_max();
     let view = FrameView::new(
         &terrain,

@@ -9,6 +9,7 @@ use std::collections::BTreeSet;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, DVec3, Vec3};
+use vkterrain::bench::error::enclosed_background;
 use vkterrain::bench::error::{measure, DepthView};
 use vkterrain::material::Appearance;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings, Shading};
@@ -39,7 +40,7 @@ fn cliff_terrain() -> Terrain {
 /// World-space centre, size and top of a terrain.
 fn extent(terrain: &Terrain) -> (DVec3, f64, f64) {
     let info = terrain.info();
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     let o = info.origin();
     let size = info.world_width().max(info.world_depth());
     (
@@ -341,7 +342,7 @@ fn check_depth_against_height_at(
         return;
     }
     let info = terrain.info().clone();
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     let range = f64::from(hi - lo);
     let spacing = info.spacing().max_element();
     let centre = info.sample_position(info.rows() / 3, info.cols() / 3);
@@ -674,7 +675,7 @@ fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
     let corners = terrain.patch_corners(id).map(|c| c - eye);
     let bounds = terrain.y_bounds()[grid.patch_index(id)].map(|y| y - eye.y);
     let range = {
-        let (lo, hi) = terrain.info().heightmap().min_max();
+        let (lo, hi) = terrain.info().min_max();
         [lo - eye.y, hi - eye.y]
     };
     let cells = [32, 32];
@@ -819,7 +820,7 @@ fn full_resolution_tess_is_the_reference() {
         ("dem", dem_terrain(16, DVec2::ZERO)),
         ("rough", rough_cliff_terrain()),
     ] {
-        let (lo, hi) = terrain.info().heightmap().min_max();
+        let (lo, hi) = terrain.info().min_max();
         let range = f64::from(hi - lo);
         let cams = crack_cameras(&terrain);
         let mut scene = GpuScene::new(terrain, 256, 192, false);

@@ -32,7 +32,7 @@ fn exact_at_every_sample_including_the_far_edges() {
                 let p = info.sample_position(r, c);
                 assert_eq!(
                     info.height_at(p.x, p.y),
-                    Some(info.heightmap().get(r, c)),
+                    Some(info.whole().get(r, c)),
                     "sample ({r}, {c})"
                 );
             }
@@ -44,7 +44,7 @@ fn exact_at_every_sample_including_the_far_edges() {
 fn far_corners_are_inside_and_exact() {
     let info = dem_info(32);
     let (w, d) = (info.world_width(), info.world_depth());
-    let map = info.heightmap();
+    let map = info.whole();
     assert_eq!(info.height_at(-w / 2.0, d / 2.0), Some(map.get(0, 0)));
     assert_eq!(info.height_at(w / 2.0, d / 2.0), Some(map.get(0, 402)));
     assert_eq!(info.height_at(-w / 2.0, -d / 2.0), Some(map.get(343, 0)));
@@ -125,7 +125,7 @@ fn plane_height(info: &TerrainInfo, x: f64, z: f64) -> f64 {
     let corner = |rr: usize, cc: usize| {
         DVec3::new(
             info.local_x(cc),
-            f64::from(info.heightmap().get(rr, cc)),
+            f64::from(info.whole().get(rr, cc)),
             info.local_z(rr),
         )
     };
@@ -183,7 +183,7 @@ fn clamped_height_follows_the_border_and_never_fails() {
     );
     assert_eq!(
         info.clamped_height_at(hw * 3.0, hd * 3.0),
-        info.heightmap().get(0, 402)
+        info.whole().get(0, 402)
     );
     assert_eq!(
         info.clamped_height_at(f64::NAN, f64::INFINITY),

@@ -369,11 +369,11 @@ fn blend_maps_baked_from_rules_hold_the_rules_weights() {
     let maps = blend_maps_from_rules(&dem, &rules, 3, 1);
     assert_eq!(maps.len(), 1);
     assert_eq!(maps[0].dimensions(), (403, 344));
-    let (lo, hi) = dem.heightmap().min_max();
+    let (lo, hi) = dem.min_max();
     for (r, c) in [(0, 0), (343, 402), (100, 200), (200, 37)] {
         let p: DVec2 = dem.sample_position(r, c);
         let n = dem.normal_at(p.x, p.y);
-        let h = (dem.heightmap().get(r, c) - lo) / (hi - lo);
+        let h = (dem.whole().get(r, c) - lo) / (hi - lo);
         let want = rules.weights(h, n.y);
         let px = maps[0].get_pixel(c as u32, r as u32).0;
         let blend = [px[0], px[1], px[2], px[3], 0, 0, 0].map(|v| f32::from(v) / 255.0);

@@ -58,7 +58,7 @@ fn check_grid(width: usize, depth: usize, cells_per_patch: u32, margin: f32) {
         let mut hi = f32::NEG_INFINITY;
         for r in rect.row0..=rect.row1 {
             for c in rect.col0..=rect.col1 {
-                let h = info.heightmap().get(r, c);
+                let h = info.whole().get(r, c);
                 lo = lo.min(h);
                 hi = hi.max(h);
             }

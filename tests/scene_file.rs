@@ -86,7 +86,7 @@ fn heightmap_paths_are_relative_to_the_scene() {
     let scene = Scene::load(&path).unwrap();
     let info = scene.terrain_info().unwrap();
     assert_eq!((info.cols(), info.rows()), (403, 344));
-    assert_eq!(info.heightmap().get(343, 402), 272.0);
+    assert_eq!(info.whole().get(343, 402), 272.0);
     assert_eq!(info.origin(), DVec2::new(1000.0, -50.0));
     assert_eq!(info.cells_per_patch(), 16);
     // No camera given: an overview from beyond the -x, -z corner, above the top.

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 
 use common::gpu::*;
 use glam::DVec2;
+use vkterrain::bench::error::enclosed_background;
 use vkterrain::render::residency::StreamShape;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings, Shading, StreamConfig};
 use vkterrain::shader_constants::PAGE_NOT_RESIDENT;

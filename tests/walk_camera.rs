@@ -63,7 +63,7 @@ fn walking_stays_on_the_terrain_at_eye_height() {
         DVec2::new(hw, -hd),
         "pinned in the corner"
     );
-    let corner = f64::from(info.heightmap().get(343, 402));
+    let corner = f64::from(info.whole().get(343, 402));
     assert!((walker.eye.y - corner - 1.8).abs() < 1e-9);
 
     // Flying again leaves the height alone and may leave the terrain.

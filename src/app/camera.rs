@@ -111,6 +111,12 @@ impl CameraController {
     fn stay_on(&mut self, terrain: &TerrainInfo) {
         let p = terrain.clamp_to_terrain(DVec2::new(self.eye.x, self.eye.z));
         let ground = f64::from(terrain.clamped_height_at(p.x, p.y));
-        self.eye = DVec3::new(p.x, ground + self.eye_height, p.y);
+        // A tile that could not be read (logged) leaves the eye's height.
+        let y = if ground.is_nan() {
+            self.eye.y
+        } else {
+            ground + self.eye_height
+        };
+        self.eye = DVec3::new(p.x, y, p.y);
     }
 }

@@ -51,6 +51,9 @@ vkterrain controls
 #[derive(Clone, Debug)]
 pub struct DemoOptions {
     pub terrain: Terrain,
+    /// How a tiled terrain streams (see `render::streaming`); frames never
+    /// wait for it.
+    pub stream: Option<crate::render::StreamConfig>,
     /// The scene's material layers and lightmap.
     pub appearance: crate::material::Appearance,
     pub camera: Camera,
@@ -329,7 +332,7 @@ impl Graphics {
                 // Line pipelines are cheap to have ready for F2.
                 wireframe: device.caps.fill_mode_non_solid,
                 samples,
-                stream: None,
+                stream: options.stream.clone(),
             },
         )
         .context("preparing the terrain for the GPU")?;

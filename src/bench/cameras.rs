@@ -30,7 +30,7 @@ fn surface(info: &TerrainInfo, u: f64, v: f64) -> DVec3 {
 }
 
 fn height_range(info: &TerrainInfo) -> (f64, f64) {
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     (f64::from(lo), f64::from(hi))
 }
 

@@ -85,14 +85,16 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     }
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
-    let info = scene.terrain_info()?;
+    let (info, stream) = super::scene_terrain_info(&scene, !cmd.view.features.no_streaming)?;
     let settings = cmd.view.settings(&scene, &info);
     let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
     let appearance = Appearance::load(&scene, &info)?;
-    let terrain = Terrain::new(info, appearance.y_margin())?;
+    let terrain =
+        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
     writeln!(out, "{}", app::HELP)?;
     let summary = app::run(DemoOptions {
         terrain,
+        stream,
         appearance,
         camera,
         settings,

@@ -5,7 +5,6 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::SampleArgs;
 use crate::output::write_atomically;
@@ -59,11 +58,7 @@ pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     };
     cmd.samples.apply(&mut opts);
     let (mut source, kind) = tiled::open_source(&cmd.inputs, &opts)?;
-    let bar = ProgressBar::new(source.depth() as u64).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} rows, {eta} left")
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
+    let bar = super::progress_bar(source.depth() as u64, "rows");
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         let written = tiled::import(

@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::scene::Scene;
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{PatchGrid, PatchId, Placement, Terrain};
+use crate::terrain::{PatchGrid, PatchId, Placement, Terrain, TerrainInfo};
 use args::{parse_point, TerrainArgs};
 
 pub mod bench;
@@ -22,6 +22,7 @@ pub mod demo;
 pub mod import;
 pub mod render;
 pub mod soak;
+pub mod stream;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -64,6 +65,11 @@ pub enum Command {
     /// terrain file that --heightmap opens on every command, reading only
     /// the tiles it needs where it can; prints what it wrote as JSON.
     Import(import::ImportCmd),
+    /// A streamed flythrough of a tiled terrain that never waits on the
+    /// disk: per-frame uploads, evictions and CPU time, holes and cracks,
+    /// and optionally its error against the whole-terrain renderer (JSON
+    /// report).
+    Stream(stream::StreamCmd),
     /// Generate the default layer textures (tileable colour, normal and
     /// height maps for sand, grass, dirt, rock and snow).
     GenerateTextures(assets::GenerateTexturesCmd),
@@ -117,6 +123,7 @@ pub fn run(cli: Cli, out: &mut dyn Write) -> Result<()> {
         Some(Command::GenerateBlendMap(cmd)) => assets::generate_blend_map(cmd, out),
         Some(Command::Bench(cmd)) => bench::bench(cmd, out),
         Some(Command::Soak(cmd)) => soak::soak(cmd, out),
+        Some(Command::Stream(cmd)) => stream::stream(cmd, out),
     }
 }
 
@@ -237,7 +244,7 @@ fn inspect(cmd: InspectCmd, out: &mut dyn Write) -> Result<()> {
         }
         None => {
             let info = scene.terrain_info()?;
-            let range = info.heightmap().min_max();
+            let range = info.min_max();
             let terrain = Terrain::new(info, 0.0)?;
             let bounds = cmd.patches.then(|| terrain.y_bounds());
             inspect_report(terrain.info().placement(), terrain.grid(), range, bounds)
@@ -294,25 +301,46 @@ fn inspect_report(
     }
 }
 
-/// How `scene`'s terrain streams: for a tiled terrain file, unless
-/// `stream` is off, the configuration the renderer streams it with, and
-/// `terrain`'s Y bounds widened for its base level. None for every other
-/// heightmap.
-pub fn stream_config(
+/// A progress bar of `len` steps counted in `unit` (rows, frames), with
+/// the time taken and left.
+pub fn progress_bar(len: u64, unit: &str) -> indicatif::ProgressBar {
+    indicatif::ProgressBar::new(len).with_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{eta}} left"
+        ))
+        .expect("a valid template")
+        .progress_chars("=> "),
+    )
+}
+
+/// `scene`'s terrain as a drawing command holds it: a tiled terrain file
+/// (unless `stream` is off) read a tile at a time, with the configuration
+/// the renderer streams it with; any other heightmap whole, and None.
+pub fn scene_terrain_info(
     scene: &Scene,
     stream: bool,
-    terrain: &mut Terrain,
-) -> Result<Option<crate::render::StreamConfig>> {
-    if !stream {
-        return Ok(None);
+) -> Result<(TerrainInfo, Option<crate::render::StreamConfig>)> {
+    if stream {
+        if let Some(info) = scene.streamed_terrain_info()? {
+            let tiled = info
+                .tiled_samples()
+                .expect("a streamed terrain's info is tiled");
+            let config = crate::render::StreamConfig::new(tiled.path().to_path_buf());
+            return Ok((info, Some(config)));
+        }
     }
-    let Some((tiled, _)) = scene.open_tiled()? else {
-        return Ok(None);
-    };
-    let crate::scene::HeightmapSource::File(path) = &scene.heightmap else {
-        return Ok(None);
-    };
-    let config = crate::render::StreamConfig::new(path.clone());
-    terrain.widen_y_bounds_to_blocks(1 << config.shape(&tiled).base_level);
-    Ok(Some(config))
+    Ok((scene.terrain_info()?, None))
+}
+
+/// The terrain a streamed scene is drawn with: its Y bounds widened for
+/// the base level `config` draws tiles from until they are resident.
+pub fn streamed_terrain(
+    mut terrain: Terrain,
+    config: Option<&crate::render::StreamConfig>,
+) -> Terrain {
+    if let (Some(config), Some(tiled)) = (config, terrain.info().tiled_samples()) {
+        let base = config.shape(tiled).base_level;
+        terrain.widen_y_bounds_to_blocks(1 << base);
+    }
+    terrain
 }

@@ -433,15 +433,15 @@ pub fn render_scene(
     let Picture { width, height, .. } = picture;
     let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
     let started = std::time::Instant::now();
-    let info = scene.terrain_info()?;
+    let (info, stream) = super::scene_terrain_info(scene, picture.stream)?;
     let load_ms = ms(started);
     let (camera, settings) = view(&info)?;
     let started = std::time::Instant::now();
     let appearance = Appearance::load(scene, &info)?;
     let material_ms = ms(started);
     let started = std::time::Instant::now();
-    let mut terrain = Terrain::new(info, appearance.y_margin())?;
-    let stream = super::stream_config(scene, picture.stream, &mut terrain)?;
+    let terrain =
+        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
     let bounds_ms = ms(started);
     let ((frame, mut stats, notes), validation) = with_gpu(gpu, |gpu| {
         let mut notes = Vec::new();
@@ -730,13 +730,7 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
         });
         Box::new(BandedRows::new(cmd.size, cmd.seed, density, height_scale))
     };
-    let bar = indicatif::ProgressBar::new(cmd.size as u64).with_style(
-        indicatif::ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} rows, {eta} left",
-        )
-        .expect("a valid template")
-        .progress_chars("=> "),
-    );
+    let bar = super::progress_bar(cmd.size as u64, "rows");
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         report = Some(

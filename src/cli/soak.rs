@@ -111,12 +111,13 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
         bail!("--loop-frames {} must be at least 3", cmd.loop_frames);
     }
     let scene = cmd.terrain.scene()?;
-    let info = scene.terrain_info()?;
+    let (info, stream) = super::scene_terrain_info(&scene, !cmd.features.no_streaming)?;
     let cameras = flythrough(&info, cmd.loop_frames);
     // The scene's look too: its textures and lightmap are resources to
     // keep, and to free.
     let appearance = Appearance::load(&scene, &info)?;
-    let terrain = Terrain::new(info, appearance.y_margin())?;
+    let terrain =
+        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
     let base = RenderSettings::for_scene(&scene, terrain.info());
     let start = std::time::Instant::now();
     let baseline_frame = cmd.baseline_frame.min(cmd.frames - 1);
@@ -131,7 +132,10 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
         for note in notes {
             writeln!(out, "{note}")?;
         }
-        let options = RendererOptions::single_sample(paths.clone());
+        let options = RendererOptions {
+            stream,
+            ..RendererOptions::single_sample(paths.clone())
+        };
         let (mut renderer, mut headless) = offscreen(
             gpu,
             &terrain,
@@ -140,6 +144,8 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
             (cmd.size.width, cmd.size.height),
         )
         .context("preparing the terrain for the GPU")?;
+        // A flythrough: a streamed terrain's frames never wait for tiles.
+        headless.wait_for_residency = false;
         let mut baseline = (0, 0);
         for i in 0..cmd.frames {
             let camera = &cameras[(i % cameras.len() as u64) as usize];

@@ -181,14 +181,14 @@ pub fn blend_maps_from_rules(
     let layers = layers.clamp(1, MAX_LAYERS);
     let step = step.max(1);
     let (w, h) = ((info.cols() - 1) / step + 1, (info.rows() - 1) / step + 1);
-    let (lo, hi) = info.heightmap().min_max();
+    let (lo, hi) = info.min_max();
     let span = (hi - lo).max(f32::MIN_POSITIVE);
     let texels: Vec<[f32; MAX_LAYERS - 1]> = (0..w * h)
         .into_par_iter()
         .map(|i| {
             let (c, r) = ((i % w) * step, (i / w) * step);
             let p: DVec2 = info.sample_position(r, c);
-            let height = (info.heightmap().get(r, c) - lo) / span;
+            let height = (info.whole().get(r, c) - lo) / span;
             let n = info.normal_at(p.x, p.y);
             blend_values(&rules.weights(height, n.y), layers)
         })

@@ -22,6 +22,11 @@ pub const MAX_TEXTURE_SIDE: u32 = 8192;
 /// Why a scene's look could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub enum MaterialError {
+    #[error(
+        "the scene's material layers and lightmap are made from the whole heightmap, which a \
+         streamed terrain does not hold: draw it with --no-streaming"
+    )]
+    Streamed,
     #[error("{origin}: cannot read {path}: {message}")]
     Read {
         origin: String,
@@ -205,6 +210,9 @@ pub struct Appearance {
 impl Appearance {
     /// Loads the scene's textures and bakes its lightmap.
     pub fn load(scene: &Scene, info: &TerrainInfo) -> Result<Appearance, MaterialError> {
+        if (scene.material.is_some() || scene.lightmap) && info.heightmap().is_none() {
+            return Err(MaterialError::Streamed);
+        }
         let material = scene
             .material
             .as_ref()
@@ -239,7 +247,7 @@ pub fn cached_lightmap(
     sun: glam::DVec3,
 ) -> Vec<u8> {
     use crate::terrain::shading::{LIGHTMAP_FINE_STEPS, LIGHTMAP_SOFTNESS_DEG};
-    let heights: &[u8] = bytemuck::cast_slice(info.heightmap().heights());
+    let heights: &[u8] = bytemuck::cast_slice(info.whole().heights());
     let numbers = [
         info.spacing().x,
         info.spacing().y,

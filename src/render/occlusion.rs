@@ -101,10 +101,17 @@ const _: () = assert!(DRAW_COMMAND_BYTES == 20);
 
 const PUSH_SIZE: u32 = 32;
 
+/// Most draws a frame may list, whatever the terrain: a frame that needs
+/// more (on a terrain of hundreds of thousands of patches) is drawn
+/// without occlusion culling (see `TerrainRenderer::record`), so the lists
+/// of a huge terrain stay a few MiB.
+pub const MAX_LISTED_DRAWS: u64 = 1 << 16;
+
 /// Draws one frame may list for a terrain of `patches` patches: the tess
-/// path's batches (at most one per patch) and its full-resolution patches.
+/// path's batches (at most one per patch) and its full-resolution patches,
+/// up to `MAX_LISTED_DRAWS`.
 fn list_capacity(patches: u64) -> u64 {
-    2 * patches
+    (2 * patches).min(MAX_LISTED_DRAWS)
 }
 
 /// The pyramid's levels over a `width` x `height` depth: level l has
@@ -290,7 +297,7 @@ impl Occlusion {
     }
 
     /// Draws one frame may list (`list_capacity`).
-    fn list_capacity(&self) -> usize {
+    pub(super) fn list_capacity(&self) -> usize {
         list_capacity(self.patches as u64) as usize
     }
 

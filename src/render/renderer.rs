@@ -681,7 +681,7 @@ impl TerrainRenderer {
                 target.color_format, target.samples, self.color_format, self.samples
             )));
         }
-        let cull = settings.occlusion
+        let mut cull = settings.occlusion
             && settings.path != RenderPath::Brute
             && target.depth_readable
             && self.occlusion.can_cull();
@@ -718,9 +718,16 @@ impl TerrainRenderer {
                 }
                 _ => Vec::new(),
             };
-            self.occlusion
-                .prepare_target(&self.device, slot, target, &self.sampler)?;
-            self.occlusion.write_draws(slot, &commands)?;
+            // A frame of more draws than the lists hold is drawn in one
+            // pass; culling is conservative, so the next frame's first
+            // pass may start from an older visible set.
+            if commands.len() > self.occlusion.list_capacity() {
+                cull = false;
+            } else {
+                self.occlusion
+                    .prepare_target(&self.device, slot, target, &self.sampler)?;
+                self.occlusion.write_draws(slot, &commands)?;
+            }
         }
         self.frames[slot].culled = cull;
         let frame = &self.frames[slot];
@@ -1041,7 +1048,12 @@ pub(super) fn write_frame_bindings(
 /// The terrain's heights as an R32_SFLOAT image, one texel per sample.
 pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) -> Result<Image> {
     let (cols, rows) = (info.cols() as u32, info.rows() as u32);
-    device.upload_r32f_image(name, cols, rows, info.heightmap().heights())
+    let heightmap = info.heightmap().ok_or_else(|| {
+        VkError::Unsupported(
+            "a tiled terrain read a tile at a time can only be drawn streamed".into(),
+        )
+    })?;
+    device.upload_r32f_image(name, cols, rows, heightmap.heights())
 }
 
 /// How the terrain file `config` names streams.

@@ -95,7 +95,7 @@ pub fn zenith_color(horizon: Vec3) -> Vec3 {
 impl FrameUniforms {
     pub fn new(terrain: &Terrain, view: &FrameView, settings: &RenderSettings) -> Self {
         let info = terrain.info();
-        let (lo, hi) = info.heightmap().min_max();
+        let (lo, hi) = info.min_max();
         let sp = info.spacing();
         let lighting = &settings.lighting;
         let lights = lighting.active();

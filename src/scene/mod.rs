@@ -131,6 +131,18 @@ pub enum SceneError {
     Terrain(#[from] TerrainError),
     #[error(transparent)]
     File(#[from] SceneFileError),
+    #[error(
+        "{}: streaming needs the error tables and Y bounds of {wanted}-cell patches, and the \
+         file stores {}: re-import it with --cells-per-patch {wanted}, use that patch size, or \
+         draw it whole with --no-streaming",
+        path.display(),
+        stored.map_or("none".to_string(), |n| format!("those of {n}-cell patches"))
+    )]
+    StreamedPatchSize {
+        path: std::path::PathBuf,
+        stored: Option<u32>,
+        wanted: u32,
+    },
 }
 
 impl Scene {
@@ -165,7 +177,7 @@ impl Scene {
         if let Some(camera) = self.camera {
             return camera;
         }
-        let (lo, hi) = info.heightmap().min_max();
+        let (lo, hi) = info.min_max();
         let (w, d) = (info.world_width(), info.world_depth());
         let size = w.max(d);
         let o = info.origin();
@@ -213,6 +225,35 @@ impl Scene {
         Ok(Some((tiled, placement)))
     }
 
+    /// A tiled terrain placed in the world without reading it whole: its
+    /// samples stay in the file, read a tile at a time, and its error
+    /// tables and Y bounds come stored (for the scene's patch size). None
+    /// for any other heightmap; an error for a tiled one that stores
+    /// nothing for this patch size.
+    pub fn streamed_terrain_info(&self) -> Result<Option<TerrainInfo>, SceneError> {
+        crate::terrain::info::validate_cells_per_patch(self.cells_per_patch)?;
+        let Some((tiled, _)) = self.open_tiled()? else {
+            return Ok(None);
+        };
+        let tables = tiled.error_tables().map_err(HeightmapError::from)?;
+        let tables = match tables {
+            Some(t) if t.cells_per_patch == self.cells_per_patch => t,
+            other => {
+                return Err(SceneError::StreamedPatchSize {
+                    path: tiled.path().to_path_buf(),
+                    stored: other.map(|t| t.cells_per_patch),
+                    wanted: self.cells_per_patch,
+                })
+            }
+        };
+        Ok(Some(TerrainInfo::tiled(
+            std::sync::Arc::new(tiled),
+            tables,
+            self.cell_spacing,
+            self.origin,
+        )?))
+    }
+
     /// The heightmap placed in the world. A tiled terrain that stores the
     /// error tables of the scene's patch size brings them along, so they
     /// are not rebuilt.
@@ -230,8 +271,8 @@ impl Scene {
                 self.origin,
             )?;
             return Ok(match tables {
-                Some((cells, tess, geomip)) if cells == self.cells_per_patch => {
-                    info.with_error_tables(tess, geomip)
+                Some(t) if t.cells_per_patch == self.cells_per_patch => {
+                    info.with_error_tables(t.tess, t.geomip)
                 }
                 _ => info,
             });

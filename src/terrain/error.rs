@@ -116,4 +116,9 @@ pub enum TerrainError {
 
     #[error("Y-bounds margin must be finite and not negative, got {0}")]
     Margin(f32),
+
+    /// A tiled terrain's file could not give what the model needs (the
+    /// message names the file and the tile).
+    #[error("{0}")]
+    Tiled(String),
 }

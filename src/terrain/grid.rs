@@ -10,7 +10,6 @@
 //! N = 32 has 13 patch columns (12 of 32 cells, one of 18) and 11 patch rows
 //! (10 of 32 cells, one of 23).
 
-use glam::Vec3;
 use rayon::prelude::*;
 
 use super::heightmap::{min_max_of, Heightmap};
@@ -222,23 +221,17 @@ pub fn control_points(
     points
 }
 
-/// A patch's corners in local coordinates, displaced to the heights of the
-/// samples under them, in index order: upper-left, upper-right, lower-left,
-/// lower-right. This is what the vertex stage produces for the four control
-/// points.
-pub fn patch_corners(info: &TerrainInfo, grid: &PatchGrid, id: PatchId) -> [Vec3; 4] {
-    let rect = grid.sample_rect(id);
-    let corner = |row: usize, col: usize| {
-        Vec3::new(
-            info.local_x(col) as f32,
-            info.heightmap().get(row, col),
-            info.local_z(row) as f32,
-        )
-    };
-    [
-        corner(rect.row0, rect.col0),
-        corner(rect.row0, rect.col1),
-        corner(rect.row1, rect.col0),
-        corner(rect.row1, rect.col1),
-    ]
+/// The height under each control point (row-major, as `control_points`),
+/// from `sample(row, col)`.
+pub fn control_heights<E>(
+    grid: &PatchGrid,
+    mut sample: impl FnMut(usize, usize) -> Result<f32, E>,
+) -> Result<Vec<f32>, E> {
+    let mut heights = Vec::with_capacity(grid.control_point_count());
+    for i in 0..grid.control_rows() {
+        for j in 0..grid.control_cols() {
+            heights.push(sample(grid.boundary_row(i), grid.boundary_col(j))?);
+        }
+    }
+    Ok(heights)
 }

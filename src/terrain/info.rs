@@ -14,6 +14,7 @@ use glam::DVec2;
 use super::error::TerrainError;
 use super::error_table::ErrorTable;
 use super::heightmap::Heightmap;
+use super::tiled::{StoredTables, TiledHeightmap};
 
 /// Cells per patch when the caller does not choose.
 pub const DEFAULT_CELLS_PER_PATCH: u32 = 32;
@@ -23,12 +24,35 @@ pub const MAX_CELLS_PER_PATCH: u32 = 64;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct TerrainInfo {
-    heightmap: Heightmap,
+    samples: Samples,
+    /// Lowest and highest height.
+    range: (f32, f32),
     cells_per_patch: u32,
     placement: Placement,
     /// Error tables that came with the heightmap (a tiled terrain stores
     /// them), for `cells_per_patch`: tess, geomip.
     error_tables: Option<std::sync::Arc<(ErrorTable, ErrorTable)>>,
+    /// Per-patch Y bounds that came with a tiled terrain.
+    y_bounds: Option<std::sync::Arc<Vec<[f32; 2]>>>,
+}
+
+/// Where a terrain's heights are: in memory whole, or in a tiled terrain
+/// file read a tile at a time (a terrain larger than memory, streamed).
+#[derive(Clone, Debug)]
+pub enum Samples {
+    Whole(Heightmap),
+    Tiled(std::sync::Arc<TiledHeightmap>),
+}
+
+impl PartialEq for Samples {
+    /// Whole heightmaps by their samples; tiled ones by the file.
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (Samples::Whole(a), Samples::Whole(b)) => a == b,
+            (Samples::Tiled(a), Samples::Tiled(b)) => a.path() == b.path(),
+            _ => false,
+        }
+    }
 }
 
 /// Where a grid of samples lies in the world: its size, spacing and
@@ -146,10 +170,45 @@ impl TerrainInfo {
         validate_cells_per_patch(cells_per_patch)?;
         let placement = Placement::new(heightmap.width(), heightmap.depth(), spacing, origin)?;
         Ok(TerrainInfo {
-            heightmap,
+            range: heightmap.min_max(),
+            samples: Samples::Whole(heightmap),
             cells_per_patch,
             placement,
             error_tables: None,
+            y_bounds: None,
+        })
+    }
+
+    /// A tiled terrain, read a tile at a time, with what it stores for
+    /// `cells_per_patch`-cell patches (which must be `tables`' size): the
+    /// error tables and Y bounds a `Terrain` would otherwise compute from
+    /// every sample.
+    pub fn tiled(
+        tiled: std::sync::Arc<TiledHeightmap>,
+        tables: StoredTables,
+        spacing: DVec2,
+        origin: DVec2,
+    ) -> Result<Self, TerrainError> {
+        let cells_per_patch = tables.cells_per_patch;
+        validate_cells_per_patch(cells_per_patch)?;
+        let placement = Placement::new(tiled.width(), tiled.depth(), spacing, origin)?;
+        let info = TerrainInfo {
+            range: tiled.min_max(),
+            samples: Samples::Tiled(tiled),
+            cells_per_patch,
+            placement,
+            error_tables: None,
+            y_bounds: None,
+        };
+        let patches = super::grid::PatchGrid::new(&info).patch_count();
+        assert_eq!(
+            tables.y_bounds.len(),
+            patches,
+            "stored bounds have one row per patch"
+        );
+        Ok(TerrainInfo {
+            y_bounds: Some(std::sync::Arc::new(tables.y_bounds)),
+            ..info.with_error_tables(tables.tess, tables.geomip)
         })
     }
 
@@ -175,23 +234,67 @@ impl TerrainInfo {
         self.error_tables.as_deref()
     }
 
+    /// The stored error tables, shared rather than copied.
+    pub fn stored_error_tables_shared(&self) -> Option<std::sync::Arc<(ErrorTable, ErrorTable)>> {
+        self.error_tables.clone()
+    }
+
     /// Where the samples lie in the world.
     pub fn placement(&self) -> &Placement {
         &self.placement
     }
 
-    pub fn heightmap(&self) -> &Heightmap {
-        &self.heightmap
+    /// The heightmap, when it is in memory whole (not for a tiled terrain
+    /// from `tiled`).
+    pub fn heightmap(&self) -> Option<&Heightmap> {
+        match &self.samples {
+            Samples::Whole(h) => Some(h),
+            Samples::Tiled(_) => None,
+        }
+    }
+
+    /// The heightmap of a terrain held whole, for what is made from every
+    /// sample at once (the lightmap, blend maps from rules; a streamed
+    /// terrain's scene is refused them up front).
+    ///
+    /// # Panics
+    /// For a tiled terrain from `tiled`.
+    pub fn whole(&self) -> &Heightmap {
+        self.heightmap()
+            .expect("made from the whole heightmap, which a streamed terrain does not hold")
+    }
+
+    /// The tiled terrain file the heights are read from, for one from
+    /// `tiled`.
+    pub fn tiled_samples(&self) -> Option<&std::sync::Arc<TiledHeightmap>> {
+        match &self.samples {
+            Samples::Tiled(t) => Some(t),
+            Samples::Whole(_) => None,
+        }
+    }
+
+    pub fn samples(&self) -> &Samples {
+        &self.samples
+    }
+
+    /// The Y bounds of every patch stored with a tiled terrain.
+    pub fn stored_y_bounds(&self) -> Option<&[[f32; 2]]> {
+        self.y_bounds.as_deref().map(Vec::as_slice)
+    }
+
+    /// Lowest and highest height.
+    pub fn min_max(&self) -> (f32, f32) {
+        self.range
     }
 
     /// Number of sample columns.
     pub fn cols(&self) -> usize {
-        self.heightmap.width()
+        self.placement.cols()
     }
 
     /// Number of sample rows.
     pub fn rows(&self) -> usize {
-        self.heightmap.depth()
+        self.placement.rows()
     }
 
     /// (dx, dz).

@@ -34,10 +34,54 @@ pub struct Terrain {
     grid: PatchGrid,
     y_bounds: Vec<[f32; 2]>,
     control_points: Vec<[f32; 4]>,
+    /// The height of the sample under each control point.
+    control_heights: Vec<f32>,
     indices: Vec<u32>,
     /// The tess and geomip error tables, computed on first use and kept:
     /// every renderer of this terrain shares them.
-    error_tables: std::sync::OnceLock<(ErrorTable, ErrorTable)>,
+    /// Shared with the info's stored tables where it has them.
+    error_tables: std::sync::OnceLock<std::sync::Arc<(ErrorTable, ErrorTable)>>,
+}
+
+/// The height under each control point of a tiled terrain, from each
+/// tile's level whose step is the patch size (it keeps every patch
+/// boundary sample, exactly).
+fn tiled_control_heights(
+    tiled: &tiled::TiledHeightmap,
+    grid: &PatchGrid,
+) -> Result<Vec<f32>, TerrainError> {
+    let t = tiled.header().tile_cells as usize;
+    let n = grid.cells_per_patch();
+    let level = n.trailing_zeros();
+    // One tile level at a time, in the order the rows ask for them.
+    let (tiles_x, _) = tiled.header().tiles();
+    let mut row_tiles: Vec<Option<std::sync::Arc<tiled::TileLevel>>> = vec![None; tiles_x as usize];
+    let mut row_tz = u32::MAX;
+    grid::control_heights(grid, |r, c| {
+        let tz = (r.saturating_sub(1) / t) as u32;
+        let tx = (c.saturating_sub(1) / t) as u32;
+        if tz != row_tz {
+            row_tiles.iter_mut().for_each(|l| *l = None);
+            row_tz = tz;
+        }
+        let slot = &mut row_tiles[tx as usize];
+        if slot.is_none() {
+            *slot = Some(tiled.tile(tx, tz, level)?);
+        }
+        let tile = slot.as_ref().expect("read above");
+        // The level's index of a boundary sample: a multiple of the patch
+        // size, or the terrain's last sample, which is the level's last.
+        let (lr, lc) = (r - tz as usize * t, c - tx as usize * t);
+        let index = |v: usize, side: u32| {
+            if v % n == 0 {
+                v / n
+            } else {
+                side as usize - 1
+            }
+        };
+        Ok(tile.get(index(lr, tile.rows) as u32, index(lc, tile.cols) as u32))
+    })
+    .map_err(|e: tiled::TiledError| TerrainError::Tiled(e.to_string()))
 }
 
 impl Terrain {
@@ -48,11 +92,28 @@ impl Terrain {
             return Err(TerrainError::Margin(y_margin));
         }
         let grid = PatchGrid::new(&info);
-        let y_bounds = grid::patch_y_bounds(info.heightmap(), &grid, y_margin);
+        let (y_bounds, control_heights) = match info.samples() {
+            info::Samples::Whole(h) => (
+                grid::patch_y_bounds(h, &grid, y_margin),
+                grid::control_heights(&grid, |r, c| Ok(h.get(r, c)))?,
+            ),
+            info::Samples::Tiled(t) => {
+                let stored = info
+                    .stored_y_bounds()
+                    .expect("a tiled terrain info has its bounds");
+                (
+                    stored
+                        .iter()
+                        .map(|&[lo, hi]| [lo - y_margin, hi + y_margin])
+                        .collect(),
+                    tiled_control_heights(t, &grid)?,
+                )
+            }
+        };
         let control_points = grid::control_points(&info, &grid, &y_bounds);
         let indices = grid.indices();
-        let error_tables = match info.stored_error_tables() {
-            Some(tables) => std::sync::OnceLock::from(tables.clone()),
+        let error_tables = match info.stored_error_tables_shared() {
+            Some(tables) => std::sync::OnceLock::from(tables),
             None => std::sync::OnceLock::new(),
         };
         Ok(Terrain {
@@ -60,6 +121,7 @@ impl Terrain {
             grid,
             y_bounds,
             control_points,
+            control_heights,
             indices,
             error_tables,
         })
@@ -89,16 +151,25 @@ impl Terrain {
     }
 
     /// The per-patch error table (computed on each call; it is the expensive
-    /// part of preparing a terrain).
+    /// part of preparing a terrain). A tiled terrain's is the stored one.
     pub fn error_table(&self) -> ErrorTable {
-        ErrorTable::compute(self.info.heightmap(), &self.grid)
+        match self.info.heightmap() {
+            Some(h) => ErrorTable::compute(h, &self.grid),
+            None => self.error_tables().0.clone(),
+        }
     }
 
     /// The tess path's error table and the geomip path's, computed together
     /// (see `ErrorTable::compute_pair`) the first time they are asked for.
+    /// A tiled terrain's come with it (`TerrainInfo::tiled`).
     pub fn error_tables(&self) -> &(ErrorTable, ErrorTable) {
-        self.error_tables
-            .get_or_init(|| ErrorTable::compute_pair(self.info.heightmap(), &self.grid))
+        self.error_tables.get_or_init(|| {
+            let h = self
+                .info
+                .heightmap()
+                .expect("a tiled terrain's info holds its stored tables");
+            std::sync::Arc::new(ErrorTable::compute_pair(h, &self.grid))
+        })
     }
 
     /// Widens each patch's Y bounds to those of the square block of
@@ -127,9 +198,17 @@ impl Terrain {
         self.control_points = grid::control_points(&self.info, &self.grid, &self.y_bounds);
     }
 
-    /// A patch's corners in local coordinates at their sample heights.
+    /// A patch's corners in local coordinates at their sample heights, in
+    /// index order: upper-left, upper-right, lower-left, lower-right. This
+    /// is what the vertex stage produces for the four control points.
     pub fn patch_corners(&self, id: PatchId) -> [Vec3; 4] {
-        grid::patch_corners(&self.info, &self.grid, id)
+        let p = self.grid.patch_index(id);
+        let corner = |k: usize| {
+            let i = self.indices[4 * p + k] as usize;
+            let [x, z, _, _] = self.control_points[i];
+            Vec3::new(x, self.control_heights[i], z)
+        };
+        [corner(0), corner(1), corner(2), corner(3)]
     }
 
     /// A patch's bounding box in local coordinates as (centre, half extents).

@@ -19,7 +19,7 @@
 
 use glam::{DVec2, Vec3};
 
-use super::info::{Placement, TerrainInfo};
+use super::info::{Placement, Samples, TerrainInfo};
 
 /// How far outside the grid (in cells) a query may land and still count as
 /// on the terrain. It absorbs the rounding of world -> grid conversion, so the
@@ -49,17 +49,35 @@ impl TerrainInfo {
     #[inline]
     pub fn height_at(&self, x: f64, z: f64) -> Option<f32> {
         let g = self.placement().grid_on_terrain(x, z)?;
-        Some(self.heightmap().interpolate(g.x, g.y) as f32)
+        self.interpolate(g)
+    }
+
+    /// The surface at continuous sample coordinates g (column, row). A
+    /// tiled terrain reads the tile it needs; a tile that cannot be read
+    /// (the file changed or broke since it was opened) is logged and gives
+    /// None.
+    fn interpolate(&self, g: DVec2) -> Option<f32> {
+        match self.samples() {
+            Samples::Whole(h) => Some(h.interpolate(g.x, g.y) as f32),
+            Samples::Tiled(t) => match t.interpolate(g.x, g.y) {
+                Ok(h) => Some(h as f32),
+                Err(e) => {
+                    log::error!("{e}");
+                    None
+                }
+            },
+        }
     }
 
     /// Height at the point of the terrain nearest to world (x, z): the
     /// position is clamped to the terrain's rectangle first, so walking off
     /// an edge keeps following the border. A non-finite coordinate is taken
-    /// as the terrain's centre on that axis.
+    /// as the terrain's centre on that axis. NaN where a tiled terrain's
+    /// tile cannot be read (logged).
     pub fn clamped_height_at(&self, x: f64, z: f64) -> f32 {
         let p = self.clamp_to_terrain(DVec2::new(x, z));
         let g = self.world_to_grid(p.x, p.y);
-        self.heightmap().interpolate(g.x, g.y) as f32
+        self.interpolate(g).unwrap_or(f32::NAN)
     }
 
     /// World (x, z) clamped into the terrain's rectangle; non-finite

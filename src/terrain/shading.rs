@@ -161,7 +161,7 @@ pub fn bake_lightmap(info: &TerrainInfo, to_light: DVec3) -> Vec<u8> {
     let unit = horizontal / flat_len;
     // Grid cells per world unit along the march; rows grow towards -z.
     let per_metre = DVec2::new(unit.x / sp.x, -unit.y / sp.y);
-    let heightmap = info.heightmap();
+    let heightmap = info.whole();
     let (_, top) = heightmap.min_max();
     let top = f64::from(top);
     // The horizon can only matter while it could reach the light's upper

@@ -256,50 +256,6 @@ pub fn world_positions(frame: &HeadlessFrame, camera: &Camera) -> Vec<Option<DVe
         .collect()
 }
 
-/// Pixels of background colour not connected to the image border through
-/// other background pixels: holes inside the terrain's outline.
-pub fn enclosed_background(
-    rgba: &[u8],
-    width: usize,
-    height: usize,
-    is_background: impl Fn(&[u8]) -> bool,
-) -> Vec<(usize, usize)> {
-    let bg: Vec<bool> = rgba.chunks_exact(4).map(&is_background).collect();
-    let mut outside = vec![false; bg.len()];
-    let mut stack: Vec<usize> = Vec::new();
-    for x in 0..width {
-        stack.push(x);
-        stack.push((height - 1) * width + x);
-    }
-    for y in 0..height {
-        stack.push(y * width);
-        stack.push(y * width + width - 1);
-    }
-    while let Some(i) = stack.pop() {
-        if outside[i] || !bg[i] {
-            continue;
-        }
-        outside[i] = true;
-        let (x, y) = (i % width, i / width);
-        if x > 0 {
-            stack.push(i - 1);
-        }
-        if x + 1 < width {
-            stack.push(i + 1);
-        }
-        if y > 0 {
-            stack.push(i - width);
-        }
-        if y + 1 < height {
-            stack.push(i + width);
-        }
-    }
-    (0..bg.len())
-        .filter(|&i| bg[i] && !outside[i])
-        .map(|i| (i % width, i / width))
-        .collect()
-}
-
 /// Compares against tests/golden/NAME.png: a pixel differs when any
 /// channel differs by more than `channel_tolerance`; at most
 /// `max_differing_fraction` of pixels may differ. On mismatch writes

@@ -660,7 +660,7 @@ pub fn import(
     let mut loaded = 0usize;
     let mapping = source.mapping();
     let tables_cells = tables_cells_per_patch.filter(|&n| tile_cells % n == 0);
-    let (mut tess_table, mut geomip_table) = (Vec::new(), Vec::new());
+    let (mut tess_table, mut geomip_table, mut y_bounds) = (Vec::new(), Vec::new(), Vec::new());
     for tz in 0..tiles_z {
         let [_, _, r0, r1] = header.tile_rect(0, tz);
         let (r0, r1) = (r0 as usize, r1 as usize);
@@ -681,9 +681,15 @@ pub fn import(
                 .map_err(|e| TiledError::Load(Box::new(e)))?;
             let grid = PatchGrid::for_size(width, map_rows, cells);
             let (tess, geomip) = ErrorTable::compute_pair(&map, &grid);
-            let keep = (r1 - r0).div_ceil(cells as usize) * grid.patch_cols() * ErrorTable::LEVELS;
+            // The band's patches end on its last row; the one after it
+            // starts the next band's.
+            let patches = (r1 - r0).div_ceil(cells as usize) * grid.patch_cols();
+            let keep = patches * ErrorTable::LEVELS;
             tess_table.extend_from_slice(&tess.as_slice()[..keep]);
             geomip_table.extend_from_slice(&geomip.as_slice()[..keep]);
+            y_bounds.extend_from_slice(
+                &crate::terrain::grid::patch_y_bounds(&map, &grid, 0.0)[..patches],
+            );
         }
         let band_rows = &band[..rows * width];
         let encoded: Vec<Vec<EncodedLevel>> = (0..tiles_x)
@@ -727,6 +733,7 @@ pub fn import(
         let tables: Vec<u8> = tess_table
             .iter()
             .chain(&geomip_table)
+            .chain(y_bounds.iter().flatten())
             .flat_map(|e| e.to_le_bytes())
             .collect();
         debug_assert_eq!(tables.len() as u64, header.tables_bytes(cells));

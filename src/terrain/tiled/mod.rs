@@ -5,7 +5,7 @@
 //! `vkterrain import` writes one (`import`), and every `--heightmap` opens
 //! one, recognised by its header (`TiledHeightmap::is_tiled`).
 //!
-//! # Layout (version 3, little-endian throughout)
+//! # Layout (version 4, little-endian throughout)
 //!
 //! ```text
 //! header      HEADER_BYTES bytes at offset 0 (`Header`)
@@ -13,7 +13,8 @@
 //! directory   one ENTRY_BYTES entry per tile level (`Entry`), tile rows
 //!             top to bottom, tiles left to right, levels finest first
 //! tables      optional: the error tables of one patch size (`ErrorTable`),
-//!             the tess path's then the geomip path's, patches row-major
+//!             the tess path's then the geomip path's, then each patch's
+//!             Y bounds (min, max), patches row-major
 //! ```
 //!
 //! **Tiles.** With `T` cells per tile, tile (tx, tz) covers sample columns
@@ -38,8 +39,9 @@
 //! and takes seconds on a large map, so the importer stores them for one
 //! patch size (`--cells-per-patch`, when tiles are a whole number of
 //! patches), computed on the same samples as `ErrorTable::compute_pair`
-//! would at load: a terrain loaded with that patch size starts without
-//! rebuilding them.
+//! would at load, with each patch's Y bounds: a terrain loaded with that
+//! patch size starts without rebuilding them, and a streamed one has its
+//! CPU model without reading every tile.
 //!
 //! **Integrity.** The header carries a magic number, a format version and
 //! a CRC-32 of itself; the directory, the tables and every tile level carry
@@ -62,7 +64,7 @@ use std::path::PathBuf;
 /// mangled by a text-mode copy.
 pub const MAGIC: [u8; 8] = *b"VKTERR\r\n";
 /// The layout version this build reads and writes.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Size of the header.
 pub const HEADER_BYTES: usize = 80;
 /// Where the header's own checksum sits: its last four bytes.
@@ -195,7 +197,7 @@ impl Header {
             self.depth as usize,
             cells_per_patch,
         );
-        2 * grid.patch_count() as u64 * crate::terrain::ErrorTable::LEVELS as u64 * 4
+        grid.patch_count() as u64 * (2 * crate::terrain::ErrorTable::LEVELS as u64 + 2) * 4
     }
 
     /// Tiles across and down.

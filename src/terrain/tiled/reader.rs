@@ -15,7 +15,16 @@ use crate::terrain::ErrorTable;
 pub const DEFAULT_CACHE_BYTES: usize = 64 << 20;
 
 /// Error tables as stored: (cells per patch, tess table, geomip table).
-pub type StoredTables = (u32, ErrorTable, ErrorTable);
+/// What a tiled terrain stores for one patch size: the error tables and
+/// each patch's Y bounds, as a terrain of that size computes them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoredTables {
+    pub cells_per_patch: u32,
+    pub tess: ErrorTable,
+    pub geomip: ErrorTable,
+    /// `[min, max]` height per patch, row-major.
+    pub y_bounds: Vec<[f32; 2]>,
+}
 
 /// What a reader reads from: a file, or bytes in memory (tests, fuzzing).
 trait Source: Read + Seek + Send {}
@@ -375,9 +384,26 @@ impl TiledHeightmap {
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
             .collect();
+        let patches = errors.len() / (2 * ErrorTable::LEVELS + 2);
+        let bounds = errors.split_off(2 * patches * ErrorTable::LEVELS);
         let geomip = errors.split_off(errors.len() / 2);
+        let y_bounds: Vec<[f32; 2]> = bounds.chunks_exact(2).map(|b| [b[0], b[1]]).collect();
+        if let Some(p) = y_bounds
+            .iter()
+            .position(|b| !(b[0].is_finite() && b[1].is_finite() && b[0] <= b[1]))
+        {
+            return Err(bad(format!(
+                "patch {p}'s Y bounds {:?} are not a finite range",
+                y_bounds[p]
+            )));
+        }
         match (ErrorTable::from_flat(errors), ErrorTable::from_flat(geomip)) {
-            (Some(tess), Some(geomip)) => Ok(Some((at.cells_per_patch, tess, geomip))),
+            (Some(tess), Some(geomip)) => Ok(Some(StoredTables {
+                cells_per_patch: at.cells_per_patch,
+                tess,
+                geomip,
+                y_bounds,
+            })),
             _ => Err(bad("an error is negative or not a finite number".into())),
         }
     }

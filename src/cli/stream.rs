@@ -1,0 +1,319 @@
+//! `stream`: a flythrough of a streamed (tiled) terrain that never waits on
+//! the disk, measured frame by frame: what each frame uploaded and evicted,
+//! its CPU time, holes and cracks (background enclosed by the terrain in a
+//! flat white render), and, with `--against-resident`, its screen-space
+//! error against the same frame drawn by the whole-terrain renderer.
+
+use std::io::Write;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
+use crate::bench::cameras::flythrough;
+use crate::bench::error::{enclosed_background, measure, DepthView};
+use crate::material::Appearance;
+use crate::render::{
+    offscreen, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading, StreamStats,
+};
+use crate::terrain::Terrain;
+
+#[derive(clap::Args, Debug)]
+pub struct StreamCmd {
+    #[command(flatten)]
+    pub terrain: TerrainArgs,
+
+    #[command(flatten)]
+    pub size: SizeArgs,
+
+    #[command(flatten)]
+    pub features: FeatureArgs,
+
+    /// Frames of the flythrough (one loop round the terrain).
+    #[arg(long, value_name = "N", default_value_t = 600)]
+    pub frames: usize,
+
+    /// Largest projected error of the error LOD, in pixels.
+    #[arg(long, value_name = "PX", default_value_t = 1.0)]
+    pub pixel_error: f32,
+
+    /// Also draw every frame with the whole terrain uploaded (on a second
+    /// device, outside the memory budget) and measure the streamed frame's
+    /// error against it. The terrain must fit in memory whole.
+    #[arg(long)]
+    pub against_resident: bool,
+
+    /// Where to write the report as JSON (every frame, and a summary).
+    #[arg(long, value_name = "PATH")]
+    pub report: Option<std::path::PathBuf>,
+
+    /// Turn on the Vulkan validation layer.
+    #[arg(long)]
+    pub validate: bool,
+}
+
+/// One frame of the flythrough.
+#[derive(Serialize, Debug, Clone)]
+pub struct StreamFrame {
+    pub frame: usize,
+    /// CPU milliseconds to prepare and record the frame.
+    pub cpu_ms: f64,
+    pub gpu_ms: Option<f64>,
+    pub triangles: Option<u64>,
+    pub stream: StreamStats,
+    /// Background pixels enclosed by the terrain: holes and cracks.
+    pub holes: usize,
+    /// Error against the whole-terrain renderer, in pixels.
+    pub error_max_px: Option<f64>,
+    pub error_p99_px: Option<f64>,
+}
+
+/// The flythrough's report.
+#[derive(Serialize, Debug)]
+pub struct StreamReport {
+    pub device: String,
+    pub width: u32,
+    pub height: u32,
+    pub samples_across: usize,
+    pub samples_down: usize,
+    pub tile_cells: u32,
+    pub base_level: u32,
+    pub pool_layers: u32,
+    pub gpu_memory_budget: Option<u64>,
+    /// GPU memory in use while drawing, and resident memory at the end.
+    pub gpu_memory_bytes: u64,
+    pub resident_bytes: u64,
+    pub frames: usize,
+    pub holes: usize,
+    pub max_cpu_ms: f64,
+    pub max_upload_bytes: u64,
+    pub upload_bytes: u64,
+    pub uploaded_tiles: u64,
+    pub evicted_tiles: u64,
+    pub max_pop_px: f32,
+    pub max_missing_px: f32,
+    pub error_max_px: Option<f64>,
+    /// The largest of the frames' p99 errors.
+    pub error_p99_px: Option<f64>,
+    pub validation_enabled: bool,
+    pub validation_messages: u32,
+    pub per_frame: Vec<StreamFrame>,
+}
+
+pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
+    if cmd.frames < 3 {
+        bail!("--frames {} must be at least 3", cmd.frames);
+    }
+    if !(cmd.pixel_error > 0.0 && cmd.pixel_error.is_finite()) {
+        bail!("--pixel-error {} must be positive", cmd.pixel_error);
+    }
+    let scene = cmd.terrain.scene()?;
+    let (info, stream) = super::scene_terrain_info(&scene, true)?;
+    let Some(stream) = stream else {
+        bail!(
+            "the stream flythrough needs a tiled terrain (from `vkterrain import`) as --heightmap"
+        );
+    };
+    let cameras = flythrough(&info, cmd.frames);
+    let terrain = super::streamed_terrain(Terrain::new(info, 0.0)?, Some(&stream));
+    let settings = RenderSettings {
+        path: RenderPath::Tess,
+        lod_metric: LodMetric::Error(cmd.pixel_error),
+        shading: Shading::Flat,
+        sky: false,
+        clear_color: [0.0; 3],
+        ..RenderSettings::for_scene(&scene, terrain.info())
+    };
+    let size = (cmd.size.width, cmd.size.height);
+    // The resident renderer's device, outside the budget.
+    let resident = cmd
+        .against_resident
+        .then(|| -> Result<_> {
+            let whole = Terrain::new(scene.terrain_info()?, 0.0)?;
+            let gpu = crate::vk::Gpu::open(&crate::vk::GpuOptions {
+                memory_budget: None,
+                ..cmd.features.gpu_options(cmd.validate)
+            })
+            .context("starting Vulkan for the resident renderer")?;
+            Ok((whole, gpu))
+        })
+        .transpose()?;
+    let resident_parts = match &resident {
+        Some((whole, gpu)) => Some((
+            whole,
+            offscreen(
+                gpu,
+                whole,
+                &Appearance::default(),
+                &RendererOptions::single_sample(vec![RenderPath::Tess]),
+                size,
+            )
+            .context("preparing the whole terrain for the GPU")?,
+        )),
+        None => None,
+    };
+    let mut resident_parts = resident_parts;
+    let budget = cmd.features.gpu_memory_budget;
+    let (mut report, validation) = cmd.features.with_gpu(cmd.validate, |gpu| {
+        let options = RendererOptions {
+            stream: Some(stream.clone()),
+            ..RendererOptions::single_sample(vec![RenderPath::Tess])
+        };
+        let (mut renderer, mut headless) =
+            offscreen(gpu, &terrain, &Appearance::default(), &options, size)
+                .context("preparing the terrain for the GPU")?;
+        headless.wait_for_residency = false;
+        let bar = super::progress_bar(cmd.frames as u64, "frames");
+        let mut frames = Vec::with_capacity(cmd.frames);
+        let mut gpu_memory_bytes = 0;
+        for (i, camera) in cameras.iter().enumerate() {
+            let frame = headless
+                .render(&mut renderer, &terrain, camera, &settings)
+                .with_context(|| format!("frame {i}"))?;
+            let (w, h) = (
+                frame.readback.width as usize,
+                frame.readback.height as usize,
+            );
+            let holes = enclosed_background(&frame.readback.rgba, w, h, |p| p[0] < 128).len();
+            let error = match &mut resident_parts {
+                Some((whole, (r, target))) => {
+                    let reference = target
+                        .render(r, whole, camera, &settings)
+                        .with_context(|| format!("frame {i}, resident"))?;
+                    Some(measure(
+                        &DepthView::of(&frame),
+                        &DepthView::of(&reference),
+                        f64::from(frame.view.pixels_per_radian),
+                    ))
+                }
+                None => None,
+            };
+            if i == 0 {
+                gpu_memory_bytes = gpu.device.memory_in_use();
+            }
+            let stats = renderer
+                .stream_stats()
+                .context("the renderer streams this terrain")?;
+            frames.push(StreamFrame {
+                frame: i,
+                cpu_ms: frame.cpu_ms,
+                gpu_ms: frame.measurements.gpu_ms,
+                triangles: frame.measurements.statistics.map(|s| s.clipping_primitives),
+                stream: stats,
+                holes,
+                error_max_px: error.map(|e| e.max_px),
+                error_p99_px: error.map(|e| e.p99_px),
+            });
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        let first = frames[0].stream;
+        let max_f64 = |v: &mut dyn Iterator<Item = f64>| {
+            v.fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
+        };
+        Ok(StreamReport {
+            device: gpu.device.caps.device_name.clone(),
+            width: size.0,
+            height: size.1,
+            samples_across: terrain.info().cols(),
+            samples_down: terrain.info().rows(),
+            tile_cells: stream_shape(&terrain, &stream).tile_cells,
+            base_level: stream_shape(&terrain, &stream).base_level,
+            pool_layers: first.layers,
+            gpu_memory_budget: budget,
+            gpu_memory_bytes,
+            resident_bytes: super::render::resident_bytes().unwrap_or(0),
+            frames: frames.len(),
+            holes: frames.iter().map(|f| f.holes).sum(),
+            max_cpu_ms: frames.iter().map(|f| f.cpu_ms).fold(0.0, f64::max),
+            max_upload_bytes: frames
+                .iter()
+                .map(|f| f.stream.upload_bytes)
+                .max()
+                .unwrap_or(0),
+            upload_bytes: frames.iter().map(|f| f.stream.upload_bytes).sum(),
+            uploaded_tiles: frames
+                .iter()
+                .map(|f| u64::from(f.stream.uploaded_tiles))
+                .sum(),
+            evicted_tiles: frames
+                .iter()
+                .map(|f| u64::from(f.stream.evicted_tiles))
+                .sum(),
+            max_pop_px: frames.iter().map(|f| f.stream.pop_px).fold(0.0, f32::max),
+            max_missing_px: frames
+                .iter()
+                .map(|f| f.stream.missing_px)
+                .fold(0.0, f32::max),
+            error_max_px: max_f64(&mut frames.iter().filter_map(|f| f.error_max_px)),
+            error_p99_px: max_f64(&mut frames.iter().filter_map(|f| f.error_p99_px)),
+            validation_enabled: false,
+            validation_messages: 0,
+            per_frame: frames,
+        })
+    })?;
+    drop(resident_parts);
+    if let Some((_, gpu)) = resident {
+        let report = gpu.shutdown();
+        if report.count > 0 {
+            bail!(
+                "the resident renderer's validation reported {} messages; the first: {}",
+                report.count,
+                report.messages.first().cloned().unwrap_or_default()
+            );
+        }
+    }
+    report.validation_enabled = validation.enabled;
+    report.validation_messages = validation.count;
+    if let Some(path) = &cmd.report {
+        let json = serde_json::to_string_pretty(&report)?;
+        crate::output::write_atomically(path, |tmp| {
+            std::fs::write(tmp, json + "\n")
+                .with_context(|| format!("{}: cannot write the report", path.display()))
+        })?;
+    }
+    let error = match (report.error_max_px, report.error_p99_px) {
+        (Some(max), Some(p99)) => {
+            format!(", error against resident max {max:.2} px, p99 {p99:.2} px")
+        }
+        _ => String::new(),
+    };
+    writeln!(
+        out,
+        "{} frames on {}: {} holes, {} tiles uploaded ({} bytes, at most {} a frame), {} evicted, \
+         CPU at most {:.1} ms a frame, largest pop {:.2} px{error}, {} validation messages{}",
+        report.frames,
+        report.device,
+        report.holes,
+        report.uploaded_tiles,
+        report.upload_bytes,
+        report.max_upload_bytes,
+        report.evicted_tiles,
+        report.max_cpu_ms,
+        report.max_pop_px,
+        report.validation_messages,
+        if report.validation_enabled {
+            ""
+        } else {
+            " (validation off)"
+        }
+    )?;
+    if report.holes > 0 {
+        bail!(
+            "{} background pixels showed through the terrain",
+            report.holes
+        );
+    }
+    Ok(())
+}
+
+fn stream_shape(
+    terrain: &Terrain,
+    stream: &crate::render::StreamConfig,
+) -> crate::render::residency::StreamShape {
+    let tiled = terrain
+        .info()
+        .tiled_samples()
+        .expect("a streamed terrain is tiled");
+    stream.shape(tiled)
+}
