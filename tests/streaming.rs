@@ -269,3 +269,80 @@ fn whole_render(map: &Heightmap, cam: &Camera, s: &RenderSettings) -> Vec<u8> {
     scene.finish();
     rgba
 }
+
+/// `vkterrain render` of an imported terrain streams it, with the CPU model
+/// read from the file's stored tables, bounds and tile levels: the image is
+/// the one drawn from the same heights loaded whole. A tile that breaks
+/// after import is named in the error, and no image is left.
+#[test]
+fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = imported(&hills(), dir.path());
+    let path = path.to_str().unwrap();
+    let run = |extra: &[&str], out: &str| {
+        let mut args = vec![
+            "render",
+            "--validate",
+            "--heightmap",
+            path,
+            "--cells-per-patch",
+            "16",
+            "--width",
+            "160",
+            "--height",
+            "100",
+            "--gpu-memory-budget",
+            "64",
+            "--out",
+            out,
+            "--stats",
+            "stats.json",
+        ];
+        args.extend_from_slice(extra);
+        common::vkterrain_in(dir.path(), &args)
+    };
+    let streamed = run(&[], "streamed.png");
+    assert!(
+        streamed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&streamed.stderr)
+    );
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("stats.json")).unwrap())
+            .unwrap();
+    assert!(
+        stats["stream"]["layers"].as_u64().unwrap() > 0,
+        "{}",
+        stats["stream"]
+    );
+    assert_eq!(stats["validation_messages"], 0);
+    let whole = run(&["--no-streaming"], "whole.png");
+    assert!(
+        whole.status.success(),
+        "{}",
+        String::from_utf8_lossy(&whole.stderr)
+    );
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("stats.json")).unwrap())
+            .unwrap();
+    assert!(stats["stream"].is_null());
+    let read = |name: &str| image::open(dir.path().join(name)).unwrap().to_rgba8();
+    assert_eq!(read("streamed.png"), read("whole.png"));
+
+    // Flip one byte in the middle of the file: inside some tile's samples.
+    let mut bytes = std::fs::read(path).unwrap();
+    let tiled = vkterrain::terrain::tiled::TiledHeightmap::open(Path::new(path)).unwrap();
+    let entry = *tiled.entry(3, 2, 0);
+    drop(tiled);
+    bytes[entry.offset as usize + 5] ^= 0x40;
+    std::fs::write(path, &bytes).unwrap();
+    let broken = run(&[], "broken.png");
+    assert!(!broken.status.success());
+    let stderr = String::from_utf8_lossy(&broken.stderr);
+    assert!(stderr.contains("tile (3, 2)"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!dir.path().join("broken.png").exists());
+}
