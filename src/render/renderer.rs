@@ -20,6 +20,10 @@
 //! The tess and geomip paths cull hidden patches with a depth pyramid, in
 //! two passes per frame (see `occlusion`), where the device can read its
 //! depth attachments and the frame's settings ask for it.
+//!
+//! A tiled terrain can be streamed instead of uploaded whole (see
+//! `streaming`): the heightmap binding then holds its base level, and every
+//! path reads heights through the page table.
 
 use std::mem::size_of;
 
