@@ -13,7 +13,8 @@ use super::shaders;
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
 use crate::shader_constants::{
-    BINDING_FRAME, BINDING_HEIGHTMAP, BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS,
+    BINDING_FRAME, BINDING_HEIGHTMAP, BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS, BINDING_PAGES,
+    BINDING_PAGE_TABLE,
 };
 use crate::terrain::error_table::PatchErrors;
 use crate::terrain::Terrain;
@@ -114,6 +115,16 @@ pub fn run_mirror_check(
                 vk::DescriptorType::STORAGE_BUFFER,
                 stage,
             ),
+            (
+                BINDING_PAGES,
+                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stage,
+            ),
+            (
+                BINDING_PAGE_TABLE,
+                vk::DescriptorType::STORAGE_BUFFER,
+                stage,
+            ),
         ],
         "mirror.set_layout",
     )?;
@@ -122,14 +133,16 @@ pub fn run_mirror_check(
         &set_layout,
         &[
             (vk::DescriptorType::UNIFORM_BUFFER, 1),
-            (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 1),
-            (vk::DescriptorType::STORAGE_BUFFER, 2),
+            (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
+            (vk::DescriptorType::STORAGE_BUFFER, 3),
         ],
         1,
         "mirror.set",
     )?;
     let set = sets.get(0);
     super::renderer::write_frame_bindings(device, set, &frame, &heightmap, &sampler);
+    let no_stream = super::streaming::NoStream::new(device, "mirror")?;
+    no_stream.write_bindings(device, set, &sampler);
     device.write_buffer(
         set,
         BINDING_MIRROR_CASES,

@@ -34,7 +34,7 @@ use super::occlusion::{ListedDraw, Occlusion, DRAW_COMMAND_BYTES};
 use super::residency::StreamShape;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::shaders;
-use super::streaming::{StreamConfig, StreamStats, Streamer};
+use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
 use crate::material::Appearance;
@@ -213,7 +213,7 @@ pub struct TerrainRenderer {
     /// Heights streamed from a tiled terrain; with none, a one-layer pool
     /// and an empty page table stand in its bindings.
     streamer: Option<Streamer>,
-    _no_stream: Option<(Image, Buffer)>,
+    _no_stream: Option<NoStream>,
     sampler: Sampler,
     /// Material layers, blend maps and lightmap, as the scene needs.
     appearance: GpuAppearance,
@@ -321,24 +321,9 @@ impl TerrainRenderer {
         )?;
         let sky = create_sky_pipeline(device, &pipeline_layout, color_format, samples)?;
         let frames = build_frames(device, &sets, (&heightmap, &sampler), &appearance)?;
-        let no_stream = (
-            device.create_layer_pool("terrain.stream.pages.unused", 1, 1)?,
-            device.create_host_buffer(
-                "terrain.stream.page_table.unused",
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                &[0u8; 16],
-            )?,
-        );
+        let no_stream = NoStream::new(device, "terrain.stream")?;
         for frame in &frames {
-            device.write_sampled_image(frame.set, BINDING_PAGES, &no_stream.0, &sampler);
-            let size = no_stream.1.desc.size;
-            device.write_buffer(
-                frame.set,
-                BINDING_PAGE_TABLE,
-                vk::DescriptorType::STORAGE_BUFFER,
-                &no_stream.1,
-                size,
-            );
+            no_stream.write_bindings(device, frame.set, &sampler);
         }
         let uniforms: Vec<&Buffer> = frames.iter().map(|f| &f.uniforms).collect();
         let occlusion = Occlusion::new(

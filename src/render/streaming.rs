@@ -489,6 +489,40 @@ impl Streamer {
     }
 }
 
+/// What the pool and page-table bindings hold where heights are not
+/// streamed: a one-texel pool and an empty table. Every pipeline that
+/// includes glsl/terrain_common.glsl declares them, and lavapipe wants
+/// them bound even where the specialisation constants leave them unread.
+pub struct NoStream {
+    pool: Image,
+    table: Buffer,
+}
+
+impl NoStream {
+    pub fn new(device: &Device, name: &str) -> Result<Self> {
+        Ok(NoStream {
+            pool: device.create_layer_pool(&format!("{name}.pages.unused"), 1, 1)?,
+            table: device.create_host_buffer(
+                &format!("{name}.page_table.unused"),
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                &[0u8; 16],
+            )?,
+        })
+    }
+
+    /// Points `set`'s pool and page-table bindings at the stand-ins.
+    pub fn write_bindings(&self, device: &Device, set: DescriptorSet, sampler: &Sampler) {
+        device.write_sampled_image(set, BINDING_PAGES, &self.pool, sampler);
+        device.write_buffer(
+            set,
+            BINDING_PAGE_TABLE,
+            vk::DescriptorType::STORAGE_BUFFER,
+            &self.table,
+            self.table.desc.size,
+        );
+    }
+}
+
 /// The base level of `tiled` as one image: each tile's level
 /// `shape.base_level`, placed where its samples fall in the whole.
 fn upload_base(device: &Device, tiled: &TiledHeightmap, shape: &StreamShape) -> Result<Image> {
