@@ -12,10 +12,7 @@ use super::settings::RenderSettings;
 use super::shaders;
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
-use crate::shader_constants::{
-    BINDING_FRAME, BINDING_HEIGHTMAP, BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS, BINDING_PAGES,
-    BINDING_PAGE_TABLE,
-};
+use crate::shader_constants::{BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS};
 use crate::terrain::error_table::PatchErrors;
 use crate::terrain::Terrain;
 use crate::vk::memory::BufferDesc;
@@ -97,37 +94,11 @@ pub fn run_mirror_check(
         "mirror.results",
     )?;
     let stage = vk::ShaderStageFlags::COMPUTE;
-    let set_layout = device.create_descriptor_set_layout(
-        &[
-            (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stage),
-            (
-                BINDING_HEIGHTMAP,
-                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                stage,
-            ),
-            (
-                BINDING_MIRROR_CASES,
-                vk::DescriptorType::STORAGE_BUFFER,
-                stage,
-            ),
-            (
-                BINDING_MIRROR_RESULTS,
-                vk::DescriptorType::STORAGE_BUFFER,
-                stage,
-            ),
-            (
-                BINDING_PAGES,
-                vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                stage,
-            ),
-            (
-                BINDING_PAGE_TABLE,
-                vk::DescriptorType::STORAGE_BUFFER,
-                stage,
-            ),
-        ],
-        "mirror.set_layout",
-    )?;
+    let mut bindings = super::renderer::frame_bindings(stage).to_vec();
+    for binding in [BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS] {
+        bindings.push((binding, vk::DescriptorType::STORAGE_BUFFER, stage));
+    }
+    let set_layout = device.create_descriptor_set_layout(&bindings, "mirror.set_layout")?;
     let layout = device.create_pipeline_layout(&[&set_layout], "mirror.pipeline_layout")?;
     let sets = device.allocate_descriptor_sets(
         &set_layout,

@@ -1034,6 +1034,22 @@ pub(super) fn write_frame_bindings(
     device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap, sampler);
 }
 
+/// The bindings of glsl/terrain_common.glsl in `stages`: the frame's
+/// uniforms, the heightmap (or base level), the tile pool and the page
+/// table; what every terrain pipeline's layout (and the mirror check's)
+/// starts with, and `write_frame_bindings` and `NoStream` fill.
+pub(super) fn frame_bindings(
+    stages: vk::ShaderStageFlags,
+) -> [(u32, vk::DescriptorType, vk::ShaderStageFlags); 4] {
+    use vk::DescriptorType as D;
+    [
+        (BINDING_FRAME, D::UNIFORM_BUFFER, stages),
+        (BINDING_HEIGHTMAP, D::COMBINED_IMAGE_SAMPLER, stages),
+        (BINDING_PAGES, D::COMBINED_IMAGE_SAMPLER, stages),
+        (BINDING_PAGE_TABLE, D::STORAGE_BUFFER, stages),
+    ]
+}
+
 /// The terrain's heights as an R32_SFLOAT image, one texel per sample.
 pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) -> Result<Image> {
     let (cols, rows) = (info.cols() as u32, info.rows() as u32);
@@ -1073,24 +1089,7 @@ impl DescriptorPlan {
                 | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
         }
         let mut plan = DescriptorPlan {
-            bindings: vec![
-                (BINDING_FRAME, vk::DescriptorType::UNIFORM_BUFFER, stages),
-                (
-                    BINDING_HEIGHTMAP,
-                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                    stages,
-                ),
-                (
-                    BINDING_PAGES,
-                    vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                    stages,
-                ),
-                (
-                    BINDING_PAGE_TABLE,
-                    vk::DescriptorType::STORAGE_BUFFER,
-                    stages,
-                ),
-            ],
+            bindings: frame_bindings(stages).to_vec(),
             pool_sizes: vec![
                 (vk::DescriptorType::UNIFORM_BUFFER, 1),
                 (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
