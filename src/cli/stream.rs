@@ -138,7 +138,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             Ok((whole, gpu))
         })
         .transpose()?;
-    let resident_parts = match &resident {
+    let mut resident_parts = match &resident {
         Some((whole, gpu)) => Some((
             whole,
             offscreen(
@@ -152,7 +152,6 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         )),
         None => None,
     };
-    let mut resident_parts = resident_parts;
     let budget = cmd.features.gpu_memory_budget;
     let (mut report, validation) = cmd.features.with_gpu(cmd.validate, |gpu| {
         let options = RendererOptions {
@@ -208,6 +207,9 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         }
         bar.finish_and_clear();
         let first = frames[0].stream;
+        let shape = renderer
+            .stream_shape()
+            .context("the renderer streams this terrain")?;
         let max_f64 = |v: &mut dyn Iterator<Item = f64>| {
             v.fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
         };
@@ -217,8 +219,8 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             height: size.1,
             samples_across: terrain.info().cols(),
             samples_down: terrain.info().rows(),
-            tile_cells: stream_shape(&terrain, &stream).tile_cells,
-            base_level: stream_shape(&terrain, &stream).base_level,
+            tile_cells: shape.tile_cells,
+            base_level: shape.base_level,
             pool_layers: first.layers,
             gpu_memory_budget: budget,
             gpu_memory_bytes,
@@ -305,15 +307,4 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         );
     }
     Ok(())
-}
-
-fn stream_shape(
-    terrain: &Terrain,
-    stream: &crate::render::StreamConfig,
-) -> crate::render::residency::StreamShape {
-    let tiled = terrain
-        .info()
-        .tiled_samples()
-        .expect("a streamed terrain is tiled");
-    stream.shape(tiled)
 }

@@ -26,6 +26,7 @@
 //! path reads heights through the page table.
 
 use std::mem::size_of;
+use std::sync::Arc;
 
 use ash::vk;
 
@@ -293,10 +294,15 @@ impl TerrainRenderer {
         };
         let sampler = device.create_nearest_sampler("terrain.heightmap_sampler")?;
         let mut appearance = GpuAppearance::new(device, appearance, info)?;
-        appearance.variant.stream = match &options.stream {
-            Some(config) => Some(stream_shape(config)?),
+        let tiled = match &options.stream {
+            Some(config) => Some(open_streamed(info, config)?),
             None => None,
         };
+        appearance.variant.stream = options
+            .stream
+            .as_ref()
+            .zip(tiled.as_deref())
+            .map(|(config, tiled)| config.shape(tiled));
         // With tessellation the layout has the tess path's bindings, so the
         // path can be built later (`ensure`) on the same sets.
         let layout = DescriptorPlan::new(device.caps.tessellation_shader, &appearance);
@@ -359,8 +365,8 @@ impl TerrainRenderer {
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
         }
-        if let Some(config) = &options.stream {
-            let streamer = Streamer::new(device, info, config, renderer.frames.len())?;
+        if let (Some(config), Some(tiled)) = (&options.stream, tiled) {
+            let streamer = Streamer::new(device, info, config, tiled, renderer.frames.len())?;
             for (slot, frame) in renderer.frames.iter().enumerate() {
                 device.write_sampled_image(
                     frame.set,
@@ -380,6 +386,11 @@ impl TerrainRenderer {
     /// uploaded whole.
     pub fn stream_stats(&self) -> Option<StreamStats> {
         self.streamer.as_ref().map(Streamer::stats)
+    }
+
+    /// How a streamed terrain streams: its tiles and base level.
+    pub fn stream_shape(&self) -> Option<StreamShape> {
+        self.streamer.as_ref().map(Streamer::shape)
     }
 
     /// A streamed terrain's page table as the next frame will draw with
@@ -1061,10 +1072,16 @@ pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) 
     device.upload_r32f_image(name, cols, rows, heightmap.heights())
 }
 
-/// How the terrain file `config` names streams.
-fn stream_shape(config: &StreamConfig) -> Result<StreamShape> {
-    let tiled = TiledHeightmap::open(&config.path).map_err(|e| VkError::Stream(e.to_string()))?;
-    Ok(config.shape(&tiled))
+/// The tiled terrain file `config` streams: the one the terrain's CPU
+/// model reads already, when it is that file, so its header and directory
+/// are read once.
+fn open_streamed(info: &TerrainInfo, config: &StreamConfig) -> Result<Arc<TiledHeightmap>> {
+    match info.tiled_samples() {
+        Some(tiled) if tiled.path() == config.path => Ok(Arc::clone(tiled)),
+        _ => TiledHeightmap::open(&config.path)
+            .map(Arc::new)
+            .map_err(|e| VkError::Stream(e.to_string())),
+    }
 }
 
 /// Brute draws 6 vertices per cell, counted by a signed index in GLSL.

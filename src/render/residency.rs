@@ -105,6 +105,12 @@ impl StreamShape {
         tz as usize * self.tiles_x as usize + tx as usize
     }
 
+    /// The (tx, tz) of tile `index` (`tile_index`'s inverse).
+    pub fn tile_coords(&self, index: usize) -> (u32, u32) {
+        let across = self.tiles_x as usize;
+        ((index % across) as u32, (index / across) as u32)
+    }
+
     /// The height a streamed terrain draws at sample (col, row): the
     /// full-resolution sample `full(row, col)` where the sample's owner
     /// tile is resident, else the base level's surface there.
@@ -133,14 +139,6 @@ impl StreamShape {
 pub struct Load {
     pub tile: usize,
     pub layer: u32,
-}
-
-/// What placing a loaded tile changed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Placed {
-    pub layer: u32,
-    /// The tile that drew from this layer until now, back on the base level.
-    pub evicted: Option<usize>,
 }
 
 /// The page pool's occupancy and the loads in flight.
@@ -236,8 +234,8 @@ impl Residency {
     }
 
     /// A load finished: its tile now draws from its layer, and the tile
-    /// that drew from there (if any) goes back to the base level.
-    pub fn arrived(&mut self, load: Load) -> Placed {
+    /// that drew from there (if any, returned) goes back to the base level.
+    pub fn arrived(&mut self, load: Load) -> Option<usize> {
         let layer = load.layer as usize;
         assert_eq!(self.incoming[layer], Some(load.tile), "a load `plan` made");
         self.incoming[layer] = None;
@@ -248,10 +246,7 @@ impl Residency {
             self.evictions += 1;
         }
         self.layer_of_tile[load.tile] = load.layer;
-        Placed {
-            layer: load.layer,
-            evicted,
-        }
+        evicted
     }
 
     /// A load that failed or was dropped: its layer is free to plan again.
@@ -303,7 +298,7 @@ mod tests {
         // while every layer has a load coming.
         assert!(r.plan(&[1.0, 5.0, 0.0, 3.0, 2.0], 8).is_empty());
         for l in loads {
-            assert_eq!(r.arrived(l).evicted, None);
+            assert_eq!(r.arrived(l), None);
         }
         assert_eq!(
             r.page_table(),
@@ -325,7 +320,7 @@ mod tests {
             r.is_resident(3),
             "an evicted tile draws until its successor arrives"
         );
-        assert_eq!(r.arrived(loads[0]).evicted, Some(3));
+        assert_eq!(r.arrived(loads[0]), Some(3));
         assert!(!r.is_resident(3) && r.is_resident(4));
         assert_eq!(r.evictions(), 1);
         // A cancelled load frees its layer for the next plan.

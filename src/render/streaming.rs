@@ -78,7 +78,7 @@ impl StreamConfig {
         }
     }
 
-    /// How the terrain file at `path` streams under this configuration.
+    /// How `tiled` (the file at `path`) streams under this configuration.
     pub fn shape(&self, tiled: &TiledHeightmap) -> StreamShape {
         StreamShape::new(
             tiled.width() as u32,
@@ -122,26 +122,24 @@ struct Loader {
 }
 
 impl Loader {
-    fn new(path: &std::path::Path, shape: StreamShape, threads: usize) -> Result<Self> {
+    fn new(reader: &Arc<TiledHeightmap>, shape: StreamShape, threads: usize) -> Result<Self> {
         let (requests, jobs) = mpsc::channel::<Load>();
         let jobs = Arc::new(Mutex::new(jobs));
         let (done, results) = mpsc::channel();
         let mut handles = Vec::new();
         for i in 0..threads.max(1) {
-            // Each thread has its own file handle; the reader's cache is
-            // off, as every tile is read once per upload.
-            let reader = TiledHeightmap::open(path)
-                .map_err(|e| VkError::Stream(e.to_string()))?
-                .with_cache_bytes(0);
+            // The threads share one reader: only its seek and read are
+            // locked, checking and decoding are not. Tiles go to the GPU,
+            // so none is kept in the reader's cache.
+            let reader = Arc::clone(reader);
             let (jobs, done) = (Arc::clone(&jobs), done.clone());
             let handle = std::thread::Builder::new()
                 .name(format!("tile-loader-{i}"))
                 .spawn(move || loop {
                     let next = jobs.lock().map(|j| j.recv());
                     let Ok(Ok(load)) = next else { break };
-                    let tx = (load.tile % shape.tiles_x as usize) as u32;
-                    let tz = (load.tile / shape.tiles_x as usize) as u32;
-                    let tile = reader.tile(tx, tz, 0).map(|t| t.heights.clone());
+                    let (tx, tz) = shape.tile_coords(load.tile);
+                    let tile = reader.read_uncached(tx, tz, 0).map(|t| t.heights);
                     if done.send((load, tile)).is_err() {
                         break;
                     }
@@ -197,17 +195,17 @@ pub struct Streamer {
 }
 
 impl Streamer {
-    /// Opens `config.path` for a terrain whose CPU model is `info`, uploads
-    /// its base level and makes a pool as large as the configuration and
-    /// the device's memory budget allow, for `frames` frames in flight.
+    /// Streams `tiled` (`config.path`, opened) for a terrain whose CPU
+    /// model is `info`: uploads its base level and makes a pool as large as
+    /// the configuration and the device's memory budget allow, for
+    /// `frames` frames in flight.
     pub fn new(
         device: &Device,
         info: &TerrainInfo,
         config: &StreamConfig,
+        tiled: Arc<TiledHeightmap>,
         frames: usize,
     ) -> Result<Self> {
-        let stream = |e: TiledError| VkError::Stream(e.to_string());
-        let tiled = TiledHeightmap::open(&config.path).map_err(stream)?;
         if (tiled.width(), tiled.depth()) != (info.cols(), info.rows()) {
             return Err(VkError::Stream(format!(
                 "{} holds {}x{} samples, the terrain drawn {}x{}",
@@ -279,7 +277,6 @@ impl Streamer {
             )));
         }
         let pool = device.create_layer_pool("terrain.stream.pages", side, layers)?;
-        drop(tiled);
         Ok(Streamer {
             shape,
             residency: Residency::new(shape.tile_total(), layers),
@@ -290,13 +287,14 @@ impl Streamer {
             tables,
             staging,
             copies: vec![Vec::new(); frames],
-            loader: Loader::new(&config.path, shape, config.loader_threads)?,
+            loader: Loader::new(&tiled, shape, config.loader_threads)?,
             arrived: VecDeque::new(),
             stats: StreamStats::default(),
             device: device.clone(),
         })
     }
 
+    /// How the terrain streams: its tiles and base level.
     pub fn shape(&self) -> StreamShape {
         self.shape
     }
@@ -382,8 +380,7 @@ impl Streamer {
             if offset + bytes > capacity {
                 break;
             }
-            let tx = (load.tile % self.shape.tiles_x as usize) as u32;
-            let tz = (load.tile / self.shape.tiles_x as usize) as u32;
+            let (tx, tz) = self.shape.tile_coords(load.tile);
             let (_, (w, d)) = self.shape.tile_rect(tx, tz);
             staging[offset as usize..(offset + bytes) as usize]
                 .copy_from_slice(bytemuck::cast_slice(heights));
@@ -393,10 +390,10 @@ impl Streamer {
                 width: w + 1,
                 height: d + 1,
             });
-            let placed = self.residency.arrived(*load);
+            let evicted = self.residency.arrived(*load);
             self.stats.uploaded_tiles += 1;
             self.stats.upload_bytes += bytes;
-            self.stats.evicted_tiles += u32::from(placed.evicted.is_some());
+            self.stats.evicted_tiles += u32::from(evicted.is_some());
             self.stats.pop_px = self.stats.pop_px.max(priorities[load.tile]);
             offset += bytes;
             self.arrived.pop_front();
@@ -532,7 +529,7 @@ fn upload_base(device: &Device, tiled: &TiledHeightmap, shape: &StreamShape) -> 
     for tz in 0..shape.tiles_z {
         for tx in 0..shape.tiles_x {
             let level = tiled
-                .tile(tx, tz, shape.base_level)
+                .read_uncached(tx, tz, shape.base_level)
                 .map_err(|e| VkError::Stream(e.to_string()))?;
             for r in 0..level.rows {
                 let row = (tz * step + r) as usize;

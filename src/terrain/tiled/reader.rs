@@ -250,16 +250,11 @@ impl TiledHeightmap {
 
     /// Tile (tx, tz) at `level`, read and checked on first use.
     pub fn tile(&self, tx: u32, tz: u32, level: u32) -> Result<Arc<TileLevel>, TiledError> {
-        let (tiles_x, tiles_z) = self.header.tiles();
-        assert!(
-            tx < tiles_x && tz < tiles_z && level < self.header.levels,
-            "tile ({tx}, {tz}) level {level} out of range"
-        );
         let key = (tx, tz, level);
         if let Some(level) = self.cache.lock().expect("cache lock").get(key) {
             return Ok(level);
         }
-        let decoded = Arc::new(self.read_level(tx, tz, level)?);
+        let decoded = Arc::new(self.read_uncached(tx, tz, level)?);
         self.cache
             .lock()
             .expect("cache lock")
@@ -267,7 +262,15 @@ impl TiledHeightmap {
         Ok(decoded)
     }
 
-    fn read_level(&self, tx: u32, tz: u32, level: u32) -> Result<TileLevel, TiledError> {
+    /// Tile (tx, tz) at `level`, read and checked now, past the cache and
+    /// not kept in it: for readers that hold what they read elsewhere (the
+    /// GPU's tile pool and base level).
+    pub fn read_uncached(&self, tx: u32, tz: u32, level: u32) -> Result<TileLevel, TiledError> {
+        let (tiles_x, tiles_z) = self.header.tiles();
+        assert!(
+            tx < tiles_x && tz < tiles_z && level < self.header.levels,
+            "tile ({tx}, {tz}) level {level} out of range"
+        );
         let bad = |what: String| TiledError::Tile {
             path: self.path.clone(),
             tx,
@@ -439,7 +442,7 @@ impl TiledHeightmap {
         let n = grid.cells_per_patch();
         for tz in 0..tiles_z {
             for tx in 0..tiles_x {
-                let tile = self.read_level(tx, tz, 0)?;
+                let tile = self.read_uncached(tx, tz, 0)?;
                 let [c0, c1, r0, r1] = self.header.tile_rect(tx, tz).map(|v| v as usize);
                 // Patches whose samples meet the tile's: a patch ending on
                 // the tile's first row or column shares that border.
@@ -494,7 +497,7 @@ impl TiledHeightmap {
         for tz in 0..tiles_z {
             for tx in 0..tiles_x {
                 // Read around the cache: a whole load would only churn it.
-                let tile = self.read_level(tx, tz, 0)?;
+                let tile = self.read_uncached(tx, tz, 0)?;
                 let [c0, _, r0, _] = self.header.tile_rect(tx, tz);
                 for (r, row) in tile.heights.chunks_exact(tile.cols as usize).enumerate() {
                     let start = (r0 as usize + r) * w + c0 as usize;
