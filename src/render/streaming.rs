@@ -324,7 +324,8 @@ impl Streamer {
     }
 
     /// Each tile's priority from `view`: its base-level error over its
-    /// box's distance, in pixels; 0 outside the frustum.
+    /// box's distance (at least the near plane's), in pixels; 0 outside the
+    /// frustum.
     fn priorities(&self, view: &FrameView) -> Vec<f32> {
         self.boxes
             .iter()
@@ -334,8 +335,10 @@ impl Streamer {
                 if error <= 0.0 || view.frustum.aabb_outside(rel, extents) {
                     return 0.0;
                 }
+                // Nothing nearer than the near plane is drawn: from inside
+                // a tile's box the error is seen from there at the nearest.
                 let d = (rel.abs() - extents).max(Vec3::ZERO).length();
-                error * view.pixels_per_radian / d.max(f32::MIN_POSITIVE)
+                error * view.pixels_per_radian / d.max(view.near)
             })
             .collect()
     }
