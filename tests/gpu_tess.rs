@@ -247,7 +247,8 @@ fn culling_skips_patches_outside_the_frustum() {
     let (c, size, top) = extent(&terrain);
     let mut scene = GpuScene::new(terrain, 256, 256, false);
     // Every patch gets factor 8, so each visible patch costs the same;
-    // one pass, so each patch reaches the control shader once.
+    // one pass. The CPU's frustum test decides which patches are drawn at
+    // all; the control shader repeats it per patch.
     let settings = RenderSettings {
         lod: DistanceLod {
             min_dist: 0.0,
@@ -273,8 +274,8 @@ fn culling_skips_patches_outside_the_frustum() {
         .expect("lavapipe has pipeline statistics");
     assert_eq!(away.patches_in_frustum, 0);
     assert_eq!(
-        stats.tcs_patches, total as u64,
-        "every patch reaches the control shader"
+        stats.tcs_patches, 0,
+        "no patch outside the frustum reaches the control shader"
     );
     assert_eq!(stats.tes_invocations, 0);
     assert_eq!(stats.clipping_primitives, 0);
@@ -285,6 +286,7 @@ fn culling_skips_patches_outside_the_frustum() {
     );
     assert_eq!(all.patches_in_frustum, total);
     let all_stats = all.measurements.statistics.unwrap();
+    assert_eq!(all_stats.tcs_patches, total as u64);
     assert_eq!(all_stats.tes_invocations % total as u64, 0);
     let per_patch = all_stats.tes_invocations / total as u64;
     assert!(
@@ -310,6 +312,10 @@ fn culling_skips_patches_outside_the_frustum() {
         per_patch * part.patches_in_frustum as u64,
         "TES work only for the CPU's in-frustum patches"
     );
+    assert_eq!(
+        part_stats.tcs_patches, part.patches_in_frustum as u64,
+        "only they reach the control shader"
+    );
     let culling_off = scene.render(
         &corner,
         &RenderSettings {
@@ -317,10 +323,9 @@ fn culling_skips_patches_outside_the_frustum() {
             ..settings
         },
     );
-    assert_eq!(
-        culling_off.measurements.statistics.unwrap().tes_invocations,
-        per_patch * total as u64
-    );
+    let off_stats = culling_off.measurements.statistics.unwrap();
+    assert_eq!(off_stats.tcs_patches, total as u64);
+    assert_eq!(off_stats.tes_invocations, per_patch * total as u64);
     assert_eq!(
         part.readback.rgba, culling_off.readback.rgba,
         "culling changes no pixel"

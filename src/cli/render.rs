@@ -337,6 +337,9 @@ pub struct FrameStats {
     pub samples: u32,
     pub patches_total: usize,
     pub patches_in_frustum: usize,
+    /// Of those, the patches the tess path's error LOD drew at full
+    /// resolution without the control shader.
+    pub patches_full_resolution: usize,
     pub tcs_patches: Option<u64>,
     pub tes_invocations: Option<u64>,
     pub triangles: Option<u64>,
@@ -477,6 +480,7 @@ pub fn render_scene(
             samples,
             patches_total: terrain.grid().patch_count(),
             patches_in_frustum: frame.patches_in_frustum,
+            patches_full_resolution: renderer.full_resolution_patches(),
             tcs_patches: statistics.map(|s| s.tcs_patches),
             tes_invocations: statistics.map(|s| s.tes_invocations),
             triangles: statistics.map(|s| s.clipping_primitives),

@@ -70,6 +70,11 @@ struct FrameSlot {
     /// Whether the slot's last recorded frame was drawn in two passes
     /// with occlusion culling between them.
     culled: bool,
+    /// The tess path's draws this frame, (first index, index count): the
+    /// runs of patches the CPU's frustum test keeps (and the error LOD
+    /// does not draw at full resolution), split where the driver limits
+    /// patches per draw.
+    tess_batches: Vec<(u32, u32)>,
 }
 
 /// What a renderer builds up front. A frame asking for anything else
@@ -121,7 +126,6 @@ impl PathPipelines {
 struct TessGeometry {
     control_points: Buffer,
     indices: Buffer,
-    index_count: u32,
     /// Fractional even spacing, for the distance LOD.
     pipelines: PathPipelines,
     /// Equal spacing, for the error LOD's whole factors.
@@ -586,6 +590,7 @@ impl TerrainRenderer {
             .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
             .copy_from_slice(bytemuck::bytes_of(&uniforms));
         self.predicted_max_px = None;
+        self.frames[slot].tess_batches.clear();
         match (settings.path, settings.lod_metric) {
             (RenderPath::Geomip, _) => {
                 if let Some(geomip) = self.geomip.as_mut() {
@@ -594,31 +599,45 @@ impl TerrainRenderer {
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
-                if let (Some(tess), Some(bits)) = (
+                let (Some(tess), Some(bits)) = (
                     self.tess.as_mut(),
                     self.frames[slot].full_resolution.as_mut(),
-                ) {
-                    let choice = choose_tess_error(
-                        terrain,
-                        &tess.errors,
-                        view.eye_local,
-                        view.pixels_per_radian,
-                        pixels,
-                    );
-                    bits.mapped_mut()
-                        .ok_or_else(|| {
-                            VkError::Unsupported("patch flag memory is not host-mapped".into())
-                        })?
-                        .copy_from_slice(bytemuck::cast_slice(&choice.full_resolution));
-                    let geomip = self.geomip.as_ref().ok_or_else(|| {
-                        VkError::Unsupported("the tess path's exact draws need geomip".into())
-                    })?;
-                    let drawn = view.patches_drawn(terrain, settings.cull);
-                    self.predicted_max_px =
-                        Some(tess.set_exact_draws(terrain, &drawn, &choice, geomip));
-                }
+                ) else {
+                    return Err(VkError::Unsupported(
+                        "the tess path's error LOD was not built".into(),
+                    ));
+                };
+                let choice = choose_tess_error(
+                    terrain,
+                    &tess.errors,
+                    view.eye_local,
+                    view.pixels_per_radian,
+                    pixels,
+                );
+                bits.mapped_mut()
+                    .ok_or_else(|| {
+                        VkError::Unsupported("patch flag memory is not host-mapped".into())
+                    })?
+                    .copy_from_slice(bytemuck::cast_slice(&choice.full_resolution));
+                let geomip = self.geomip.as_ref().ok_or_else(|| {
+                    VkError::Unsupported("the tess path's exact draws need geomip".into())
+                })?;
+                let drawn = view.patches_drawn(terrain, settings.cull);
+                self.predicted_max_px =
+                    Some(tess.set_exact_draws(terrain, &drawn, &choice, geomip));
+                let tessellated = drawn
+                    .iter()
+                    .enumerate()
+                    .map(|(p, &d)| d && !choice.is_full_resolution(p));
+                self.frames[slot].tess_batches =
+                    patch_batches(tessellated, self.max_patches_per_draw);
             }
-            (RenderPath::Tess | RenderPath::Brute, _) => {}
+            (RenderPath::Tess, _) => {
+                let drawn = view.patches_drawn(terrain, settings.cull);
+                self.frames[slot].tess_batches =
+                    patch_batches(drawn.into_iter(), self.max_patches_per_draw);
+            }
+            (RenderPath::Brute, _) => {}
         }
         Ok(())
     }
@@ -629,6 +648,16 @@ impl TerrainRenderer {
     /// resolution). None for the distance LOD and the brute path.
     pub fn predicted_max_px(&self) -> Option<f32> {
         self.predicted_max_px
+    }
+
+    /// How many patches in view the last prepared frame of the tess
+    /// path's error LOD draws at full resolution, with the reference's
+    /// own triangles instead of the control shader (0 on other paths).
+    pub fn full_resolution_patches(&self) -> usize {
+        match (&self.tess, self.predicted_max_px) {
+            (Some(tess), Some(_)) => tess.exact.len(),
+            _ => 0,
+        }
     }
 
     /// Makes the geomip path draw every patch at the given level (one per
@@ -703,9 +732,10 @@ impl TerrainRenderer {
                 (RenderPath::Geomip, _, Some(g)) => patch_draws(&g.draws),
                 (RenderPath::Tess, Some(t), _) => {
                     // Four indices per patch.
-                    let mut list: Vec<ListedDraw> = self
-                        .tess_batches(t)
-                        .map(|(first, count)| ListedDraw {
+                    let mut list: Vec<ListedDraw> = self.frames[slot]
+                        .tess_batches
+                        .iter()
+                        .map(|&(first, count)| ListedDraw {
                             patches: [first / 4, count / 4],
                             first_index: first,
                             index_count: count,
@@ -809,7 +839,7 @@ impl TerrainRenderer {
                 if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
                     let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
                     // Listed after the batches.
-                    let batches = self.tess_batches(tess).count() as u64;
+                    let batches = frame.tess_batches.len() as u64;
                     let exact = indirect.map(|(commands, base)| (commands, base + batches));
                     geomip.draw(rec, frame.set, settings.wireframe, &tess.exact, exact)?;
                 }
@@ -841,8 +871,8 @@ impl TerrainRenderer {
         Ok(Some(self.occlusion.draw_commands(slot, phase)?))
     }
 
-    /// Every patch of the tess path through `pipeline`, for `phase`, in
-    /// the draws of `tess_batches`; with `indirect`, draw b reads its
+    /// The frame's tess patches through `pipeline`, for `phase`, in the
+    /// draws of its `tess_batches`; with `indirect`, draw b reads its
     /// instance count from command `first + b` (see `indirect_draws`).
     fn draw_patches(
         &self,
@@ -859,7 +889,7 @@ impl TerrainRenderer {
             bytemuck::bytes_of(&phase),
         );
         rec.bind_geometry(&tess.control_points, &tess.indices);
-        for (b, (first, count)) in self.tess_batches(tess).enumerate() {
+        for (b, &(first, count)) in frame.tess_batches.iter().enumerate() {
             match indirect {
                 Some((commands, base)) => {
                     rec.draw_indexed_indirect(commands, (base + b as u64) * DRAW_COMMAND_BYTES)
@@ -867,18 +897,6 @@ impl TerrainRenderer {
                 None => rec.draw_indexed(first, count),
             }
         }
-    }
-
-    /// The tess path's draws: (first index, index count) of one draw of
-    /// every patch, or of batches where the driver needs them (see
-    /// `Workarounds::max_patches_per_draw`).
-    fn tess_batches(&self, tess: &TessGeometry) -> impl Iterator<Item = (u32, u32)> {
-        let total = tess.index_count;
-        let batch = self.max_patches_per_draw.map_or(total, |n| n * 4).max(4);
-        (0..total.div_ceil(batch)).map(move |b| {
-            let first = b * batch;
-            (first, batch.min(total - first))
-        })
     }
 
     /// The tess path's patches that occlusion culled, in one colour over
@@ -964,6 +982,7 @@ fn build_frames(
             full_resolution: None,
             settings: None,
             culled: false,
+            tess_batches: Vec::new(),
         });
     }
     Ok(frames)
@@ -1360,7 +1379,6 @@ fn build_tess(
             vk::BufferUsageFlags::INDEX_BUFFER,
             bytemuck::cast_slice(terrain.indices()),
         )?,
-        index_count: terrain.indices().len() as u32,
         pipelines: build_pipelines(renderer, layout, (RenderPath::Tess, false), wireframe)?,
         error_pipelines: build_pipelines(renderer, layout, (RenderPath::Tess, true), wireframe)?,
         errors,
@@ -1540,6 +1558,32 @@ impl GeomipGeometry {
     }
 }
 
+/// The tess path's draws of the patches `drawn` (one flag per patch, in
+/// patch order), as (first index, index count) with four indices a patch:
+/// one draw per run of consecutive drawn patches, split into draws of at
+/// most `max_patches` (see `Workarounds::max_patches_per_draw`). Patches
+/// left out never reach the control shader.
+fn patch_batches(drawn: impl Iterator<Item = bool>, max_patches: Option<u32>) -> Vec<(u32, u32)> {
+    let max_patches = max_patches.unwrap_or(u32::MAX).max(1);
+    let mut batches = Vec::new();
+    let mut run: Option<(u32, u32)> = None;
+    for (p, d) in drawn.enumerate() {
+        let p = p as u32;
+        run = match (run, d) {
+            (Some((first, n)), true) if n < max_patches => Some((first, n + 1)),
+            (run, d) => {
+                batches.extend(run);
+                d.then_some((p, 1))
+            }
+        };
+    }
+    batches.extend(run);
+    batches
+        .into_iter()
+        .map(|(first, n)| (first * 4, n * 4))
+        .collect()
+}
+
 /// The largest of per-patch `values` over the patches `drawn` (0 if none).
 fn max_drawn(drawn: &[bool], values: &[f32]) -> f32 {
     values
@@ -1582,5 +1626,29 @@ impl TessGeometry {
             });
         }
         max_drawn(drawn, &choice.predicted_px)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::patch_batches;
+
+    fn batches(drawn: &str, max: Option<u32>) -> Vec<(u32, u32)> {
+        patch_batches(drawn.chars().map(|c| c == '#'), max)
+    }
+
+    #[test]
+    fn tess_draws_cover_exactly_the_drawn_patches() {
+        // Runs, in indices (four a patch).
+        assert_eq!(batches("##..###.#", None), vec![(0, 8), (16, 12), (32, 4)]);
+        assert_eq!(batches("....", None), vec![]);
+        assert_eq!(batches("", Some(8)), vec![]);
+        // Split where the driver limits a draw, and runs end at gaps.
+        assert_eq!(
+            batches("#####.##", Some(2)),
+            vec![(0, 8), (8, 8), (16, 4), (24, 8)]
+        );
+        let all = batches(&"#".repeat(17), Some(8));
+        assert_eq!(all, vec![(0, 32), (32, 32), (64, 4)]);
     }
 }
