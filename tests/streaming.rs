@@ -288,8 +288,6 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
             "--validate",
             "--heightmap",
             path,
-            "--cells-per-patch",
-            "16",
             "--width",
             "160",
             "--height",
@@ -304,6 +302,7 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
         args.extend_from_slice(extra);
         common::vkterrain_in(dir.path(), &args)
     };
+    // No patch size is given: the file's stored tables bring theirs.
     let streamed = run(&[], "streamed.png");
     assert!(
         streamed.status.success(),
@@ -319,6 +318,13 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
         stats["stream"]
     );
     assert_eq!(stats["validation_messages"], 0);
+    assert_eq!(
+        stats["patches_total"].as_u64().unwrap(),
+        Terrain::new(info(hills()), 0.0)
+            .unwrap()
+            .grid()
+            .patch_count() as u64
+    );
     let whole = run(&["--no-streaming"], "whole.png");
     assert!(
         whole.status.success(),

@@ -235,6 +235,11 @@ impl TerrainArgs {
             // proportion to it when the distance LOD is asked for).
             scene.lod = None;
             scene.pixel_error = Some(crate::scene::DEFAULT_PIXEL_ERROR);
+            // A tiled terrain brings the patch size its tables were stored
+            // for, which streaming needs.
+            if let Some(n) = crate::terrain::tiled::TiledHeightmap::stored_patch_size(path) {
+                scene.cells_per_patch = n;
+            }
         }
         let load = &mut scene.load;
         self.samples.apply(load);

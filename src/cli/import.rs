@@ -9,9 +9,8 @@ use anyhow::{Context, Result};
 use super::args::SampleArgs;
 use crate::output::write_atomically;
 use crate::terrain::heightmap::{LoadOptions, DEFAULT_MAX_SAMPLES};
-use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::info::{stored_cells_per_patch, validate_cells_per_patch};
 use crate::terrain::tiled::{self, SourceKind, DEFAULT_TILE_CELLS};
-use crate::terrain::DEFAULT_CELLS_PER_PATCH;
 
 #[derive(clap::Args, Debug)]
 pub struct ImportCmd {
@@ -31,9 +30,10 @@ pub struct ImportCmd {
 
     /// Store the error tables of patches this size, so that a terrain
     /// loaded with it starts without rebuilding them (when tiles hold a
-    /// whole number of such patches).
-    #[arg(long, value_name = "N", default_value_t = DEFAULT_CELLS_PER_PATCH)]
-    pub cells_per_patch: u32,
+    /// whole number of such patches) [default: 32, or 64 past 8193
+    /// samples a side].
+    #[arg(long, value_name = "N")]
+    pub cells_per_patch: Option<u32>,
 
     #[command(flatten)]
     pub samples: SampleArgs,
@@ -50,7 +50,9 @@ pub struct ImportCmd {
 
 pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     tiled::validate_tile_cells(cmd.tile)?;
-    validate_cells_per_patch(cmd.cells_per_patch)?;
+    if let Some(n) = cmd.cells_per_patch {
+        validate_cells_per_patch(n)?;
+    }
     let mut opts = LoadOptions {
         luminance: cmd.luminance,
         max_samples: cmd.max_samples,
@@ -58,13 +60,16 @@ pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     };
     cmd.samples.apply(&mut opts);
     let (mut source, kind) = tiled::open_source(&cmd.inputs, &opts)?;
+    let cells_per_patch = cmd
+        .cells_per_patch
+        .unwrap_or_else(|| stored_cells_per_patch(source.width(), source.depth()));
     let bar = super::progress_bar(source.depth() as u64, "rows");
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         let written = tiled::import(
             source.as_mut(),
             cmd.tile,
-            Some(cmd.cells_per_patch),
+            Some(cells_per_patch),
             tmp,
             &mut |done, _| bar.set_position(done),
         )

@@ -648,9 +648,10 @@ pub struct GenerateCmd {
     /// Cells per tile side of a tiled output.
     #[arg(long, value_name = "N", default_value_t = crate::terrain::tiled::DEFAULT_TILE_CELLS)]
     pub tile: u32,
-    /// Patch size whose error tables a tiled output stores.
-    #[arg(long, value_name = "N", default_value_t = crate::terrain::DEFAULT_CELLS_PER_PATCH)]
-    pub cells_per_patch: u32,
+    /// Patch size whose error tables a tiled output stores [default: 32,
+    /// or 64 past 8193 samples a side].
+    #[arg(long, value_name = "N")]
+    pub cells_per_patch: Option<u32>,
     /// Height of the top of the range in a tiled output (its heights are
     /// fixed when written); a PNG holds 0 to 1, scaled when loaded.
     #[arg(long, value_name = "S", value_parser = super::args::parse_finite)]
@@ -707,7 +708,14 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     tiled::validate_tile_cells(cmd.tile)?;
-    crate::terrain::info::validate_cells_per_patch(cmd.cells_per_patch)?;
+    let cells_per_patch = cmd.cells_per_patch.map_or_else(
+        || {
+            Ok(crate::terrain::info::stored_cells_per_patch(
+                cmd.size, cmd.size,
+            ))
+        },
+        |n| crate::terrain::info::validate_cells_per_patch(n).map(|()| n),
+    )?;
     let height_scale = cmd.height_scale.unwrap_or(1.0);
     let mapping = IntegerMapping {
         scale: height_scale,
@@ -741,7 +749,7 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
             tiled::import(
                 source.as_mut(),
                 cmd.tile,
-                Some(cmd.cells_per_patch),
+                Some(cells_per_patch),
                 tmp,
                 &mut |done, _| bar.set_position(done),
             )

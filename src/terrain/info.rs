@@ -344,11 +344,49 @@ impl TerrainInfo {
     }
 }
 
+/// Largest patch grid side a tiled terrain's stored tables are made for
+/// unless told otherwise (see `stored_cells_per_patch`).
+pub const STORED_PATCHES_PER_SIDE: usize = 256;
+
+/// The patch size whose tables a tiled terrain of `width` x `depth`
+/// samples stores unless told: `DEFAULT_CELLS_PER_PATCH`, doubled (up to
+/// `MAX_CELLS_PER_PATCH`) while the grid would have more than
+/// `STORED_PATCHES_PER_SIDE` patches a side. Every patch in view costs the
+/// control shader whatever its factor, so a terrain past 8193^2 samples
+/// gets larger patches rather than more of them.
+pub fn stored_cells_per_patch(width: usize, depth: usize) -> u32 {
+    let cells = width.max(depth).saturating_sub(1);
+    let mut n = DEFAULT_CELLS_PER_PATCH;
+    while n < MAX_CELLS_PER_PATCH && cells.div_ceil(n as usize) > STORED_PATCHES_PER_SIDE {
+        n *= 2;
+    }
+    n
+}
+
 /// Cells per patch must be a power of two in 2..=64.
 pub fn validate_cells_per_patch(n: u32) -> Result<(), TerrainError> {
     if n.is_power_of_two() && (2..=MAX_CELLS_PER_PATCH).contains(&n) {
         Ok(())
     } else {
         Err(TerrainError::CellsPerPatch(n))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stored_patches_grow_past_256_a_side_up_to_64_cells() {
+        assert_eq!(stored_cells_per_patch(1025, 1025), 32);
+        assert_eq!(stored_cells_per_patch(403, 344), 32);
+        // 8193 samples: 256 patches of 32 cells, still the default.
+        assert_eq!(stored_cells_per_patch(8193, 8193), 32);
+        assert_eq!(stored_cells_per_patch(8194, 100), 64);
+        assert_eq!(stored_cells_per_patch(100, 16385), 64);
+        // No larger than a patch that still reaches every sample.
+        assert_eq!(stored_cells_per_patch(32769, 32769), 64);
+        assert_eq!(stored_cells_per_patch(1, 1), 32);
+        assert_eq!(stored_cells_per_patch(0, 0), 32);
     }
 }

@@ -112,6 +112,19 @@ impl TiledHeightmap {
             .is_ok_and(|()| magic == super::MAGIC)
     }
 
+    /// The patch size whose error tables the tiled terrain at `path`
+    /// stores, read from its header alone. None for a terrain that stores
+    /// none, and for a file that is not a readable tiled terrain (opening
+    /// it reports why).
+    pub fn stored_patch_size(path: &Path) -> Option<u32> {
+        let mut file = std::fs::File::open(path).ok()?;
+        let len = file.metadata().ok()?.len();
+        let mut b = [0u8; super::HEADER_BYTES];
+        file.read_exact(&mut b).ok()?;
+        let header = super::Header::decode(&b, len, path).ok()?;
+        header.tables.map(|t| t.cells_per_patch)
+    }
+
     /// Opens a tiled terrain, checking its header and directory.
     pub fn open(path: &Path) -> Result<Self, TiledError> {
         let io = |source| TiledError::io(path, source);
