@@ -12,7 +12,7 @@ use glam::{DVec2, DVec3, Vec3};
 use vkterrain::bench::error::enclosed_background;
 use vkterrain::bench::error::{measure, DepthView};
 use vkterrain::material::Appearance;
-use vkterrain::render::{LodMetric, RenderPath, RenderSettings, Shading};
+use vkterrain::render::{ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::lod::{choose_tess_error, patch_tess_factors};
@@ -369,6 +369,8 @@ fn check_depth_against_height_at(
         },
         path,
         lod_metric,
+        // A tiny tolerance on the bounds: every patch at full resolution.
+        error_measure: ErrorMeasure::Bound,
         ..RenderSettings::default()
     };
     let mut scene = GpuScene::new(terrain, 200, 200, false);
@@ -761,6 +763,15 @@ fn error_settings(pixels: f32) -> RenderSettings {
     }
 }
 
+/// The error LOD holding every patch's bound within `pixels`: at a tiny
+/// tolerance, every patch at full resolution.
+fn bound_settings(pixels: f32) -> RenderSettings {
+    RenderSettings {
+        error_measure: ErrorMeasure::Bound,
+        ..error_settings(pixels)
+    }
+}
+
 /// The tess error LOD has no error floor: where the data's full resolution
 /// is needed it draws the reference's own triangles, so at tau = 1 px its
 /// p99 is within 1 px of brute, with no more triangles than brute.
@@ -784,7 +795,10 @@ fn error_lod_has_no_floor_on_a_rough_cliff_map() {
             .statistics
             .unwrap()
             .clipping_primitives;
-        let frame = scene.render(cam, &error_settings(1.0));
+        // The measure that holds every patch's error within tau: the view's
+        // measure spends 1 % of pixels where it saves most, which this
+        // map's terraces can overdraw (see BENCHMARKS.md).
+        let frame = scene.render(cam, &bound_settings(1.0));
         let tris = frame.measurements.statistics.unwrap().clipping_primitives;
         let k = f64::from(reference.view.pixels_per_radian);
         let stats = measure(&DepthView::of(&frame), &DepthView::of(&reference), k);
@@ -837,7 +851,7 @@ fn full_resolution_tess_is_the_reference() {
                     ..RenderSettings::default()
                 },
             );
-            let tess = scene.render(cam, &error_settings(1e-6));
+            let tess = scene.render(cam, &bound_settings(1e-6));
             let stats = tess.measurements.statistics.unwrap();
             assert_eq!(
                 stats.tes_invocations, 0,
@@ -1106,7 +1120,7 @@ fn paths_a_renderer_lacks_are_built_when_a_frame_asks() {
         );
     }
     let after = gpu.device.memory_report();
-    assert!(after.iter().any(|(n, _)| n == "terrain.error_table"));
+    assert!(after.iter().any(|(n, _)| n == "terrain.view_errors[0]"));
     drop((renderer, headless));
     let report = gpu.shutdown();
     assert_eq!(report.count, 0, "{:#?}", report.messages);

@@ -91,7 +91,7 @@ fn csv_field(s: &str) -> String {
 pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
-         triangles,tes_invocations,gpu_memory_bytes,predicted_max_px,max_px,p99_px,mean_px,error_pixels,\
+         triangles,tes_invocations,gpu_memory_bytes,predicted_max_px,predicted_p99_px,max_px,p99_px,mean_px,error_pixels,\
          mismatched_pixels,occlusion,patches_occluded,patches_drawn_hidden,culling_gpu_ms,\
          differing_pixels\n",
     );
@@ -114,6 +114,7 @@ pub fn csv(rows: &[Row]) -> String {
             opt(r.tes_invocations),
             r.gpu_memory_bytes.to_string(),
             opt(r.predicted_max_px.map(|v| format!("{v:.4}"))),
+            opt(r.predicted_p99_px.map(|v| format!("{v:.4}"))),
             format!("{:.4}", r.max_px),
             format!("{:.4}", r.p99_px),
             format!("{:.4}", r.mean_px),
@@ -422,17 +423,18 @@ fn targets_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w);
 }
 
-/// Each error mode's predicted largest error beside the measured ones.
+/// Each error mode's predicted errors beside the measured ones.
 fn predicted_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w, "## Predicted against measured error\n");
     let _ = writeln!(
         w,
-        "At tau = 1 px: the largest error each error mode's level choice expected on screen \
-         (`predicted_max_px`, over the frames), beside the measured max and p99.\n"
+        "At tau = 1 px: the frame's 99th percentile and the largest error each error mode's \
+         level choice expected on screen (`predicted_p99_px` and `predicted_max_px`, the \
+         largest over the frames), beside the measured p99 and max.\n"
     );
     let _ = writeln!(
         w,
-        "| scene | device | camera | tess predicted / max / p99 px | geomip predicted / max / p99 px |"
+        "| scene | device | camera | tess predicted p99 / measured p99 / predicted max / measured max px | geomip, the same |"
     );
     let _ = writeln!(w, "|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
@@ -446,12 +448,13 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
                         && !r.occlusion
                 })
                 .map_or("n/a".to_string(), |r| {
+                    let px = |p: Option<f64>| p.map_or("n/a".into(), |p| format!("{p:.2}"));
                     format!(
-                        "{} / {:.2} / {:.3}",
-                        r.predicted_max_px
-                            .map_or("unbounded".into(), |p| format!("{p:.2}")),
+                        "{} / {:.3} / {} / {:.2}",
+                        px(r.predicted_p99_px),
+                        r.p99_px,
+                        px(r.predicted_max_px),
                         r.max_px,
-                        r.p99_px
                     )
                 })
         };

@@ -329,6 +329,11 @@ pub struct Row {
     /// oracle and the distance LOD.
     #[serde(default)]
     pub predicted_max_px: Option<f64>,
+    /// The frame's 99th percentile error the LOD choice expected, the
+    /// largest over the frames (`TerrainRenderer::predicted_p99_px`);
+    /// null where the view was not measured.
+    #[serde(default)]
+    pub predicted_p99_px: Option<f64>,
     pub max_px: f64,
     pub p99_px: f64,
     pub mean_px: f64,
@@ -370,6 +375,7 @@ struct Gathered {
     triangles: Vec<u64>,
     tes_invocations: Vec<u64>,
     predicted_max_px: Option<f64>,
+    predicted_p99_px: Option<f64>,
     errors: ErrorHistogram,
     patches_occluded: Vec<u64>,
     patches_drawn_hidden: Vec<u64>,
@@ -509,10 +515,14 @@ impl<'a> Bench<'a> {
             let frame = self.render(camera, config, levels)?;
             progress.advance(message);
             let renderer = &renderer_for(&mut self.renderers, config).renderer;
-            if let Some(px) = renderer.predicted_max_px() {
-                let px = f64::from(px);
-                gathered.predicted_max_px =
-                    Some(gathered.predicted_max_px.map_or(px, |m| m.max(px)));
+            for (px, into) in [
+                (renderer.predicted_max_px(), &mut gathered.predicted_max_px),
+                (renderer.predicted_p99_px(), &mut gathered.predicted_p99_px),
+            ] {
+                if let Some(px) = px {
+                    let px = f64::from(px);
+                    *into = Some(into.map_or(px, |m| m.max(px)));
+                }
             }
             if first_sample + r >= self.warm_up {
                 gathered.gpu_ms.extend(frame.measurements.gpu_ms);
@@ -802,6 +812,7 @@ impl<'a> Bench<'a> {
                     tes_invocations: mean_count(&g.tes_invocations),
                     gpu_memory_bytes: bytes,
                     predicted_max_px: g.predicted_max_px,
+                    predicted_p99_px: g.predicted_p99_px,
                     max_px: stats.max_px,
                     p99_px: stats.p99_px,
                     mean_px: stats.mean_px,

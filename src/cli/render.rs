@@ -16,6 +16,7 @@ use super::args::{
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
 use crate::render::settings::{measurement_notes, sample_count};
+use crate::render::ErrorMeasure;
 use crate::render::{
     offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
     RendererOptions, Shading, StreamStats,
@@ -165,6 +166,14 @@ pub struct ViewArgs {
     #[arg(long, value_name = "PIXELS", value_parser = positive_pixels)]
     pub pixel_error: Option<f32>,
 
+    /// What the error LOD holds within --pixel-error: `view`, the frame's
+    /// 99th percentile as the view sees each level (hidden ground, ground
+    /// seen edge-on and the frame's 1 % spent where it saves the most
+    /// triangles); `bound`, every patch's largest vertical error, face-on
+    /// from its nearest point. Streamed terrains always use `bound`.
+    #[arg(long, value_enum, default_value_t = ErrorMeasureArg::View)]
+    pub error_measure: ErrorMeasureArg,
+
     /// Geomip path: switch levels abruptly instead of geomorphing.
     #[arg(long)]
     pub no_morph: bool,
@@ -176,6 +185,14 @@ pub struct ViewArgs {
 
     #[command(flatten)]
     pub features: FeatureArgs,
+}
+
+/// `--error-measure`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum ErrorMeasureArg {
+    #[default]
+    View,
+    Bound,
 }
 
 /// An option turned on or off.
@@ -265,6 +282,10 @@ impl ViewArgs {
             cull: !self.no_cull,
             occlusion: self.occlusion == Switch::On,
             geomorph: !self.no_morph,
+            error_measure: match self.error_measure {
+                ErrorMeasureArg::View => ErrorMeasure::View,
+                ErrorMeasureArg::Bound => ErrorMeasure::Bound,
+            },
             lod_metric,
             lod: self.distance_overrides(base.lod),
             ..base
@@ -356,6 +377,9 @@ pub struct FrameStats {
     /// The largest error the error LOD's choice expects on screen, in
     /// pixels; null for the distance LOD and brute.
     pub predicted_max_px: Option<f32>,
+    /// The frame's 99th percentile error the error LOD's choice expects,
+    /// in pixels; null where the view was not measured.
+    pub predicted_p99_px: Option<f32>,
     /// What streaming did for the frame (null for a terrain uploaded
     /// whole): tiles resident, uploaded, evicted, and the largest error a
     /// tile drawn from the base level adds.
@@ -491,6 +515,7 @@ pub fn render_scene(
             patches_occluded: frame.measurements.occlusion.map(|o| o.patches_occluded),
             culling_gpu_ms: frame.measurements.occlusion.and_then(|o| o.culling_ms),
             predicted_max_px: renderer.predicted_max_px(),
+            predicted_p99_px: renderer.predicted_p99_px(),
             stream: renderer.stream_stats(),
             cpu_ms: frame.cpu_ms,
             gpu_memory_bytes: gpu_memory.values().sum(),
@@ -708,14 +733,12 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
         return Ok(());
     }
     tiled::validate_tile_cells(cmd.tile)?;
-    let cells_per_patch = cmd.cells_per_patch.map_or_else(
-        || {
-            Ok(crate::terrain::info::stored_cells_per_patch(
-                cmd.size, cmd.size,
-            ))
-        },
-        |n| crate::terrain::info::validate_cells_per_patch(n).map(|()| n),
-    )?;
+    if let Some(n) = cmd.cells_per_patch {
+        crate::terrain::info::validate_cells_per_patch(n)?;
+    }
+    let cells_per_patch = cmd
+        .cells_per_patch
+        .unwrap_or_else(|| crate::terrain::info::stored_cells_per_patch(cmd.size, cmd.size));
     let height_scale = cmd.height_scale.unwrap_or(1.0);
     let mapping = IntegerMapping {
         scale: height_scale,

@@ -16,7 +16,8 @@ pub mod view;
 pub use headless::{offscreen, Headless, HeadlessFrame};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 pub use settings::{
-    sample_count, with_fallback, LodMetric, RenderPath, RenderSettings, Shading, DEFAULT_SAMPLES,
+    sample_count, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading,
+    DEFAULT_SAMPLES,
 };
 pub use streaming::{StreamConfig, StreamStats};
 pub use uniforms::FrameUniforms;

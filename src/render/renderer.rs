@@ -33,7 +33,7 @@ use ash::vk;
 use super::material::{GpuAppearance, ShaderVariant};
 use super::occlusion::{ListedDraw, Occlusion, DRAW_COMMAND_BYTES};
 use super::residency::StreamShape;
-use super::settings::{LodMetric, RenderPath, RenderSettings};
+use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use super::shaders;
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::uniforms::FrameUniforms;
@@ -47,6 +47,7 @@ use crate::shader_constants::{
 use crate::shader_variants::{Placing, Shader};
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
 use crate::terrain::tiled::TiledHeightmap;
+use crate::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
 use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
 use crate::vk::commands::{Recorder, RenderingPart};
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
@@ -65,6 +66,9 @@ struct FrameSlot {
     queries: FrameQueries,
     /// The tess path's full-resolution patches, one bit each (error LOD).
     full_resolution: Option<Buffer>,
+    /// The tess path's error table as this frame's view sees it (error
+    /// LOD), read by the control shader.
+    view_errors: Option<Buffer>,
     /// What `prepare` set this slot's frame up for; `record` draws it.
     settings: Option<RenderSettings>,
     /// Whether the slot's last recorded frame was drawn in two passes
@@ -202,8 +206,6 @@ pub struct TerrainRenderer {
     tess: Option<TessGeometry>,
     geomip: Option<GeomipGeometry>,
     brute: Option<BruteGeometry>,
-    /// Per-patch errors for the tess path's error-bounded factors.
-    error_table: Option<Buffer>,
     /// The patches' occlusion state and culling.
     occlusion: Occlusion,
     /// Built when a frame first shows culled patches.
@@ -234,6 +236,9 @@ pub struct TerrainRenderer {
     /// The largest error the last prepared frame's LOD choice expects on
     /// screen, in pixels (error LOD only).
     predicted_max_px: Option<f32>,
+    /// The frame's 99th percentile error the last prepared frame's LOD
+    /// choice expects, in pixels (error LOD, where the view measured it).
+    predicted_p99_px: Option<f32>,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -347,7 +352,6 @@ impl TerrainRenderer {
             tess: None,
             geomip: None,
             brute: None,
-            error_table: None,
             occlusion,
             culled_pipelines: None,
             _sets: sets,
@@ -365,6 +369,7 @@ impl TerrainRenderer {
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms: 0.0,
             predicted_max_px: None,
+            predicted_p99_px: None,
         };
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
@@ -474,13 +479,8 @@ impl TerrainRenderer {
                 // path's error LOD has its own, for its fixed diagonal.
                 // Both come from one pass, kept by the terrain.
                 let (table, _) = self.error_tables(terrain);
-                if self.error_table.is_none() {
-                    self.error_table = Some(self.device.upload_buffer(
-                        "terrain.error_table",
-                        vk::BufferUsageFlags::STORAGE_BUFFER,
-                        bytemuck::cast_slice(table.as_slice()),
-                    )?);
-                    self.add_full_resolution_bits(terrain)?;
+                if self.frames.iter().any(|f| f.view_errors.is_none()) {
+                    self.add_error_lod_buffers(terrain, table)?;
                 }
                 self.tess = Some(build_tess(self, terrain, table.clone(), wireframe)?);
             }
@@ -514,12 +514,12 @@ impl TerrainRenderer {
         tables
     }
 
-    /// Per frame slot, the buffer of full-resolution patch bits, and the
-    /// slot's set pointed at it, the error table and the occlusion state
-    /// (the bindings of the tess path's control shader).
-    fn add_full_resolution_bits(&mut self, terrain: &Terrain) -> Result<()> {
+    /// Per frame slot, the buffers of full-resolution patch bits and of
+    /// the view's error table (starting as `table`), and the slot's set
+    /// pointed at them and the occlusion state (the bindings of the tess
+    /// path's control shader).
+    fn add_error_lod_buffers(&mut self, terrain: &Terrain, table: &ErrorTable) -> Result<()> {
         let device = &self.device;
-        let errors = self.error_table.as_ref().expect("uploaded by the caller");
         let words = terrain.grid().patch_count().div_ceil(32).max(1);
         for (i, frame) in self.frames.iter_mut().enumerate() {
             let bits = device.create_host_buffer(
@@ -527,8 +527,13 @@ impl TerrainRenderer {
                 vk::BufferUsageFlags::STORAGE_BUFFER,
                 bytemuck::cast_slice(&vec![0u32; words]),
             )?;
+            let errors = device.create_host_buffer(
+                &format!("terrain.view_errors[{i}]"),
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytemuck::cast_slice(table.as_slice()),
+            )?;
             for (binding, buffer) in [
-                (BINDING_ERROR_TABLE, errors),
+                (BINDING_ERROR_TABLE, &errors),
                 (BINDING_FULL_RESOLUTION, &bits),
                 (BINDING_VISIBILITY, &self.occlusion.visibility),
             ] {
@@ -542,6 +547,7 @@ impl TerrainRenderer {
                 );
             }
             frame.full_resolution = Some(bits);
+            frame.view_errors = Some(errors);
         }
         Ok(())
     }
@@ -590,41 +596,66 @@ impl TerrainRenderer {
             .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
             .copy_from_slice(bytemuck::bytes_of(&uniforms));
         self.predicted_max_px = None;
+        self.predicted_p99_px = None;
         self.frames[slot].tess_batches.clear();
+        if let Some(tess) = self.tess.as_mut() {
+            tess.exact.clear();
+        }
         match (settings.path, settings.lod_metric) {
             (RenderPath::Geomip, _) => {
                 if let Some(geomip) = self.geomip.as_mut() {
                     let drawn = view.patches_drawn(terrain, settings.cull);
-                    self.predicted_max_px = geomip.choose(terrain, view, settings, &drawn);
+                    let predicted = geomip.choose(terrain, view, settings, &drawn);
+                    self.predicted_max_px = predicted.map(|p| p.0);
+                    self.predicted_p99_px = predicted.and_then(|p| p.1);
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
-                let (Some(tess), Some(bits)) = (
+                let frame = &mut self.frames[slot];
+                let (Some(tess), Some(bits), Some(view_errors)) = (
                     self.tess.as_mut(),
-                    self.frames[slot].full_resolution.as_mut(),
+                    frame.full_resolution.as_mut(),
+                    frame.view_errors.as_mut(),
                 ) else {
                     return Err(VkError::Unsupported(
                         "the tess path's error LOD was not built".into(),
                     ));
                 };
-                let choice = choose_tess_error(
+                let drawn = view.patches_drawn(terrain, settings.cull);
+                let seen = seen_errors(
                     terrain,
                     &tess.errors,
+                    Diagonal::Either,
+                    view,
+                    (settings, pixels),
+                    &drawn,
+                );
+                let table = seen.as_ref().map_or(&tess.errors, |s| &s.table);
+                let choice = choose_tess_error(
+                    terrain,
+                    table,
                     view.eye_local,
                     view.pixels_per_radian,
                     pixels,
                 );
-                bits.mapped_mut()
-                    .ok_or_else(|| {
-                        VkError::Unsupported("patch flag memory is not host-mapped".into())
-                    })?
-                    .copy_from_slice(bytemuck::cast_slice(&choice.full_resolution));
+                for (buffer, bytes) in [
+                    (view_errors, bytemuck::cast_slice(table.as_slice())),
+                    (bits, bytemuck::cast_slice(&choice.full_resolution)),
+                ] {
+                    buffer
+                        .mapped_mut()
+                        .ok_or_else(|| {
+                            VkError::Unsupported("error LOD memory is not host-mapped".into())
+                        })?
+                        .copy_from_slice(bytes);
+                }
                 let geomip = self.geomip.as_ref().ok_or_else(|| {
                     VkError::Unsupported("the tess path's exact draws need geomip".into())
                 })?;
-                let drawn = view.patches_drawn(terrain, settings.cull);
+                let bound_px = tess.set_exact_draws(terrain, &drawn, &choice, geomip);
                 self.predicted_max_px =
-                    Some(tess.set_exact_draws(terrain, &drawn, &choice, geomip));
+                    Some(seen.as_ref().map_or(bound_px, |s| s.predicted_max_px));
+                self.predicted_p99_px = seen.map(|s| s.predicted_p99_px);
                 let tessellated = drawn
                     .iter()
                     .enumerate()
@@ -650,14 +681,19 @@ impl TerrainRenderer {
         self.predicted_max_px
     }
 
+    /// The frame's 99th percentile error the last prepared frame's level
+    /// choice expects on screen, in pixels, where the view measured it
+    /// (`terrain::view_error`): None for the distance LOD, the brute path
+    /// and streamed terrains.
+    pub fn predicted_p99_px(&self) -> Option<f32> {
+        self.predicted_p99_px
+    }
+
     /// How many patches in view the last prepared frame of the tess
     /// path's error LOD draws at full resolution, with the reference's
     /// own triangles instead of the control shader (0 on other paths).
     pub fn full_resolution_patches(&self) -> usize {
-        match (&self.tess, self.predicted_max_px) {
-            (Some(tess), Some(_)) => tess.exact.len(),
-            _ => 0,
-        }
+        self.tess.as_ref().map_or(0, |tess| tess.exact.len())
     }
 
     /// Makes the geomip path draw every patch at the given level (one per
@@ -980,6 +1016,7 @@ fn build_frames(
             set,
             queries,
             full_resolution: None,
+            view_errors: None,
             settings: None,
             culled: false,
             tess_batches: Vec::new(),
@@ -1444,30 +1481,45 @@ impl GeomipGeometry {
         view: &FrameView,
         settings: &RenderSettings,
         drawn: &[bool],
-    ) -> Option<f32> {
+    ) -> Option<(f32, Option<f32>)> {
         if let Some(chosen) = self.given.take() {
             self.set_draws(terrain, settings, drawn, &chosen);
             self.given = Some(chosen);
             return None;
         }
+        let mut seen = None;
         let chosen = match settings.lod_metric {
             // The peers' policies are tessellation factors; geomip draws
             // them by distance.
             LodMetric::Distance | LodMetric::Peer(_) => {
                 geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
             }
-            LodMetric::Error(pixels) => geomip::select_levels_by_error(
-                terrain,
-                &self.errors,
-                view.eye_local,
-                view.pixels_per_radian,
-                pixels,
-            ),
+            LodMetric::Error(pixels) => {
+                let view_errors = seen_errors(
+                    terrain,
+                    &self.errors,
+                    Diagonal::Reference,
+                    view,
+                    (settings, pixels),
+                    drawn,
+                );
+                let table = view_errors.as_ref().map_or(&self.errors, |s| &s.table);
+                let chosen = geomip::select_levels_by_error(
+                    terrain,
+                    table,
+                    view.eye_local,
+                    view.pixels_per_radian,
+                    pixels,
+                );
+                seen = Some(view_errors);
+                chosen
+            }
         };
         self.set_draws(terrain, settings, drawn, &chosen);
-        let LodMetric::Error(_) = settings.lod_metric else {
-            return None;
-        };
+        let view_errors = seen?;
+        if let Some(v) = view_errors {
+            return Some((v.predicted_max_px, Some(v.predicted_p99_px)));
+        }
         let predicted = geomip::predicted_px(
             terrain,
             &self.errors,
@@ -1476,7 +1528,7 @@ impl GeomipGeometry {
             view.pixels_per_radian,
             settings.geomorph,
         );
-        Some(max_drawn(drawn, &predicted))
+        Some((max_drawn(drawn, &predicted), None))
     }
 
     /// The unstitched full-resolution index list of a patch of `cells`.
@@ -1582,6 +1634,38 @@ fn patch_batches(drawn: impl Iterator<Item = bool>, max_patches: Option<u32>) ->
         .into_iter()
         .map(|(first, n)| (first * 4, n * 4))
         .collect()
+}
+
+/// The error table `bound` as `view` sees it for the patches `drawn`
+/// (`terrain::view_error`), where `settings` measure the view and the CPU
+/// holds the heights; None keeps the bounds (a streamed terrain's too),
+/// with no expectation to report.
+fn seen_errors(
+    terrain: &Terrain,
+    bound: &ErrorTable,
+    diagonal: Diagonal,
+    view: &FrameView,
+    (settings, pixel_error): (&RenderSettings, f32),
+    drawn: &[bool],
+) -> Option<ViewErrors> {
+    if settings.error_measure == ErrorMeasure::Bound {
+        return None;
+    }
+    let heightmap = terrain.info().heightmap()?;
+    Some(view_error_table(
+        terrain,
+        heightmap,
+        bound,
+        diagonal,
+        &ViewLod {
+            eye_local: view.eye_local,
+            pixels_per_radian: view.pixels_per_radian,
+            viewport_pixels: f64::from(view.viewport.x) * f64::from(view.viewport.y),
+            frustum: view.frustum,
+            pixel_error,
+        },
+        drawn,
+    ))
 }
 
 /// The largest of per-patch `values` over the patches `drawn` (0 if none).

@@ -115,12 +115,28 @@ pub enum LodMetric {
     Peer(PeerPolicy),
 }
 
+/// What the error LOD holds within its tolerance.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum ErrorMeasure {
+    /// The frame's 99th percentile error, as the view sees each level
+    /// (`terrain::view_error`): at most 1 % of the terrain's pixels may be
+    /// over, where that saves the most triangles. Terrains whose heights
+    /// stream (the CPU does not hold them) use `Bound`.
+    #[default]
+    View,
+    /// Every patch's largest vertical error anywhere, projected face-on
+    /// from its nearest point (the error table's bound).
+    Bound,
+}
+
 /// What a frame looks like, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     pub path: RenderPath,
     /// How the geomip path picks levels.
     pub lod_metric: LodMetric,
+    /// What the error LOD holds within its tolerance.
+    pub error_measure: ErrorMeasure,
     /// Geomip path: glide vertices between levels instead of popping.
     pub geomorph: bool,
     pub lod: DistanceLod,
@@ -151,6 +167,7 @@ impl Default for RenderSettings {
         RenderSettings {
             path: RenderPath::Tess,
             lod_metric: LodMetric::Distance,
+            error_measure: ErrorMeasure::View,
             geomorph: true,
             lod: DistanceLod::default(),
             lod_mode: DistanceMode::Smooth,

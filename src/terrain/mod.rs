@@ -15,6 +15,8 @@ pub mod lod;
 mod query;
 pub mod shading;
 pub mod tiled;
+pub mod view_error;
+pub mod viewshed;
 
 pub use camera::{look_at, perspective, Frustum};
 pub use error::{HeightmapError, TerrainError};

@@ -1,0 +1,556 @@
+//! The error a view sees of a patch drawn at a coarser level: the error
+//! table's levels re-measured for one eye, the way the benchmark measures a
+//! render against the reference, and the frame's share of pixels over the
+//! tolerance spent where it saves the most triangles.
+//!
+//! **What a pixel shows.** The error table bounds each level's largest
+//! vertical error anywhere on the patch, and the bound is projected face-on
+//! from the patch's nearest point. A pixel's view ray meets the reference at
+//! R; the drawn surface lies a vertical distance delta above or below R, and
+//! the ray runs on (or back) until it meets it. For a ray that falls `t`
+//! per unit of horizontal travel (`t` < 0 rising) onto a drawn surface that
+//! rises `s` per unit in the ray's horizontal direction, the two meeting
+//! points are `|delta| |t| / (s + t)` apart vertically, which at distance
+//! `d` covers `|delta| |t| / (s + t) * K / d` pixels (K the viewport's pixels
+//! per radian). On flat ground that is the face-on projection; on ground
+//! rising towards the eye, seen from low down, it is a fraction of it. Where
+//! the drawn surface meets the ray less steeply than flat ground would
+//! (`s + t < |t|`: ground falling away, towards a silhouette) it is counted
+//! face-on, as the bound counts it everywhere; so is a meeting point
+//! further away (`|delta| / (s + t)`) than the drawn quad is wide, where the
+//! drawn surface is no longer the plane its slope was read from.
+//!
+//! **Which pixels.** Each sample stands for its cell, whose screen area is
+//! `A (s_ref + t) / (sqrt(1 + t^2) d^2)` steradians (A the cell's horizontal
+//! area, `s_ref` the reference's own slope along the ray): ground a ray
+//! grazes covers few pixels. Samples outside the frustum, facing away, or
+//! hidden behind nearer terrain (`viewshed`, with a pixel's margin) cover
+//! none. So a level's error is a distribution over the patch's pixels, not
+//! one worst value.
+//!
+//! **The frame's share.** The benchmark's target is the frame's 99th
+//! percentile, so 1 % of the frame's terrain pixels (`EXCEED_FRACTION`, of
+//! the seen pixels the samples add up to, at most the viewport) may exceed
+//! tau. Starting from every patch at its coarsest level, that share is
+//! handed out greedily: the patch and finer level that remove the most
+//! pixels over tau per triangle added go first, until what remains over tau
+//! fits. Each patch then has its own share `q` of its pixels, and each of
+//! its levels the error that all but `q` of its pixels stay within (a
+//! pixel-weighted percentile).
+//!
+//! **Units.** The result is given in the error table's units, a length at
+//! the patch's nearest point: the percentile in pixels times that distance
+//! over K. The control shader and every CPU choice use it exactly as they
+//! use the table, so nothing on the GPU changes, and both sides of a shared
+//! edge still agree. No level gets more than its bound, and levels stay
+//! non-increasing as they rise.
+
+use glam::{DVec2, DVec3, Vec3};
+
+use super::camera::Frustum;
+use rayon::prelude::*;
+
+use super::error_table::{ErrorTable, LEVEL_COUNT};
+use super::grid::SampleRect;
+use super::heightmap::Heightmap;
+use super::lod::patch_box_distance;
+use super::viewshed::Viewshed;
+use super::Terrain;
+
+/// Share of the frame's terrain pixels the view's choice lets exceed tau:
+/// the frame's 99th percentile is then within tau.
+pub const EXCEED_FRACTION: f64 = 0.01;
+
+/// Which triangulation a level's quads are drawn with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Diagonal {
+    /// The tessellator's: either diagonal, so the larger error of the two.
+    Either,
+    /// The reference's (upper-right to lower-left), as the geomip path
+    /// draws every quad.
+    Reference,
+}
+
+/// What the view is: the eye relative to the terrain's centre, the
+/// viewport's pixels per radian and size, the frustum (eye-relative) and
+/// the tolerance the choice is for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewLod {
+    pub eye_local: Vec3,
+    pub pixels_per_radian: f32,
+    pub viewport_pixels: f64,
+    pub frustum: Frustum,
+    pub pixel_error: f32,
+}
+
+/// The error table as one view sees it, and what the view expects of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ViewErrors {
+    pub table: ErrorTable,
+    /// The frame's 99th percentile error the choice expects, in pixels.
+    pub predicted_p99_px: f32,
+    /// The largest error the choice expects on any seen sample, in pixels.
+    pub predicted_max_px: f32,
+}
+
+/// One patch's levels as the view sees them at its share (second pass):
+/// the patch, its table entries, and (error, pixels) of each seen sample
+/// at the level the control shader will pick.
+type Measured = (usize, [f32; LEVEL_COUNT], Vec<(f64, f64)>);
+
+/// One patch's measured levels (first pass).
+struct Estimate {
+    patch: usize,
+    /// Its seen pixels.
+    pixels: f64,
+    /// Per level index: pixels over tau (`f64::INFINITY` where not
+    /// measured: the bound stands).
+    over: [f64; LEVEL_COUNT],
+    /// The full-resolution level's index: log2 of the side.
+    full: usize,
+}
+
+/// The error table `bound` as this view sees it, for the patches `wanted`
+/// (the others keep their bounds). See the module documentation: the
+/// frame's share of pixels over tau (`EXCEED_FRACTION`) is spent where it
+/// saves the most triangles, and each patch's levels get the error that
+/// all but its share of pixels stay within, in the table's units. Levels
+/// stay non-increasing as they rise, and no level gets more than its bound.
+/// Patches the eye is inside, and those that are not square with a power
+/// of two cells a side (the far remainders), keep their bounds.
+pub fn view_error_table(
+    terrain: &Terrain,
+    heightmap: &Heightmap,
+    bound: &ErrorTable,
+    diagonal: Diagonal,
+    view: &ViewLod,
+    wanted: &[bool],
+) -> ViewErrors {
+    let grid = terrain.grid();
+    let info = terrain.info();
+    let tau = f64::from(view.pixel_error.max(f32::MIN_POSITIVE));
+    let viewshed = sweep_viewshed(terrain, heightmap, view, wanted);
+    let distance = |p: usize| {
+        let corners = terrain
+            .patch_corners(grid.patch_id(p))
+            .map(|c| c - view.eye_local);
+        let [lo, hi] = terrain.y_bounds()[p];
+        patch_box_distance(corners, [lo - view.eye_local.y, hi - view.eye_local.y])
+    };
+    let samples = |p: usize| {
+        let rect = grid.sample_rect(grid.patch_id(p));
+        PatchSamples::new(heightmap, rect, info, view, &viewshed)
+    };
+    // First pass: each patch's seen pixels, and its pixels over tau at
+    // every level.
+    let estimates: Vec<Estimate> = (0..grid.patch_count())
+        .into_par_iter()
+        .filter(|&p| wanted[p])
+        .filter_map(|p| {
+            let mut patch = samples(p)?;
+            let full = patch.side.trailing_zeros() as usize;
+            let mut over = [f64::INFINITY; LEVEL_COUNT];
+            let measured = distance(p) > 0.0;
+            for (k, o) in over.iter_mut().enumerate().take(full + 1) {
+                *o = if k == full {
+                    0.0
+                } else if measured {
+                    patch.level(1 << k, diagonal);
+                    patch.over(tau)
+                } else {
+                    f64::INFINITY
+                };
+            }
+            // A level's table entry is the largest of it and every finer
+            // level's (see below), so it is within tau only where they all
+            // are.
+            for k in (0..full.saturating_sub(1)).rev() {
+                over[k] = over[k].max(over[k + 1]);
+            }
+            Some(Estimate {
+                patch: p,
+                pixels: patch.pixels(),
+                over,
+                full,
+            })
+        })
+        .collect();
+    let shares = allocate(&estimates, view.viewport_pixels);
+
+    // Second pass: each measured patch's levels at its share.
+    let mut errors = bound.as_slice().to_vec();
+    let per_patch: Vec<Measured> = estimates
+        .par_iter()
+        .zip(shares.par_iter())
+        .filter(|(e, _)| e.over[0].is_finite())
+        .filter_map(|(e, &share)| {
+            let p = e.patch;
+            let d = f64::from(distance(p));
+            let mut patch = samples(p)?;
+            let own = bound.patch(p);
+            let mut levels: [f32; LEVEL_COUNT] = own.try_into().expect("LEVEL_COUNT levels");
+            let mut seen = vec![Vec::new(); e.full + 1];
+            for (k, level) in levels.iter_mut().enumerate().take(e.full) {
+                patch.level(1 << k, diagonal);
+                let px = patch.percentile(share);
+                *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
+                seen[k] = std::mem::take(&mut patch.scratch);
+            }
+            for k in (0..LEVEL_COUNT - 1).rev() {
+                levels[k] = levels[k].max(levels[k + 1]);
+            }
+            // The level the control shader will pick, and what it shows.
+            let scale = view.pixels_per_radian / d as f32;
+            let chosen = (0..e.full)
+                .find(|&k| levels[k] * scale <= view.pixel_error)
+                .unwrap_or(e.full);
+            let shown = if chosen == e.full {
+                vec![(0.0, e.pixels)]
+            } else {
+                std::mem::take(&mut seen[chosen])
+            };
+            Some((p, levels, shown))
+        })
+        .collect();
+    let mut shown: Vec<(f64, f64)> = Vec::new();
+    for (p, levels, seen) in per_patch {
+        errors[p * LEVEL_COUNT..(p + 1) * LEVEL_COUNT].copy_from_slice(&levels);
+        shown.extend(seen);
+    }
+    // Pixels of the patches that keep their bounds count as within tau.
+    let within: f64 = estimates
+        .iter()
+        .filter(|e| !e.over[0].is_finite())
+        .map(|e| e.pixels)
+        .sum();
+    let predicted_max_px = shown.iter().map(|s| s.0).fold(0.0f64, f64::max) as f32;
+    let predicted_p99_px = weighted_percentile(&mut shown, within, EXCEED_FRACTION) as f32;
+    ViewErrors {
+        table: ErrorTable::from_flat(errors).expect("the bound's layout, finite and not negative"),
+        predicted_p99_px,
+        predicted_max_px,
+    }
+}
+
+/// The viewshed out to the farthest wanted sample. Samples within a pixel
+/// below their horizon count as seen: they share its pixels.
+fn sweep_viewshed(
+    terrain: &Terrain,
+    heightmap: &Heightmap,
+    view: &ViewLod,
+    wanted: &[bool],
+) -> Viewshed {
+    let grid = terrain.grid();
+    let info = terrain.info();
+    let eye_grid = info.placement().world_to_grid(
+        f64::from(view.eye_local.x) + info.origin().x,
+        f64::from(view.eye_local.z) + info.origin().y,
+    );
+    let max_ring = (0..grid.patch_count())
+        .filter(|&p| wanted[p])
+        .map(|p| {
+            let rect = grid.sample_rect(grid.patch_id(p));
+            let far =
+                |lo: usize, hi: usize, e: f64| (lo as f64 - e).abs().max((hi as f64 - e).abs());
+            far(rect.col0, rect.col1, eye_grid.x).max(far(rect.row0, rect.row1, eye_grid.y))
+        })
+        .fold(0.0f64, f64::max);
+    let mut viewshed = Viewshed::default();
+    if max_ring.is_finite() {
+        viewshed.sweep(
+            info,
+            heightmap,
+            view.eye_local,
+            1.0 / f64::from(view.pixels_per_radian),
+            max_ring.ceil() as usize + 1,
+        );
+    }
+    viewshed
+}
+
+/// Each estimate's share of its own pixels that may exceed tau: the
+/// frame's `EXCEED_FRACTION` of its seen pixels (at most the viewport) is
+/// handed out greedily, each step taking the patch and finer level that
+/// removes the most pixels over tau per triangle added, from every patch
+/// at its coarsest level until what remains over tau fits.
+fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
+    use std::cmp::Ordering;
+    use std::collections::BinaryHeap;
+    let total: f64 = estimates.iter().map(|e| e.pixels).sum();
+    let budget = EXCEED_FRACTION * total.min(viewport_pixels);
+    let triangles = |k: usize| 2.0 * 4f64.powi(k as i32);
+    let mut level: Vec<usize> = vec![0; estimates.len()];
+    let mut over: f64 = estimates.iter().map(|e| e.over[0]).sum();
+    // The best finer level from `from`: (pixels removed per triangle, level).
+    let best = |e: &Estimate, from: usize| -> Option<(f64, usize)> {
+        (from + 1..=e.full)
+            .filter(|&k| e.over[k] < e.over[from])
+            .map(|k| {
+                let gain = if e.over[from].is_infinite() {
+                    f64::MAX
+                } else {
+                    (e.over[from] - e.over[k]) / (triangles(k) - triangles(from))
+                };
+                (gain, k)
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+    };
+    #[derive(PartialEq)]
+    struct Step(f64, usize, usize);
+    impl Eq for Step {}
+    impl PartialOrd for Step {
+        fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+            Some(self.cmp(other))
+        }
+    }
+    impl Ord for Step {
+        fn cmp(&self, other: &Self) -> Ordering {
+            self.0.total_cmp(&other.0).then(other.1.cmp(&self.1))
+        }
+    }
+    let mut heap: BinaryHeap<Step> = estimates
+        .iter()
+        .enumerate()
+        .filter_map(|(i, e)| best(e, 0).map(|(g, k)| Step(g, i, k)))
+        .collect();
+    while over > budget {
+        let Some(Step(_, i, k)) = heap.pop() else {
+            break;
+        };
+        let e = &estimates[i];
+        over = if e.over[level[i]].is_infinite() {
+            estimates
+                .iter()
+                .enumerate()
+                .map(|(j, f)| if j == i { f.over[k] } else { f.over[level[j]] })
+                .sum()
+        } else {
+            over - (e.over[level[i]] - e.over[k])
+        };
+        level[i] = k;
+        if let Some((g, next)) = best(e, k) {
+            heap.push(Step(g, i, next));
+        }
+    }
+    estimates
+        .iter()
+        .zip(&level)
+        .map(|(e, &k)| {
+            if e.pixels > 0.0 && e.over[k].is_finite() {
+                e.over[k] / e.pixels
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// The smallest error that at most `fraction` of the pixels of `items`
+/// (error, pixels) and of `within` more pixels (error 0) exceed.
+fn weighted_percentile(items: &mut [(f64, f64)], within: f64, fraction: f64) -> f64 {
+    let total: f64 = items.iter().map(|i| i.1).sum::<f64>() + within;
+    let allowed = fraction * total;
+    items.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+    let mut over = 0.0;
+    for &(px, pixels) in items.iter() {
+        if over + pixels > allowed {
+            return px;
+        }
+        over += pixels;
+    }
+    0.0
+}
+
+/// One patch's samples as the eye sees them.
+struct PatchSamples<'a> {
+    map: &'a Heightmap,
+    rect: SampleRect,
+    /// Cells a side.
+    side: usize,
+    /// Per sample, row-major over the rect.
+    seen: Vec<Seen>,
+    /// Sample spacing (dx, dz).
+    spacing: DVec2,
+    /// The last measured level's (error in pixels, pixels) per seen sample.
+    scratch: Vec<(f64, f64)>,
+}
+
+/// How the eye sees one sample.
+#[derive(Clone, Copy)]
+struct Seen {
+    /// Pixels a unit of vertical error covers face-on (K / d).
+    face_on: f64,
+    /// The ray's horizontal direction (x, z).
+    dir: DVec2,
+    /// The ray's fall `t` per unit of horizontal travel; infinite straight
+    /// down.
+    fall: f64,
+    /// The pixels of the sample's cell; 0 where hidden, out of view or
+    /// facing away.
+    pixels: f64,
+}
+
+impl<'a> PatchSamples<'a> {
+    /// None unless the patch is square with a power of two cells a side.
+    fn new(
+        map: &'a Heightmap,
+        rect: SampleRect,
+        info: &super::TerrainInfo,
+        view: &ViewLod,
+        viewshed: &Viewshed,
+    ) -> Option<Self> {
+        let side = rect.cells_x();
+        if side != rect.cells_z() || !side.is_power_of_two() {
+            return None;
+        }
+        let spacing = info.spacing();
+        let eye = view.eye_local.as_dvec3();
+        let k = f64::from(view.pixels_per_radian);
+        let cell_pixels = spacing.x * spacing.y * k * k;
+        let (w, d) = (map.width(), map.depth());
+        let h = |r: usize, c: usize| f64::from(map.get(r, c));
+        let unseen = Seen {
+            face_on: 0.0,
+            dir: DVec2::X,
+            fall: 0.0,
+            pixels: 0.0,
+        };
+        let mut seen = Vec::with_capacity((side + 1) * (side + 1));
+        for r in rect.row0..=rect.row1 {
+            for c in rect.col0..=rect.col1 {
+                let rel = DVec3::new(info.local_x(c), h(r, c), info.local_z(r)) - eye;
+                let in_view = !view.frustum.aabb_outside(rel.as_vec3(), Vec3::ZERO);
+                if !in_view || viewshed.hidden(r, c) {
+                    seen.push(unseen);
+                    continue;
+                }
+                let horizontal = DVec2::new(rel.x, rel.z);
+                let reach = horizontal.length();
+                let distance = rel.length().max(f64::MIN_POSITIVE);
+                if reach <= 0.0 {
+                    // Straight below the eye: seen face-on.
+                    seen.push(Seen {
+                        face_on: k / distance,
+                        dir: DVec2::X,
+                        fall: f64::INFINITY,
+                        pixels: (cell_pixels / (distance * distance)).min(view.viewport_pixels),
+                    });
+                    continue;
+                }
+                let dir = horizontal / reach;
+                let fall = -rel.y / reach;
+                // The reference's gradient (x, z) by central differences,
+                // one-sided at the map's edges; local z falls as rows rise.
+                let (c0, c1) = (c.saturating_sub(1), (c + 1).min(w - 1));
+                let (r0, r1) = (r.saturating_sub(1), (r + 1).min(d - 1));
+                let gx = (h(r, c1) - h(r, c0)) / ((c1 - c0) as f64 * spacing.x);
+                let gz = (h(r0, c) - h(r1, c)) / ((r1 - r0) as f64 * spacing.y);
+                let rise = gx * dir.x + gz * dir.y;
+                let solid_angle =
+                    (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance);
+                seen.push(Seen {
+                    face_on: k / distance,
+                    dir,
+                    fall,
+                    pixels: (solid_angle * cell_pixels).min(view.viewport_pixels),
+                });
+            }
+        }
+        Some(PatchSamples {
+            map,
+            rect,
+            side,
+            seen,
+            spacing,
+            scratch: Vec::new(),
+        })
+    }
+
+    /// The patch's seen pixels.
+    fn pixels(&self) -> f64 {
+        self.seen.iter().map(|s| s.pixels).sum()
+    }
+
+    /// Measures `level` segments a side (a divisor of the side, below it)
+    /// into `scratch`: each seen sample's error in pixels and its pixels.
+    fn level(&mut self, level: usize, diagonal: Diagonal) {
+        let n = self.side;
+        let s = n / level;
+        let stride = n + 1;
+        let h =
+            |r: usize, c: usize| f64::from(self.map.get(self.rect.row0 + r, self.rect.col0 + c));
+        let inv = 1.0 / s as f64;
+        let quad = DVec2::new(s as f64 * self.spacing.x, s as f64 * self.spacing.y);
+        let extent = quad.min_element();
+        self.scratch.clear();
+        for qi in 0..level {
+            for qj in 0..level {
+                let (r0, c0) = (qi * s, qj * s);
+                // A upper-left, B upper-right, C lower-left, D lower-right.
+                let (a, b) = (h(r0, c0), h(r0, c0 + s));
+                let (c, d) = (h(r0 + s, c0), h(r0 + s, c0 + s));
+                // Samples on a quad's right or lower border belong to the
+                // next quad, except at the patch's own far borders.
+                let rows = if qi + 1 == level { s } else { s - 1 };
+                let cols = if qj + 1 == level { s } else { s - 1 };
+                for i in 0..=rows {
+                    let v = i as f64 * inv;
+                    for j in 0..=cols {
+                        let seen = self.seen[(r0 + i) * stride + c0 + j];
+                        if seen.pixels <= 0.0 {
+                            continue;
+                        }
+                        let u = j as f64 * inv;
+                        let here = h(r0 + i, c0 + j);
+                        // Split B-C (the reference's), and A-D.
+                        let bc = if i + j <= s {
+                            a + u * (b - a) + v * (c - a)
+                        } else {
+                            d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
+                        };
+                        let mut delta = (here - bc).abs();
+                        if diagonal == Diagonal::Either {
+                            let ad = if j >= i {
+                                a + u * (b - a) + v * (d - b)
+                            } else {
+                                a + v * (c - a) + u * (d - c)
+                            };
+                            delta = delta.max((here - ad).abs());
+                        }
+                        // The drawn quad's slope along the ray (its
+                        // bilinear gradient; local z falls as rows rise),
+                        // counted face-on where the ray meets it no more
+                        // steeply than flat ground.
+                        let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
+                        let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
+                        let rise = gx * seen.dir.x + gz * seen.dir.y;
+                        // The meeting points lie `delta / meet` apart
+                        // horizontally; past the quad the drawn surface
+                        // is no longer this plane, so count it face-on.
+                        let meet = (rise + seen.fall).max(seen.fall.abs());
+                        let px = if seen.fall.is_infinite() || delta > meet * extent {
+                            delta * seen.face_on
+                        } else {
+                            delta * seen.face_on * seen.fall.abs() / meet
+                        };
+                        self.scratch.push((px, seen.pixels));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The measured level's pixels over `tau` pixels of error.
+    fn over(&self, tau: f64) -> f64 {
+        self.scratch.iter().filter(|s| s.0 > tau).map(|s| s.1).sum()
+    }
+
+    /// The measured level's error that at most `share` of the patch's
+    /// pixels exceed.
+    fn percentile(&mut self, share: f64) -> f64 {
+        // A share handed out as a level's pixels over tau must let exactly
+        // those pixels through, whatever the order of the sums.
+        let share = share * (1.0 + 1e-9);
+        weighted_percentile(&mut self.scratch, 0.0, share)
+    }
+}

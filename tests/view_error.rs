@@ -1,0 +1,217 @@
+//! The view's error table: the viewshed it hides samples with, and the
+//! levels it gives patches against the error table's bounds.
+
+mod common;
+
+use common::gpu::camera;
+use common::*;
+use glam::{DVec2, Vec3};
+use vkterrain::render::FrameView;
+use vkterrain::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
+use vkterrain::terrain::viewshed::Viewshed;
+use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
+
+/// A terrain of `map` with unit spacing and 16-cell patches, centred on 0.
+fn terrain(map: Heightmap) -> Terrain {
+    let info = TerrainInfo::new(map, DVec2::ONE, 16, DVec2::ZERO).expect("valid terrain");
+    Terrain::new(info, 0.0).expect("valid margin")
+}
+
+/// The view table of `terrain` from `eye` looking at `target` (world
+/// coordinates), 1280x720, every patch wanted.
+fn view_table(terrain: &Terrain, eye: [f64; 3], target: [f64; 3], tau: f32) -> ViewErrors {
+    let view = FrameView::new(terrain, &camera(eye, target, 55.0), 1280, 720);
+    let lod = ViewLod {
+        eye_local: view.eye_local,
+        pixels_per_radian: view.pixels_per_radian,
+        viewport_pixels: 1280.0 * 720.0,
+        frustum: view.frustum,
+        pixel_error: tau,
+    };
+    let wanted = vec![true; terrain.grid().patch_count()];
+    let (bound, _) = terrain.error_tables();
+    let heightmap = terrain.info().heightmap().expect("held whole");
+    view_error_table(terrain, heightmap, bound, Diagonal::Either, &lod, &wanted)
+}
+
+/// 65 x 65 samples, flat at 0 but for a wall `height` high along row 20.
+fn wall_map(height: f32) -> Heightmap {
+    Heightmap::from_fn(65, 65, |r, _| if r == 20 { height } else { 0.0 }).expect("valid size")
+}
+
+/// Local position of sample (row, col) of a 65 x 65 unit-spaced map.
+fn local(row: usize, col: usize, y: f32) -> Vec3 {
+    Vec3::new(col as f32 - 32.0, y, 32.0 - row as f32)
+}
+
+#[test]
+fn a_wall_hides_the_ground_behind_it_and_not_in_front() {
+    let map = wall_map(10.0);
+    let t = terrain(map.clone());
+    let mut shed = Viewshed::default();
+    // Eye 2 above the ground at row 5, in the middle column.
+    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.0, usize::MAX);
+    for c in 0..65 {
+        assert!(!shed.hidden(10, c), "in front of the wall, column {c}");
+        assert!(!shed.hidden(20, c), "the wall itself, column {c}");
+    }
+    // Straight behind the wall, the ground is hidden all the way back.
+    for r in 21..65 {
+        assert!(shed.hidden(r, 32), "behind the wall, row {r}");
+    }
+    // A wall no higher than the eye hides only what its line of sight
+    // crosses below it: the ground just behind it.
+    let low = wall_map(1.0);
+    shed.sweep(t.info(), &low, local(5, 32, 2.0), 0.0, usize::MAX);
+    assert!(shed.hidden(21, 32));
+    assert!(
+        !shed.hidden(64, 32),
+        "far ground rises above the line of sight"
+    );
+}
+
+#[test]
+fn a_lone_peak_hides_only_its_own_line_and_the_margin_uncovers_the_horizon() {
+    let spike = Heightmap::from_fn(65, 65, |r, c| if (r, c) == (20, 32) { 50.0 } else { 0.0 })
+        .expect("valid size");
+    let t = terrain(spike.clone());
+    let mut shed = Viewshed::default();
+    shed.sweep(t.info(), &spike, local(5, 32, 2.0), 0.0, usize::MAX);
+    // Only samples on the very line of sight through the peak are hidden
+    // (column 32 behind it); one sample is never a wall on both sides of
+    // any other ray.
+    for i in 0..65 * 65 {
+        let (r, c) = (i / 65, i % 65);
+        assert!(
+            !shed.hidden(r, c) || (c == 32 && r > 20),
+            "({r}, {c}) hidden"
+        );
+    }
+    // Behind a wall, ground within the margin of its horizon counts as
+    // seen: the wall's top at row 20 is 8 above the eye 15 away (0.53);
+    // the ground at row 40 is 2 below the eye 35 away (-0.057).
+    let map = wall_map(10.0);
+    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.5, usize::MAX);
+    assert!(
+        shed.hidden(40, 32),
+        "0.59 below its horizon, past a 0.5 margin"
+    );
+    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.7, usize::MAX);
+    assert!(!shed.hidden(40, 32), "within a 0.7 margin");
+}
+
+#[test]
+fn an_eye_outside_the_map_sweeps_from_beyond_its_edge() {
+    let map = wall_map(10.0);
+    let t = terrain(map.clone());
+    let mut shed = Viewshed::default();
+    // 40 beyond the near edge (row 0 is at local z = 32), 3 above ground.
+    shed.sweep(t.info(), &map, Vec3::new(0.0, 3.0, 72.0), 0.0, usize::MAX);
+    assert!(!shed.hidden(0, 32) && !shed.hidden(19, 32));
+    assert!(shed.hidden(30, 32), "behind the wall from outside too");
+}
+
+/// Rolling hills on a slope rising to the far rows, 0 to 23 high.
+fn rough() -> Terrain {
+    terrain(
+        Heightmap::from_fn(65, 65, |r, c| {
+            let (r, c) = (r as f32, c as f32);
+            10.0 + 10.0 * (c / 5.0).sin() * (r / 7.0).cos() + 0.05 * r
+        })
+        .expect("valid size"),
+    )
+}
+
+fn assert_within_bound(view: &ViewErrors, bound: &ErrorTable) {
+    for p in 0..bound.as_slice().len() / ErrorTable::LEVELS {
+        let (seen, own) = (view.table.patch(p), bound.patch(p));
+        for k in 0..ErrorTable::LEVELS {
+            assert!(
+                seen[k] <= own[k],
+                "patch {p} level {k}: {} over {}",
+                seen[k],
+                own[k]
+            );
+            assert!(seen[k] >= 0.0 && seen[k].is_finite());
+            if k + 1 < ErrorTable::LEVELS {
+                assert!(seen[k] >= seen[k + 1], "patch {p}: rises at level {k}");
+            }
+        }
+    }
+}
+
+#[test]
+fn never_above_the_bound_and_never_rising_with_the_level() {
+    let t = rough();
+    let (bound, _) = t.error_tables();
+    for (eye, target) in [
+        ([-30.0, 60.0, 40.0], [0.0, 30.0, 0.0]),
+        ([-31.0, 25.0, 31.0], [31.0, 25.0, -31.0]),
+        ([0.0, 200.0, 0.5], [0.0, 0.0, 0.0]),
+        ([100.0, 40.0, 100.0], [0.0, 20.0, 0.0]),
+    ] {
+        for tau in [0.5, 1.0, 4.0] {
+            let view = view_table(&t, eye, target, tau);
+            assert_within_bound(&view, bound);
+            assert!(
+                view.predicted_p99_px <= tau,
+                "from {eye:?} at {tau} px: the choice expects p99 {}",
+                view.predicted_p99_px
+            );
+        }
+    }
+}
+
+#[test]
+fn grazing_views_relax_levels_that_views_from_above_do_not() {
+    let t = rough();
+    let (bound, _) = t.error_tables();
+    let sum = |table: &ErrorTable| table.as_slice().iter().map(|&e| f64::from(e)).sum::<f64>();
+    // Low over one corner, looking level across the slope rising away.
+    let grazing = view_table(&t, [-31.0, 25.0, 31.0], [31.0, 25.0, -31.0], 1.0);
+    assert!(
+        sum(&grazing.table) < 0.5 * sum(bound),
+        "grazing: {} of the bound's {}",
+        sum(&grazing.table),
+        sum(bound)
+    );
+}
+
+#[test]
+fn a_patch_behind_a_wall_has_no_error_and_one_in_front_keeps_its_own() {
+    // Rough ground with a wall across row 20, seen from low in front.
+    let noise = noise_map(65, 65, 3);
+    let map = Heightmap::from_fn(65, 65, |r, c| if r == 20 { 100.0 } else { noise.get(r, c) })
+        .expect("valid size");
+    let t = terrain(map);
+    let view = view_table(&t, [0.0, 10.0, 31.0], [0.0, 10.0, -31.0], 1.0);
+    let grid = t.grid();
+    // Patch rows cover sample rows 0-16, 16-32, 32-48, 48-64: rows 2 and 3
+    // lie wholly behind the wall.
+    for p in 0..grid.patch_count() {
+        let id = grid.patch_id(p);
+        if id.row >= 2 {
+            assert!(
+                view.table.patch(p).iter().all(|&e| e == 0.0),
+                "patch {id:?} is hidden: {:?}",
+                view.table.patch(p)
+            );
+        }
+    }
+    let (bound, _) = t.error_tables();
+    let front = grid.patch_index(vkterrain::terrain::PatchId { row: 0, col: 1 });
+    assert!(view.table.patch(front)[0] > 0.0 && bound.patch(front)[0] > 0.0);
+}
+
+#[test]
+fn a_plane_has_no_error_from_anywhere() {
+    let plane =
+        Heightmap::from_fn(65, 65, |r, c| 0.3 * c as f32 - 0.2 * r as f32).expect("valid size");
+    let t = terrain(plane);
+    for eye in [[-31.0, 5.0, 31.0], [0.0, 100.0, 0.0], [50.0, 30.0, -50.0]] {
+        let view = view_table(&t, eye, [0.0, 0.0, 0.0], 1.0);
+        // Heights are f32, so the plane is flat to rounding only.
+        assert!(view.table.as_slice().iter().all(|&e| e < 1e-5));
+        assert!(view.predicted_p99_px < 1e-3, "{}", view.predicted_p99_px);
+    }
+}
