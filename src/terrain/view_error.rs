@@ -116,8 +116,9 @@ struct Estimate {
 /// saves the most triangles, and each patch's levels get the error that
 /// all but its share of pixels stay within, in the table's units. Levels
 /// stay non-increasing as they rise, and no level gets more than its bound.
-/// Patches the eye is inside, and those that are not square with a power
-/// of two cells a side (the far remainders), keep their bounds.
+/// Only the levels the bound rejects from a patch's nearest point are
+/// measured. Patches the eye is inside, and those that are not square with
+/// a power of two cells a side (the far remainders), keep their bounds.
 pub fn view_error_table(
     terrain: &Terrain,
     heightmap: &Heightmap,
@@ -129,7 +130,6 @@ pub fn view_error_table(
     let grid = terrain.grid();
     let info = terrain.info();
     let tau = f64::from(view.pixel_error.max(f32::MIN_POSITIVE));
-    let viewshed = sweep_viewshed(terrain, heightmap, view, wanted);
     let distance = |p: usize| {
         let corners = terrain
             .patch_corners(grid.patch_id(p))
@@ -137,28 +137,43 @@ pub fn view_error_table(
         let [lo, hi] = terrain.y_bounds()[p];
         patch_box_distance(corners, [lo - view.eye_local.y, hi - view.eye_local.y])
     };
+    // The coarsest level the bound accepts from the patch's nearest point.
+    // The view's error at a sample is never over the bound's there, so
+    // every level from this one on has no pixel over tau, and a patch whose
+    // coarsest level is accepted needs no measuring at all (its pixels are
+    // left out of the frame's share: fewer pixels, a smaller share).
+    let accepted = |p: usize| {
+        let scale = view.pixels_per_radian / distance(p).max(f32::MIN_POSITIVE);
+        (0..LEVEL_COUNT)
+            .find(|&k| bound.error(p, k) * scale <= view.pixel_error)
+            .unwrap_or(LEVEL_COUNT)
+    };
+    let measured: Vec<bool> = (0..grid.patch_count())
+        .into_par_iter()
+        .map(|p| wanted[p] && accepted(p) > 0)
+        .collect();
+    let viewshed = sweep_viewshed(terrain, heightmap, view, &measured);
     let samples = |p: usize| {
         let rect = grid.sample_rect(grid.patch_id(p));
         PatchSamples::new(heightmap, rect, info, view, &viewshed)
     };
     // First pass: each patch's seen pixels, and its pixels over tau at
-    // every level.
+    // every level the bound rejects.
     let estimates: Vec<Estimate> = (0..grid.patch_count())
         .into_par_iter()
-        .filter(|&p| wanted[p])
+        .filter(|&p| measured[p])
         .filter_map(|p| {
             let mut patch = samples(p)?;
             let full = patch.side.trailing_zeros() as usize;
-            let mut over = [f64::INFINITY; LEVEL_COUNT];
-            let measured = distance(p) > 0.0;
-            for (k, o) in over.iter_mut().enumerate().take(full + 1) {
-                *o = if k == full {
-                    0.0
-                } else if measured {
+            let from = accepted(p).min(full);
+            let inside = distance(p) <= 0.0;
+            let mut over = [0.0; LEVEL_COUNT];
+            for (k, o) in over.iter_mut().enumerate().take(from) {
+                *o = if inside {
+                    f64::INFINITY
+                } else {
                     patch.level(1 << k, diagonal);
                     patch.over(tau)
-                } else {
-                    f64::INFINITY
                 };
             }
             // A level's table entry is the largest of it and every finer
@@ -189,8 +204,9 @@ pub fn view_error_table(
             let mut patch = samples(p)?;
             let own = bound.patch(p);
             let mut levels: [f32; LEVEL_COUNT] = own.try_into().expect("LEVEL_COUNT levels");
+            let from = accepted(p).min(e.full);
             let mut seen = vec![Vec::new(); e.full + 1];
-            for (k, level) in levels.iter_mut().enumerate().take(e.full) {
+            for (k, level) in levels.iter_mut().enumerate().take(from) {
                 patch.level(1 << k, diagonal);
                 let px = patch.percentile(share);
                 *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
@@ -207,6 +223,10 @@ pub fn view_error_table(
             let shown = if chosen == e.full {
                 vec![(0.0, e.pixels)]
             } else {
+                if chosen >= from {
+                    patch.level(1 << chosen, diagonal);
+                    seen[chosen] = std::mem::take(&mut patch.scratch);
+                }
                 std::mem::take(&mut seen[chosen])
             };
             Some((p, levels, shown))
