@@ -253,7 +253,8 @@ fn the_base_level_drawn_matches_its_cpu_mirror() {
         against_full > 1000,
         "the base level should show: only {against_full} pixels differ from full resolution"
     );
-    if against_mirror != 0 {
+    let allowed = (w * h / 10_000) as usize;
+    if against_mirror > allowed {
         frame.rgba_image().save("stream-mirror-gpu.png").unwrap();
         image::RgbaImage::from_raw(w, h, expected.readback.rgba.clone())
             .unwrap()
@@ -263,7 +264,7 @@ fn the_base_level_drawn_matches_its_cpu_mirror() {
     // The heights are what is checked: Mesa 22.3.6's lavapipe shades one
     // of this view's 64,000 pixels differently between the two draws.
     assert!(
-        against_mirror <= (w * h / 10_000) as usize,
+        against_mirror <= allowed,
         "{against_mirror} pixels differ from the mirror's image"
     );
 }

@@ -151,6 +151,27 @@ fn split(k: usize, cells: usize, level: usize) -> (usize, usize) {
     (n / level, n % level)
 }
 
+/// The heights of a quad's two triangulations at its lattice point (row
+/// `i`, column `j`) of `s` a side, from its corners A upper-left, B
+/// upper-right, C lower-left, D lower-right: (split B-C, the reference's:
+/// ABC above, DCB below; split A-D: ABD right of it, ACD left).
+#[inline]
+pub(super) fn quad_splits([a, b, c, d]: [f64; 4], (i, j): (usize, usize), s: usize) -> (f64, f64) {
+    let inv = 1.0 / s as f64;
+    let (u, v) = (j as f64 * inv, i as f64 * inv);
+    let bc = if i + j <= s {
+        a + u * (b - a) + v * (c - a)
+    } else {
+        d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
+    };
+    let ad = if j >= i {
+        a + u * (b - a) + v * (d - b)
+    } else {
+        a + v * (c - a) + u * (d - c)
+    };
+    (bc, ad)
+}
+
 /// Exact errors of one level over one patch whose quads are square runs of
 /// whole cells: (either diagonal, the reference's diagonal); None where the
 /// quads are not (see the module documentation).
@@ -171,22 +192,9 @@ fn exact_level_error(map: &Heightmap, rect: SampleRect, level: usize) -> Option<
             let inv = 1.0 / s as f64;
             let (mut along, mut against) = (0.0f64, 0.0f64);
             for i in 0..=s {
-                let v = i as f64 * inv;
                 for j in 0..=s {
-                    let u = j as f64 * inv;
                     let here = h(r0 + i, c0 + j);
-                    // Split B-C (the reference's): ABC above, DCB below.
-                    let bc = if i + j <= s {
-                        a + u * (b - a) + v * (c - a)
-                    } else {
-                        d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
-                    };
-                    // Split A-D: ABD right of it, ACD left.
-                    let ad = if j >= i {
-                        a + u * (b - a) + v * (d - b)
-                    } else {
-                        a + v * (c - a) + u * (d - c)
-                    };
+                    let (bc, ad) = quad_splits([a, b, c, d], (i, j), s);
                     along = along.max((here - bc).abs());
                     against = against.max((here - ad).abs());
                 }

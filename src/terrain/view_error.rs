@@ -50,7 +50,7 @@ use glam::{DVec2, DVec3, Vec3};
 use super::camera::Frustum;
 use rayon::prelude::*;
 
-use super::error_table::{ErrorTable, LEVEL_COUNT};
+use super::error_table::{quad_splits, ErrorTable, LEVEL_COUNT};
 use super::grid::SampleRect;
 use super::heightmap::Heightmap;
 use super::lod::patch_box_distance;
@@ -522,21 +522,11 @@ impl<'a> PatchSamples<'a> {
                         }
                         let u = j as f64 * inv;
                         let here = h(r0 + i, c0 + j);
-                        // Split B-C (the reference's), and A-D.
-                        let bc = if i + j <= s {
-                            a + u * (b - a) + v * (c - a)
-                        } else {
-                            d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
+                        let (bc, ad) = quad_splits([a, b, c, d], (i, j), s);
+                        let delta = match diagonal {
+                            Diagonal::Reference => (here - bc).abs(),
+                            Diagonal::Either => (here - bc).abs().max((here - ad).abs()),
                         };
-                        let mut delta = (here - bc).abs();
-                        if diagonal == Diagonal::Either {
-                            let ad = if j >= i {
-                                a + u * (b - a) + v * (d - b)
-                            } else {
-                                a + v * (c - a) + u * (d - c)
-                            };
-                            delta = delta.max((here - ad).abs());
-                        }
                         // The drawn quad's slope along the ray (its
                         // bilinear gradient; local z falls as rows rise),
                         // counted face-on where the ray meets it no more
