@@ -1487,36 +1487,36 @@ impl GeomipGeometry {
             self.given = Some(chosen);
             return None;
         }
-        let mut seen = None;
+        let view_errors = match settings.lod_metric {
+            LodMetric::Error(pixels) => seen_errors(
+                terrain,
+                &self.errors,
+                Diagonal::Reference,
+                view,
+                (settings, pixels),
+                drawn,
+            ),
+            _ => None,
+        };
+        let table = view_errors.as_ref().map_or(&self.errors, |s| &s.table);
         let chosen = match settings.lod_metric {
             // The peers' policies are tessellation factors; geomip draws
             // them by distance.
             LodMetric::Distance | LodMetric::Peer(_) => {
                 geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
             }
-            LodMetric::Error(pixels) => {
-                let view_errors = seen_errors(
-                    terrain,
-                    &self.errors,
-                    Diagonal::Reference,
-                    view,
-                    (settings, pixels),
-                    drawn,
-                );
-                let table = view_errors.as_ref().map_or(&self.errors, |s| &s.table);
-                let chosen = geomip::select_levels_by_error(
-                    terrain,
-                    table,
-                    view.eye_local,
-                    view.pixels_per_radian,
-                    pixels,
-                );
-                seen = Some(view_errors);
-                chosen
-            }
+            LodMetric::Error(pixels) => geomip::select_levels_by_error(
+                terrain,
+                table,
+                view.eye_local,
+                view.pixels_per_radian,
+                pixels,
+            ),
         };
         self.set_draws(terrain, settings, drawn, &chosen);
-        let view_errors = seen?;
+        let LodMetric::Error(_) = settings.lod_metric else {
+            return None;
+        };
         if let Some(v) = view_errors {
             return Some((v.predicted_max_px, Some(v.predicted_p99_px)));
         }

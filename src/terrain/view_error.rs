@@ -101,11 +101,17 @@ type Measured = (usize, [f32; LEVEL_COUNT], Vec<(f64, f64)>);
 /// One patch's measured levels (first pass).
 struct Estimate {
     patch: usize,
+    /// Distance from the eye to the patch's box.
+    distance: f32,
     /// Its seen pixels.
     pixels: f64,
-    /// Per level index: pixels over tau (`f64::INFINITY` where not
-    /// measured: the bound stands).
+    /// Per level index: pixels over tau; `f64::INFINITY` at every level
+    /// below full resolution where the eye is inside the patch's box (it
+    /// keeps its bounds), 0 from `from` on.
     over: [f64; LEVEL_COUNT],
+    /// The first level the bound accepts (at most `full`): the levels
+    /// below it are the measured ones.
+    from: usize,
     /// The full-resolution level's index: log2 of the side.
     full: usize,
 }
@@ -166,7 +172,8 @@ pub fn view_error_table(
             let mut patch = samples(p)?;
             let full = patch.side.trailing_zeros() as usize;
             let from = accepted(p).min(full);
-            let inside = distance(p) <= 0.0;
+            let distance = distance(p);
+            let inside = distance <= 0.0;
             let mut over = [0.0; LEVEL_COUNT];
             for (k, o) in over.iter_mut().enumerate().take(from) {
                 *o = if inside {
@@ -184,27 +191,31 @@ pub fn view_error_table(
             }
             Some(Estimate {
                 patch: p,
+                distance,
                 pixels: patch.pixels(),
                 over,
+                from,
                 full,
             })
         })
         .collect();
     let shares = allocate(&estimates, view.viewport_pixels);
 
-    // Second pass: each measured patch's levels at its share.
+    // Second pass: each measured patch's levels at its share. The levels
+    // are measured again rather than kept from the first pass: kept, every
+    // measured patch's samples at every level would be held at once
+    // (hundreds of megabytes on a 4097^2 terrain).
     let mut errors = bound.as_slice().to_vec();
     let per_patch: Vec<Measured> = estimates
         .par_iter()
         .zip(shares.par_iter())
         .filter(|(e, _)| e.over[0].is_finite())
         .filter_map(|(e, &share)| {
-            let p = e.patch;
-            let d = f64::from(distance(p));
+            let (p, from) = (e.patch, e.from);
+            let d = f64::from(e.distance);
             let mut patch = samples(p)?;
             let own = bound.patch(p);
             let mut levels: [f32; LEVEL_COUNT] = own.try_into().expect("LEVEL_COUNT levels");
-            let from = accepted(p).min(e.full);
             let mut seen = vec![Vec::new(); e.full + 1];
             for (k, level) in levels.iter_mut().enumerate().take(from) {
                 patch.level(1 << k, diagonal);
@@ -262,7 +273,7 @@ fn sweep_viewshed(
 ) -> Viewshed {
     let grid = terrain.grid();
     let info = terrain.info();
-    let eye_grid = info.placement().world_to_grid(
+    let eye_grid = info.world_to_grid(
         f64::from(view.eye_local.x) + info.origin().x,
         f64::from(view.eye_local.z) + info.origin().y,
     );
@@ -299,18 +310,18 @@ fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
     let total: f64 = estimates.iter().map(|e| e.pixels).sum();
     let budget = EXCEED_FRACTION * total.min(viewport_pixels);
     let triangles = |k: usize| 2.0 * 4f64.powi(k as i32);
-    let mut level: Vec<usize> = vec![0; estimates.len()];
-    let mut over: f64 = estimates.iter().map(|e| e.over[0]).sum();
+    // Patches the eye is inside keep their bounds: full resolution.
+    let mut level: Vec<usize> = estimates
+        .iter()
+        .map(|e| if e.over[0].is_finite() { 0 } else { e.full })
+        .collect();
+    let mut over: f64 = estimates.iter().zip(&level).map(|(e, &k)| e.over[k]).sum();
     // The best finer level from `from`: (pixels removed per triangle, level).
     let best = |e: &Estimate, from: usize| -> Option<(f64, usize)> {
         (from + 1..=e.full)
             .filter(|&k| e.over[k] < e.over[from])
             .map(|k| {
-                let gain = if e.over[from].is_infinite() {
-                    f64::MAX
-                } else {
-                    (e.over[from] - e.over[k]) / (triangles(k) - triangles(from))
-                };
+                let gain = (e.over[from] - e.over[k]) / (triangles(k) - triangles(from));
                 (gain, k)
             })
             .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -330,23 +341,16 @@ fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
     }
     let mut heap: BinaryHeap<Step> = estimates
         .iter()
+        .zip(&level)
         .enumerate()
-        .filter_map(|(i, e)| best(e, 0).map(|(g, k)| Step(g, i, k)))
+        .filter_map(|(i, (e, &k))| best(e, k).map(|(g, next)| Step(g, i, next)))
         .collect();
     while over > budget {
         let Some(Step(_, i, k)) = heap.pop() else {
             break;
         };
         let e = &estimates[i];
-        over = if e.over[level[i]].is_infinite() {
-            estimates
-                .iter()
-                .enumerate()
-                .map(|(j, f)| if j == i { f.over[k] } else { f.over[level[j]] })
-                .sum()
-        } else {
-            over - (e.over[level[i]] - e.over[k])
-        };
+        over -= e.over[level[i]] - e.over[k];
         level[i] = k;
         if let Some((g, next)) = best(e, k) {
             heap.push(Step(g, i, next));
@@ -356,7 +360,7 @@ fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
         .iter()
         .zip(&level)
         .map(|(e, &k)| {
-            if e.pixels > 0.0 && e.over[k].is_finite() {
+            if e.pixels > 0.0 {
                 e.over[k] / e.pixels
             } else {
                 0.0

@@ -17,7 +17,7 @@
 //! Outside the heightmap there is no terrain; an eye outside it sweeps
 //! from its nearest grid point beyond the edge.
 
-use glam::{DVec2, Vec3};
+use glam::Vec3;
 
 use super::heightmap::Heightmap;
 use super::TerrainInfo;
@@ -28,8 +28,6 @@ pub struct Viewshed {
     cols: usize,
     /// Per sample, row-major: hidden behind nearer terrain.
     hidden: Vec<bool>,
-    /// Scratch: the horizon each sample passes on.
-    horizon: Vec<f32>,
 }
 
 impl Viewshed {
@@ -48,15 +46,12 @@ impl Viewshed {
         self.cols = cols;
         self.hidden.clear();
         self.hidden.resize(cols * rows, false);
-        self.horizon.clear();
-        self.horizon.resize(cols * rows, f32::NEG_INFINITY);
+        // The horizon each sample passes on.
+        let mut horizon = vec![f32::NEG_INFINITY; cols * rows];
         let eye = eye_local.as_dvec3();
-        let spacing = info.spacing();
         // The eye in grid units (column, row), and its nearest grid point.
-        let eye_grid = DVec2::new(
-            (eye.x + 0.5 * info.world_width()) / spacing.x,
-            (0.5 * info.world_depth() - eye.z) / spacing.y,
-        );
+        let origin = info.origin();
+        let eye_grid = info.world_to_grid(eye.x + origin.x, eye.z + origin.y);
         if !eye_grid.is_finite() {
             return;
         }
@@ -73,12 +68,16 @@ impl Viewshed {
                 f32::NEG_INFINITY
             }
         };
+        // A sample's height above the eye over its horizontal distance.
+        let elevation = |r: usize, c: usize| {
+            let (dx, dz) = (info.local_x(c) - eye.x, info.local_z(r) - eye.z);
+            let reach = (dx * dx + dz * dz).sqrt().max(f64::MIN_POSITIVE);
+            (f64::from(map.get(r, c)) - eye.y) / reach
+        };
         let (ec, er) = (ec as i64, er as i64);
         if inside(ec, er) {
             let (c, r) = (ec as usize, er as usize);
-            let reach = (info.local_x(c) - eye.x).hypot(info.local_z(r) - eye.z);
-            let elevation = (f64::from(map.get(r, c)) - eye.y) / reach.max(f64::MIN_POSITIVE);
-            self.horizon[r * cols + c] = elevation as f32;
+            horizon[r * cols + c] = elevation(r, c) as f32;
         }
         for k in 1..=last as i64 {
             // The ring's cells within the heightmap: rows er-k..=er+k,
@@ -109,19 +108,12 @@ impl Viewshed {
                             let t = dc as f64 * (k - 1) as f64 / k as f64 + ec as f64;
                             ((t.floor() as i64, rr), (t.ceil() as i64, rr))
                         };
-                        let behind = horizon_at(&self.horizon, a.0, a.1).min(horizon_at(
-                            &self.horizon,
-                            b.0,
-                            b.1,
-                        ));
+                        let behind =
+                            horizon_at(&horizon, a.0, a.1).min(horizon_at(&horizon, b.0, b.1));
                         let i = r as usize * cols + c as usize;
-                        let dx = info.local_x(c as usize) - eye.x;
-                        let dz = info.local_z(r as usize) - eye.z;
-                        let reach = (dx * dx + dz * dz).sqrt().max(f64::MIN_POSITIVE);
-                        let elevation =
-                            (f64::from(map.get(r as usize, c as usize)) - eye.y) / reach;
+                        let elevation = elevation(r as usize, c as usize);
                         self.hidden[i] = elevation + margin < f64::from(behind);
-                        self.horizon[i] = behind.max(elevation as f32);
+                        horizon[i] = behind.max(elevation as f32);
                     }
                     c += step as i64;
                 }
