@@ -50,6 +50,7 @@ fn a_quick_run_measures_every_configuration() {
         quick: true,
         flythrough_frames: 3,
         single_frame: false,
+        views: Vec::new(),
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 96, 64).expect("bench objects");
     let mut progress = Count(0, 0);
@@ -331,6 +332,7 @@ fn a_single_frame_run_renders_each_view_once() {
         quick: false,
         flythrough_frames: 0,
         single_frame: true,
+        views: Vec::new(),
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 64, 48).expect("bench objects");
     let mut progress = Count(0, 0);

@@ -285,7 +285,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
 }
 
 /// What the run covers.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct BenchOptions {
     pub width: u32,
     pub height: u32,
@@ -296,6 +296,9 @@ pub struct BenchOptions {
     /// Each named view rendered and timed once, without warm-up: for
     /// terrains whose brute frame takes seconds on a CPU rasteriser.
     pub single_frame: bool,
+    /// Only these views (named views and the flythrough); empty: all of
+    /// them (the first named view alone with `quick`).
+    pub views: Vec<String>,
 }
 
 /// One configuration seen from one camera (or the whole flythrough).
@@ -755,10 +758,14 @@ impl<'a> Bench<'a> {
             .into_iter()
             .map(|v| (v.name.to_string(), vec![v.camera], repeats))
             .collect();
-        if options.quick {
+        if !options.views.is_empty() {
+            views.retain(|(name, _, _)| options.views.contains(name));
+        } else if options.quick {
             views.truncate(1);
         }
-        if options.flythrough_frames > 0 {
+        let flythrough_wanted =
+            options.views.is_empty() || options.views.iter().any(|v| v == FLYTHROUGH);
+        if options.flythrough_frames > 0 && flythrough_wanted {
             views.push((
                 FLYTHROUGH.to_string(),
                 flythrough(info, options.flythrough_frames),

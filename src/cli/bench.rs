@@ -45,6 +45,12 @@ pub struct BenchCmd {
     #[arg(long)]
     pub single_frame: bool,
 
+    /// Measure only this view: grazing, overview, valley or flythrough
+    /// (repeat the option for several). With --quick, the flythrough is
+    /// left out whatever is named.
+    #[arg(long = "view", value_name = "NAME", value_parser = ["grazing", "overview", "valley", "flythrough"])]
+    pub views: Vec<String>,
+
     /// Frames of the flythrough (0 leaves it out).
     #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
     pub frames: usize,
@@ -271,6 +277,7 @@ fn measure(
             cmd.frames
         },
         single_frame: cmd.single_frame,
+        views: cmd.views.clone(),
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")

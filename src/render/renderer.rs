@@ -1499,7 +1499,7 @@ impl GeomipGeometry {
             _ => None,
         };
         let table = view_errors.as_ref().map_or(&self.errors, |s| &s.table);
-        let chosen = match settings.lod_metric {
+        let mut chosen = match settings.lod_metric {
             // The peers' policies are tessellation factors; geomip draws
             // them by distance.
             LodMetric::Distance | LodMetric::Peer(_) => {
@@ -1513,6 +1513,10 @@ impl GeomipGeometry {
                 pixels,
             ),
         };
+        if let Some(v) = &view_errors {
+            let n = terrain.grid().cells_per_patch();
+            geomip::limit_morph(&mut chosen, &v.morph_limits, drawn, n);
+        }
         self.set_draws(terrain, settings, drawn, &chosen);
         let LodMetric::Error(_) = settings.lod_metric else {
             return None;

@@ -372,6 +372,32 @@ pub fn select_levels_by_error(
     PatchLevels { levels, morph }
 }
 
+/// Caps each patch's morph factor at the view's limit for the level it
+/// expected (`ViewErrors::morph_limits`, by error table index: log2 of the
+/// segments a side). A patch balancing left finer morphs towards a level
+/// the view already accepts, and keeps its factor. A patch not `drawn` has
+/// no limit measured, and a side shared with it takes the larger of the
+/// two factors (`patch_morph`), so it does not morph: its drawn neighbours'
+/// sides follow their own limits.
+pub fn limit_morph(
+    chosen: &mut PatchLevels,
+    limits: &[Option<(usize, f32)>],
+    drawn: &[bool],
+    cells_per_patch: usize,
+) {
+    let top = level_count(cells_per_patch) - 1;
+    let patches = chosen.levels.iter().zip(&mut chosen.morph);
+    for (((level, morph), limit), &drawn) in patches.zip(limits).zip(drawn) {
+        if !drawn {
+            *morph = 0.0;
+        } else if let Some((k, cap)) = *limit {
+            if usize::from(*level) + k == top {
+                *morph = morph.min(cap);
+            }
+        }
+    }
+}
+
 /// Morph factors of one patch: for its interior, and for its sides (left,
 /// top, right, bottom). All 0 at the coarsest level (its own factor is).
 pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32, [f32; 4]) {

@@ -28,6 +28,8 @@ pub struct Viewshed {
     cols: usize,
     /// Per sample, row-major: hidden behind nearer terrain.
     hidden: Vec<bool>,
+    /// Per sample: seen, with ground right behind it hidden (a silhouette).
+    crest: Vec<bool>,
 }
 
 impl Viewshed {
@@ -46,6 +48,8 @@ impl Viewshed {
         self.cols = cols;
         self.hidden.clear();
         self.hidden.resize(cols * rows, false);
+        self.crest.clear();
+        self.crest.resize(cols * rows, false);
         // The horizon each sample passes on.
         let mut horizon = vec![f32::NEG_INFINITY; cols * rows];
         let eye = eye_local.as_dvec3();
@@ -114,11 +118,30 @@ impl Viewshed {
                         let elevation = elevation(r as usize, c as usize);
                         self.hidden[i] = elevation + margin < f64::from(behind);
                         horizon[i] = behind.max(elevation as f32);
+                        if self.hidden[i] {
+                            // What hides it and is itself seen is a crest.
+                            for (pc, pr) in [a, b] {
+                                if inside(pc, pr) {
+                                    let j = pr as usize * cols + pc as usize;
+                                    self.crest[j] |= !self.hidden[j];
+                                }
+                            }
+                        }
                     }
                     c += step as i64;
                 }
             }
         }
+    }
+
+    /// Whether sample (row, col) is seen with ground right behind it
+    /// hidden: a silhouette, which a drawn surface lying lower or higher
+    /// moves, uncovering or covering what is behind.
+    pub fn crest(&self, row: usize, col: usize) -> bool {
+        self.crest
+            .get(row * self.cols + col)
+            .copied()
+            .unwrap_or(false)
     }
 
     /// Whether sample (row, col) is hidden.
