@@ -20,6 +20,16 @@ fn terrain(map: Heightmap) -> Terrain {
 /// The view table of `terrain` from `eye` looking at `target` (world
 /// coordinates), 1280x720, every patch wanted.
 fn view_table(terrain: &Terrain, eye: [f64; 3], target: [f64; 3], tau: f32) -> ViewErrors {
+    view_table_for(terrain, eye, target, tau, Diagonal::Either)
+}
+
+fn view_table_for(
+    terrain: &Terrain,
+    eye: [f64; 3],
+    target: [f64; 3],
+    tau: f32,
+    diagonal: Diagonal,
+) -> ViewErrors {
     let view = FrameView::new(terrain, &camera(eye, target, 55.0), 1280, 720);
     let lod = ViewLod {
         eye_local: view.eye_local,
@@ -31,7 +41,7 @@ fn view_table(terrain: &Terrain, eye: [f64; 3], target: [f64; 3], tau: f32) -> V
     let wanted = vec![true; terrain.grid().patch_count()];
     let (bound, _) = terrain.error_tables();
     let heightmap = terrain.info().heightmap().expect("held whole");
-    view_error_table(terrain, heightmap, bound, Diagonal::Either, &lod, &wanted)
+    view_error_table(terrain, heightmap, bound, diagonal, &lod, &wanted)
 }
 
 /// 65 x 65 samples, flat at 0 but for a wall `height` high along row 20.
@@ -68,6 +78,26 @@ fn a_wall_hides_the_ground_behind_it_and_not_in_front() {
         !shed.hidden(64, 32),
         "far ground rises above the line of sight"
     );
+}
+
+#[test]
+fn the_top_of_a_wall_that_hides_ground_is_a_crest_and_open_ground_is_not() {
+    let map = wall_map(10.0);
+    let t = terrain(map.clone());
+    let mut shed = Viewshed::default();
+    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.0, usize::MAX);
+    // The wall's samples in front of the eye hide the ground behind them.
+    for c in 28..=36 {
+        assert!(shed.crest(20, c), "the wall at column {c}");
+    }
+    // Ground in front of the wall, and the hidden ground behind it, are not.
+    for r in [6, 10, 19, 21, 40] {
+        assert!(!shed.crest(r, 32), "row {r}");
+    }
+    // With no wall nothing is hidden, so nothing is a crest.
+    let flat = wall_map(0.0);
+    shed.sweep(t.info(), &flat, local(5, 32, 2.0), 0.0, usize::MAX);
+    assert!((0..65).all(|r| (0..65).all(|c| !shed.crest(r, c))));
 }
 
 #[test]
@@ -215,4 +245,53 @@ fn a_plane_has_no_error_from_anywhere() {
         assert!(view.table.as_slice().iter().all(|&e| e < 1e-5));
         assert!(view.predicted_p99_px < 1e-3, "{}", view.predicted_p99_px);
     }
+}
+
+#[test]
+fn geomip_morph_limits_are_factors_for_the_level_each_patch_expects() {
+    let t = rough();
+    let (bound, _) = t.error_tables();
+    let eye = [-30.0, 60.0, 40.0];
+    let target = [0.0, 30.0, 0.0];
+    let tess = view_table(&t, eye, target, 1.0);
+    assert!(
+        tess.morph_limits.iter().all(Option::is_none),
+        "the tessellator does not morph between levels"
+    );
+    let geomip = view_table_for(&t, eye, target, 1.0, Diagonal::Reference);
+    assert_within_bound(&geomip, bound);
+    let limits: Vec<(usize, f32)> = geomip.morph_limits.iter().flatten().copied().collect();
+    assert!(
+        !limits.is_empty(),
+        "some patch morphs towards a measured level"
+    );
+    let grid = t.grid();
+    let scale = |p: usize| {
+        let view = FrameView::new(&t, &camera(eye, target, 55.0), 1280, 720);
+        let corners = t
+            .patch_corners(grid.patch_id(p))
+            .map(|c| c - view.eye_local);
+        let [lo, hi] = t.y_bounds()[p];
+        let d = vkterrain::terrain::lod::patch_box_distance(
+            corners,
+            [lo - view.eye_local.y, hi - view.eye_local.y],
+        );
+        view.pixels_per_radian / d
+    };
+    for (p, limit) in geomip.morph_limits.iter().enumerate() {
+        let Some((k, m)) = *limit else { continue };
+        assert!((0.0..=1.0).contains(&m), "patch {p}: factor {m}");
+        // The level it expects is the coarsest within tau, and the next
+        // coarser one is not.
+        let levels = geomip.table.patch(p);
+        assert!(
+            k >= 1 && levels[k - 1] * scale(p) > 1.0,
+            "patch {p} level {k}"
+        );
+        if k < ErrorTable::LEVELS {
+            assert!(levels[k] * scale(p) <= 1.0 + 1e-4, "patch {p} level {k}");
+        }
+    }
+    // Somewhere the blend would go over: not every factor is free.
+    assert!(limits.iter().any(|&(_, m)| m < 1.0), "{limits:?}");
 }

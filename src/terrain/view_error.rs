@@ -101,7 +101,8 @@ pub struct ViewLod {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ViewErrors {
     pub table: ErrorTable,
-    /// The frame's 99th percentile error the choice expects, in pixels.
+    /// The frame's 99th percentile error the choice expects, in pixels (its
+    /// own target is the 99.5th, `EXCEED_FRACTION`).
     pub predicted_p99_px: f32,
     /// The largest error the choice expects on any seen sample, in pixels.
     pub predicted_max_px: f32,
@@ -300,7 +301,7 @@ pub fn view_error_table(
         .map(|s| s.0)
         .filter(|e| e.is_finite())
         .fold(0.0f64, f64::max) as f32;
-    let predicted_p99_px = weighted_percentile(&mut shown, within, EXCEED_FRACTION) as f32;
+    let predicted_p99_px = weighted_percentile(&mut shown, within, 0.01) as f32;
     ViewErrors {
         table: ErrorTable::from_flat(errors).expect("the bound's layout, finite and not negative"),
         predicted_p99_px,
