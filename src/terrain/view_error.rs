@@ -75,6 +75,9 @@ use super::Terrain;
 /// spent.
 pub const EXCEED_FRACTION: f64 = 0.005;
 
+/// Share of the frame's pixels above its 99th percentile.
+const P99_FRACTION: f64 = 0.01;
+
 /// Which triangulation a level's quads are drawn with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Diagonal {
@@ -108,8 +111,8 @@ pub struct ViewErrors {
     pub predicted_max_px: f32,
     /// Per patch, for `Diagonal::Reference` (geomorphing draws): the level
     /// index the choice expects and the largest morph factor towards the
-    /// next coarser level that keeps the patch's pixels over tau within its
-    /// share (see `morph_limit`); None where any factor does.
+    /// next coarser level that puts no more of the patch's pixels over tau
+    /// than that level does (see `morph_limit`); None where any factor does.
     pub morph_limits: Vec<Option<(usize, f32)>>,
 }
 
@@ -239,6 +242,7 @@ pub fn view_error_table(
             let (p, from) = (e.patch, e.from);
             let d = f64::from(e.distance);
             let mut patch = samples(p)?;
+            patch.keep_signed = diagonal == Diagonal::Reference;
             let own = bound.patch(p);
             let mut levels: [f32; LEVEL_COUNT] = own.try_into().expect("LEVEL_COUNT levels");
             let mut seen = vec![Vec::new(); e.full + 1];
@@ -260,7 +264,7 @@ pub fn view_error_table(
                 .unwrap_or(e.full);
             // Geomorphing blends the chosen level into the next coarser
             // one; where that one was measured (the bound rejects it), the
-            // blend is held to the patch's share.
+            // blend may put no more pixels over tau than the chosen level.
             let limit =
                 (diagonal == Diagonal::Reference && chosen > 0 && chosen - 1 < from).then(|| {
                     let finer = (chosen < e.full).then(|| signed[chosen].as_slice());
@@ -301,7 +305,7 @@ pub fn view_error_table(
         .map(|s| s.0)
         .filter(|e| e.is_finite())
         .fold(0.0f64, f64::max) as f32;
-    let predicted_p99_px = weighted_percentile(&mut shown, within, 0.01) as f32;
+    let predicted_p99_px = weighted_percentile(&mut shown, within, P99_FRACTION) as f32;
     ViewErrors {
         table: ErrorTable::from_flat(errors).expect("the bound's layout, finite and not negative"),
         predicted_p99_px,
@@ -323,24 +327,21 @@ const MORPH_STEPS: usize = 16;
 /// percentiles would put every morphing patch's share at tau and many of
 /// its pixels over.
 fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: f64) -> f32 {
-    let lookup: Option<std::collections::HashMap<u32, &Signed>> =
-        finer.map(|f| f.iter().map(|s| (s.sample, s)).collect());
-    let zero = Signed {
-        sample: 0,
-        px: 0.0,
-        swept: 0.0,
-        pixels: 0.0,
-    };
+    // Both levels list the same seen samples; the finer one's (px, swept)
+    // by sample index, 0 where it is the reference.
+    let finer = finer.unwrap_or_default();
+    let samples = coarser.iter().chain(finer).map(|s| s.sample as usize + 1);
+    let mut finer_at = vec![(0.0, 0.0); samples.max().unwrap_or(0)];
+    for a in finer {
+        finer_at[a.sample as usize] = (a.px, a.swept);
+    }
     let over = |m: f64| -> f64 {
         coarser
             .iter()
             .map(|b| {
-                let a = lookup
-                    .as_ref()
-                    .and_then(|l| l.get(&b.sample).copied())
-                    .unwrap_or(&zero);
-                let px = ((1.0 - m) * a.px + m * b.px).abs();
-                let swept = ((1.0 - m) * a.swept + m * b.swept).abs();
+                let (a_px, a_swept) = finer_at[b.sample as usize];
+                let px = ((1.0 - m) * a_px + m * b.px).abs();
+                let swept = ((1.0 - m) * a_swept + m * b.swept).abs();
                 swept + if px > tau { b.pixels } else { 0.0 }
             })
             .sum()
@@ -491,8 +492,10 @@ struct PatchSamples<'a> {
     spacing: DVec2,
     /// The last measured level's (error in pixels, pixels) per seen sample.
     scratch: Vec<(f64, f64)>,
-    /// The last measured level's signed errors per seen sample.
+    /// With `keep_signed`, the last measured level's signed errors per
+    /// seen sample (only geomorphing blends two levels).
     signed: Vec<Signed>,
+    keep_signed: bool,
 }
 
 /// One seen sample's error at a measured level, signed (drawn above the
@@ -612,6 +615,7 @@ impl<'a> PatchSamples<'a> {
             spacing,
             scratch: Vec::new(),
             signed: Vec::new(),
+            keep_signed: false,
         })
     }
 
@@ -683,12 +687,14 @@ impl<'a> PatchSamples<'a> {
                         if swept > 0.0 {
                             self.scratch.push((f64::INFINITY, swept));
                         }
-                        self.signed.push(Signed {
-                            sample: ((r0 + i) * stride + c0 + j) as u32,
-                            px: px.copysign(error),
-                            swept: swept.copysign(error),
-                            pixels: seen.pixels,
-                        });
+                        if self.keep_signed {
+                            self.signed.push(Signed {
+                                sample: ((r0 + i) * stride + c0 + j) as u32,
+                                px: px.copysign(error),
+                                swept: swept.copysign(error),
+                                pixels: seen.pixels,
+                            });
+                        }
                     }
                 }
             }
