@@ -312,6 +312,11 @@ fn bench_refuses_bad_arguments() {
         "not the results of an earlier run",
     );
     fail(&["bench"], "--out");
+    fail(
+        &["bench", "--out", "q", "--quick", "--view", "flythrough"],
+        "leave the flythrough out",
+    );
+    assert!(!dir.path().join("q").exists(), "nothing written");
 }
 
 /// `--single-frame`: every named view once, timed, no flythrough.

@@ -156,7 +156,15 @@ fn levels_by_projected_error() {
     )
     .unwrap();
     let table = terrain.error_table();
-    let chosen = select_levels_by_error(&terrain, &table, Vec3::new(0.0, 10.0, 0.0), 1000.0, 1.0);
+    let all = vec![true; terrain.grid().patch_count()];
+    let chosen = select_levels_by_error(
+        &terrain,
+        &table,
+        Vec3::new(0.0, 10.0, 0.0),
+        1000.0,
+        1.0,
+        &all,
+    );
     assert!(chosen.levels.iter().all(|&l| l == 5), "{:?}", chosen.levels);
     assert!(chosen.morph.iter().all(|&m| m == 0.0));
 
@@ -171,9 +179,10 @@ fn levels_by_projected_error() {
     let terrain = Terrain::new(info, 0.0).unwrap();
     let table = terrain.error_table();
     let eye = Vec3::new(-200.0, 60.0, -200.0);
-    let strict = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0);
-    let loose = select_levels_by_error(&terrain, &table, eye, 200.0, 8.0);
-    let small = select_levels_by_error(&terrain, &table, eye, 50.0, 1.0);
+    let all = vec![true; terrain.grid().patch_count()];
+    let strict = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &all);
+    let loose = select_levels_by_error(&terrain, &table, eye, 200.0, 8.0, &all);
+    let small = select_levels_by_error(&terrain, &table, eye, 50.0, 1.0, &all);
     let sum = |l: &PatchLevels| l.levels.iter().map(|&v| u32::from(v)).sum::<u32>();
     assert!(sum(&loose) > sum(&strict) && sum(&small) > sum(&strict));
     assert!(strict.levels.iter().zip(&loose.levels).all(|(s, l)| s <= l));
@@ -185,4 +194,15 @@ fn levels_by_projected_error() {
     );
     assert!(strict.levels[7] > 0, "the far corner coarser");
     assert!(strict.morph.iter().all(|m| (0.0..=1.0).contains(m)));
+    // A patch that is not drawn is refined only as far as its drawn
+    // neighbours need, and they are never the finer for it.
+    let mut drawn = all.clone();
+    drawn[7 * 8] = false;
+    let culled = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &drawn);
+    assert!(culled.levels[7 * 8] > 0);
+    assert!(strict
+        .levels
+        .iter()
+        .zip(&culled.levels)
+        .all(|(s, c)| s <= c));
 }

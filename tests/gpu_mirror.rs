@@ -104,7 +104,7 @@ fn glsl_formulas_match_their_rust_mirrors() {
         [1e-3; 7],
     ];
     let count = positions.len().max(boxes.len()).max(grid.len());
-    let cases: Vec<MirrorCase> = (0..count)
+    let mut cases: Vec<MirrorCase> = (0..count)
         .map(|k| MirrorCase {
             position: if k < boxes.len() {
                 boxes[k].0
@@ -124,6 +124,20 @@ fn glsl_formulas_match_their_rust_mirrors() {
             cells: [32, 23, 1, 2, 64, 18][k % 6],
         })
         .collect();
+    // An eye inside a patch's box: the levels a view accepts there are
+    // told by zero errors, which no infinite scale may reject.
+    let inside = [9.0, 3.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    assert_eq!(
+        error_tess_factor(&inside, 0.0, view.pixels_per_radian, 1.0, 32),
+        4.0
+    );
+    cases.push(MirrorCase {
+        position: Vec3::ZERO,
+        extents: Vec3::ONE,
+        grid: grid[0],
+        errors: inside,
+        cells: 32,
+    });
 
     // Distinct values of each peer's factor, so the agreement is not only
     // at the clamps.

@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
+use crate::bench::cameras::FLYTHROUGH;
 use crate::bench::report::{self, check_targets};
 use crate::bench::run::{configs, Bench, BenchOptions, Progress};
 use crate::scene::HeightmapSource;
@@ -46,8 +47,9 @@ pub struct BenchCmd {
     pub single_frame: bool,
 
     /// Measure only this view: grazing, overview, valley or flythrough
-    /// (repeat the option for several). With --quick, the flythrough is
-    /// left out whatever is named.
+    /// (repeat the option for several). --quick, --single-frame and
+    /// --frames 0 leave the flythrough out, so naming it alone with them is
+    /// an error.
     #[arg(long = "view", value_name = "NAME", value_parser = ["grazing", "overview", "valley", "flythrough"])]
     pub views: Vec<String>,
 
@@ -127,6 +129,13 @@ impl Progress for Bar {
 }
 
 pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
+    let no_flythrough = cmd.quick || cmd.single_frame || cmd.frames == 0;
+    if no_flythrough && !cmd.views.is_empty() && cmd.views.iter().all(|v| v == FLYTHROUGH) {
+        bail!(
+            "--view flythrough measures nothing with --quick, --single-frame or --frames 0, \
+             which leave the flythrough out"
+        );
+    }
     let scene = cmd.terrain.scene()?;
     let name = cmd.name.clone().unwrap_or_else(|| {
         let file = cmd.terrain.scene.as_ref().or(match &scene.heightmap {

@@ -1511,6 +1511,7 @@ impl GeomipGeometry {
                 view.eye_local,
                 view.pixels_per_radian,
                 pixels,
+                drawn,
             ),
         };
         if let Some(v) = &view_errors {

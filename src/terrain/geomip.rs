@@ -331,6 +331,7 @@ pub fn select_levels_by_error(
     eye_local: Vec3,
     pixels_per_radian: f32,
     pixel_error: f32,
+    drawn: &[bool],
 ) -> PatchLevels {
     let grid = terrain.grid();
     let n = grid.cells_per_patch();
@@ -346,6 +347,11 @@ pub fn select_levels_by_error(
         .iter()
         .enumerate()
         .map(|(p, &d)| {
+            if !drawn[p] {
+                // Not drawn: its sides are out of view, so it takes the
+                // coarsest level and constrains no neighbour.
+                return (count - 1) as u8;
+            }
             (0..count)
                 .rev()
                 .find(|&l| threshold(p, l) <= d)

@@ -198,6 +198,14 @@ pub fn patch_tess_factors(
     }
 }
 
+/// Whether an error seen at `scale` pixels per unit is within `tau` pixels.
+/// A zero error always is, even from inside a patch's box, where the scale
+/// is infinite (an eye inside a patch is told its accepted levels by zero
+/// errors). Mirror: `within_tolerance` in glsl/terrain_common.glsl.
+pub fn within_tolerance(error: f32, scale: f32, tau: f32) -> bool {
+    error == 0.0 || error * scale <= tau
+}
+
 /// Error-bounded tessellation factor of a span of `cells` cells (an edge,
 /// or the smaller side of a patch) at `distance` from the eye (the tess
 /// path's `--lod error`).
@@ -231,7 +239,7 @@ pub fn error_tess_factor(
         if factor >= full {
             break;
         }
-        if error * scale <= tau {
+        if within_tolerance(error, scale, tau) {
             return factor;
         }
     }

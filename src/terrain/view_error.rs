@@ -9,39 +9,52 @@
 //! R; the drawn surface lies a vertical distance delta above or below R, and
 //! the ray runs on (or back) until it meets it. For a ray that falls `t`
 //! per unit of horizontal travel (`t` < 0 rising) onto a drawn surface that
-//! rises `s` per unit in the ray's horizontal direction, the two meeting
-//! points are `|delta| |t| / (s + t)` apart vertically, which at distance
-//! `d` covers `|delta| |t| / (s + t) * K / d` pixels (K the viewport's pixels
-//! per radian). On flat ground that is the face-on projection; on ground
-//! rising towards the eye, seen from low down, it is a fraction of it. Where
-//! the drawn surface meets the ray less steeply than flat ground would
-//! (`s + t < |t|`: ground falling away, towards a silhouette) it is counted
-//! face-on, as the bound counts it everywhere; so is a meeting point
-//! further away (`|delta| / (s + t)`) than the drawn quad is wide, where the
-//! drawn surface is no longer the plane its slope was read from.
+//! rises `s` per unit in the ray's horizontal direction, the meeting points
+//! lie `|delta| / (s + t)` apart horizontally and `|t|` times that
+//! vertically, which at distance `d` covers that many times `K / d` pixels
+//! (K the viewport's pixels per radian). On flat ground that is the face-on
+//! projection; on ground rising towards the eye, seen from low down, a
+//! fraction of it; on ground falling away, towards a silhouette, more. The
+//! horizontal run is cut at the drawn quad's diagonal: at the quad's
+//! corners the drawn surface is the reference, which the ray has entered,
+//! so a ray that grazes the drawn surface meets it within the quad. That
+//! holds only while the ray sinks into the reference (rising `s_ref` along
+//! it) fast enough to be `|delta|` deep within the diagonal; a ray that
+//! sinks slower may clear the drawn surface and land anywhere on, and its
+//! error is counted face-on, as the bound counts it, though never more than
+//! `|t|` times the run to the terrain's edge.
 //!
-//! **Which pixels.** Each sample stands for its cell, whose screen area is
-//! `A (s_ref + t) / (sqrt(1 + t^2) d^2)` steradians (A the cell's horizontal
-//! area, `s_ref` the reference's own slope along the ray): ground a ray
-//! grazes covers few pixels. Samples more than a cell outside the frustum,
-//! facing away, or hidden behind nearer terrain (`viewshed`, with a pixel's
-//! margin) cover none. So a level's error is a distribution over the patch's pixels, not
-//! one worst value.
+//! **Which pixels.** Each sample stands for the ground its viewshed ring
+//! step adds to the view (`Viewshed::exposure`): the solid angle between
+//! the horizon in front of it and the sample, within the frustum's height,
+//! so ground a ray grazes covers few pixels, ground facing away or hidden
+//! (wholly or in part) by nearer terrain adds only what shows, and the
+//! steps add up to the ground the eye sees. A pixel `a` off the view axis
+//! covers `cos^3(a) / K^2` steradians. Samples outside the frustum or
+//! hidden cover no pixels. So a level's error is a distribution over the
+//! patch's pixels, not one worst value.
 //!
 //! **Silhouettes.** A seen sample with hidden ground right behind it
 //! (`Viewshed::crest`) is on a silhouette: a vertical error there moves the
-//! silhouette by about its face-on size, and every pixel it sweeps shows
-//! other ground, so those pixels count as over any tolerance.
+//! silhouette by its face-on size, but no further than the sample rises
+//! above the horizon in front of it (below that, nearer ground is the
+//! silhouette). Each pixel it sweeps shows the silhouette in one render and
+//! the ground where its line of sight lands in the other: as far apart, in
+//! pixels, as the line of sight falls between them, seen at the sample.
+//! Against the sky, each is off by its distance to the moved silhouette.
 //!
 //! **The frame's share.** The benchmark's target is the frame's 99th
 //! percentile, so 1 % of the frame's terrain pixels may exceed tau; the
 //! choice spends half of it on the errors it models (`EXCEED_FRACTION`, of
-//! the seen pixels the samples add up to, at most the viewport). Starting from every patch at its coarsest level, that share is
-//! handed out greedily: the patch and finer level that remove the most
-//! pixels over tau per triangle added go first, until what remains over tau
-//! fits. Each patch then has its own share `q` of its pixels, and each of
-//! its levels the error that all but `q` of its pixels stay within (a
-//! pixel-weighted percentile).
+//! the seen pixels the samples add up to, at most the viewport). Starting
+//! from every patch at its coarsest level, that share is handed out
+//! greedily: the patch and finer level that remove the most pixels over
+//! tau per triangle added go first, until what remains over tau fits. Each
+//! patch then has its own share `q` of its pixels, and each of its levels
+//! the error that all but `q` of its pixels stay within (a pixel-weighted
+//! percentile). Geomip draws refine patches to within one level of their
+//! neighbours afterwards, which leaves pixels over tau unspent: for them
+//! the greedy share is raised as far as the refined levels still fit.
 //!
 //! **Geomorphing.** A geomip patch glides towards its next coarser level;
 //! its morph factor is capped where the blend would put more of its pixels
@@ -62,7 +75,7 @@ use rayon::prelude::*;
 use super::error_table::{quad_splits, ErrorTable, LEVEL_COUNT};
 use super::grid::SampleRect;
 use super::heightmap::Heightmap;
-use super::lod::patch_box_distance;
+use super::lod::{patch_box_distance, within_tolerance};
 use super::viewshed::Viewshed;
 use super::Terrain;
 
@@ -133,9 +146,7 @@ struct Estimate {
     distance: f32,
     /// Its seen pixels.
     pixels: f64,
-    /// Per level index: pixels over tau; `f64::INFINITY` at every level
-    /// below full resolution where the eye is inside the patch's box (it
-    /// keeps its bounds), 0 from `from` on.
+    /// Per level index: pixels over tau, 0 from `from` on.
     over: [f64; LEVEL_COUNT],
     /// The first level the bound accepts (at most `full`): the levels
     /// below it are the measured ones.
@@ -151,8 +162,10 @@ struct Estimate {
 /// all but its share of pixels stay within, in the table's units. Levels
 /// stay non-increasing as they rise, and no level gets more than its bound.
 /// Only the levels the bound rejects from a patch's nearest point are
-/// measured. Patches the eye is inside, and those that are not square with
-/// a power of two cells a side (the far remainders), keep their bounds.
+/// measured. Patches that are not square with a power of two cells a side
+/// (the far remainders) keep their bounds. A patch the eye is inside has no
+/// nearest distance to scale by: its accepted levels get error 0
+/// (`within_tolerance`), the others keep their bounds.
 pub fn view_error_table(
     terrain: &Terrain,
     heightmap: &Heightmap,
@@ -179,7 +192,7 @@ pub fn view_error_table(
     let accepted = |p: usize| {
         let scale = view.pixels_per_radian / distance(p).max(f32::MIN_POSITIVE);
         (0..LEVEL_COUNT)
-            .find(|&k| bound.error(p, k) * scale <= view.pixel_error)
+            .find(|&k| within_tolerance(bound.error(p, k), scale, view.pixel_error))
             .unwrap_or(LEVEL_COUNT)
     };
     let measured: Vec<bool> = (0..grid.patch_count())
@@ -201,15 +214,10 @@ pub fn view_error_table(
             let full = patch.side.trailing_zeros() as usize;
             let from = accepted(p).min(full);
             let distance = distance(p);
-            let inside = distance <= 0.0;
             let mut over = [0.0; LEVEL_COUNT];
             for (k, o) in over.iter_mut().enumerate().take(from) {
-                *o = if inside {
-                    f64::INFINITY
-                } else {
-                    patch.level(1 << k, diagonal);
-                    patch.over(tau)
-                };
+                patch.level(1 << k, diagonal);
+                *o = patch.over(tau);
             }
             // A level's table entry is the largest of it and every finer
             // level's (see below), so it is within tau only where they all
@@ -227,7 +235,8 @@ pub fn view_error_table(
             })
         })
         .collect();
-    let shares = allocate(&estimates, view.viewport_pixels);
+    let stitched = (diagonal == Diagonal::Reference).then_some(grid);
+    let shares = allocate(&estimates, view.viewport_pixels, stitched);
 
     // Second pass: each measured patch's levels at its share. The levels
     // are measured again rather than kept from the first pass: kept, every
@@ -237,7 +246,6 @@ pub fn view_error_table(
     let per_patch: Vec<Measured> = estimates
         .par_iter()
         .zip(shares.par_iter())
-        .filter(|(e, _)| e.over[0].is_finite())
         .filter_map(|(e, &share)| {
             let (p, from) = (e.patch, e.from);
             let d = f64::from(e.distance);
@@ -250,7 +258,14 @@ pub fn view_error_table(
             for (k, level) in levels.iter_mut().enumerate().take(from) {
                 patch.level(1 << k, diagonal);
                 let px = patch.percentile(share * e.pixels);
-                *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
+                if d > 0.0 {
+                    *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
+                } else if px <= tau {
+                    // The eye is inside the patch's box, where every error
+                    // but none projects to infinitely many pixels: an
+                    // accepted level is told by a zero error.
+                    *level = 0.0;
+                }
                 seen[k] = std::mem::take(&mut patch.scratch);
                 signed[k] = std::mem::take(&mut patch.signed);
             }
@@ -260,7 +275,7 @@ pub fn view_error_table(
             // The level the control shader will pick, and what it shows.
             let scale = view.pixels_per_radian / d as f32;
             let chosen = (0..e.full)
-                .find(|&k| levels[k] * scale <= view.pixel_error)
+                .find(|&k| within_tolerance(levels[k], scale, view.pixel_error))
                 .unwrap_or(e.full);
             // Geomorphing blends the chosen level into the next coarser
             // one; where that one was measured (the bound rejects it), the
@@ -293,24 +308,32 @@ pub fn view_error_table(
         shown.extend(seen);
         morph_limits[p] = limit;
     }
-    // Pixels of the patches that keep their bounds count as within tau.
-    let within: f64 = estimates
-        .iter()
-        .filter(|e| !e.over[0].is_finite())
-        .map(|e| e.pixels)
-        .sum();
     // A moved silhouette's pixels are past any bound: the largest finite.
     let predicted_max_px = shown
         .iter()
         .map(|s| s.0)
         .filter(|e| e.is_finite())
         .fold(0.0f64, f64::max) as f32;
-    let predicted_p99_px = weighted_percentile(&mut shown, within, P99_FRACTION) as f32;
+    let predicted_p99_px = weighted_percentile(&mut shown, P99_FRACTION) as f32;
     ViewErrors {
         table: ErrorTable::from_flat(errors).expect("the bound's layout, finite and not negative"),
         predicted_p99_px,
         predicted_max_px,
         morph_limits,
+    }
+}
+
+/// The pixels a silhouette sweeps when it moves `moved` pixels along
+/// `width` pixels, as (error, pixels): each shows the silhouette in one
+/// render and the ground behind it in the other, `crest_px` apart; against
+/// the sky (`crest_px` infinite), each is off by its distance to the moved
+/// silhouette, spread evenly up to the whole move.
+fn silhouette(moved: f64, width: f64, crest_px: f64) -> [(f64, f64); 2] {
+    let swept = moved * width;
+    if crest_px.is_finite() {
+        [(crest_px, swept), (0.0, 0.0)]
+    } else {
+        [(moved, 0.5 * swept), (0.5 * moved, 0.5 * swept)]
     }
 }
 
@@ -327,22 +350,24 @@ const MORPH_STEPS: usize = 16;
 /// percentiles would put every morphing patch's share at tau and many of
 /// its pixels over.
 fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: f64) -> f32 {
-    // Both levels list the same seen samples; the finer one's (px, swept)
+    // Both levels list the same seen samples; the finer one's (px, moved)
     // by sample index, 0 where it is the reference.
     let finer = finer.unwrap_or_default();
     let samples = coarser.iter().chain(finer).map(|s| s.sample as usize + 1);
     let mut finer_at = vec![(0.0, 0.0); samples.max().unwrap_or(0)];
     for a in finer {
-        finer_at[a.sample as usize] = (a.px, a.swept);
+        finer_at[a.sample as usize] = (a.px, a.moved);
     }
     let over = |m: f64| -> f64 {
         coarser
             .iter()
             .map(|b| {
-                let (a_px, a_swept) = finer_at[b.sample as usize];
+                let (a_px, a_moved) = finer_at[b.sample as usize];
                 let px = ((1.0 - m) * a_px + m * b.px).abs();
-                let swept = ((1.0 - m) * a_swept + m * b.swept).abs();
-                swept + if px > tau { b.pixels } else { 0.0 }
+                let moved = ((1.0 - m) * a_moved + m * b.moved).abs();
+                let swept = silhouette(moved, b.crest_width, b.crest_px);
+                swept.iter().filter(|s| s.0 > tau).map(|s| s.1).sum::<f64>()
+                    + if px > tau { b.pixels } else { 0.0 }
             })
             .sum()
     };
@@ -384,6 +409,7 @@ fn sweep_viewshed(
             view.eye_local,
             1.0 / f64::from(view.pixels_per_radian),
             max_ring.ceil() as usize + 1,
+            Some(&view.frustum),
         );
     }
     viewshed
@@ -391,20 +417,65 @@ fn sweep_viewshed(
 
 /// Each estimate's share of its own pixels that may exceed tau: the
 /// frame's `EXCEED_FRACTION` of its seen pixels (at most the viewport) is
-/// handed out greedily, each step taking the patch and finer level that
-/// removes the most pixels over tau per triangle added, from every patch
-/// at its coarsest level until what remains over tau fits.
-fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
-    use std::cmp::Ordering;
-    use std::collections::BinaryHeap;
+/// handed out greedily (`greedy_levels`). Geomip draws (`stitched`) then
+/// refine a patch to within one level of its neighbours, which leaves
+/// fewer pixels over tau than the greedy choice spent: the greedy budget
+/// is raised, in steps, as far as the stitched levels still fit the
+/// frame's share.
+fn allocate(
+    estimates: &[Estimate],
+    viewport_pixels: f64,
+    stitched: Option<&super::grid::PatchGrid>,
+) -> Vec<f64> {
     let total: f64 = estimates.iter().map(|e| e.pixels).sum();
     let budget = EXCEED_FRACTION * total.min(viewport_pixels);
-    let triangles = |k: usize| 2.0 * 4f64.powi(k as i32);
-    // Patches the eye is inside keep their bounds: full resolution.
-    let mut level: Vec<usize> = estimates
+    let over =
+        |levels: &[usize]| -> f64 { estimates.iter().zip(levels).map(|(e, &k)| e.over[k]).sum() };
+    let mut levels = greedy_levels(estimates, budget);
+    if let Some(grid) = stitched {
+        let count = LEVEL_COUNT;
+        let balanced = |levels: &[usize]| -> Vec<usize> {
+            // Geomip levels count down from the finest; patches without an
+            // estimate (coarsest accepted, or not drawn) constrain nothing.
+            let mut geomip = vec![(count - 1) as u8; grid.patch_count()];
+            for (e, &k) in estimates.iter().zip(levels) {
+                geomip[e.patch] = (count - 1 - k) as u8;
+            }
+            super::geomip::balance(&mut geomip, grid);
+            estimates
+                .iter()
+                .map(|e| count - 1 - usize::from(geomip[e.patch]))
+                .collect()
+        };
+        for factor in [1.5, 2.0, 3.0, 4.0, 6.0, 8.0] {
+            let wider = greedy_levels(estimates, factor * budget);
+            if over(&balanced(&wider)) > budget {
+                break;
+            }
+            levels = wider;
+        }
+    }
+    estimates
         .iter()
-        .map(|e| if e.over[0].is_finite() { 0 } else { e.full })
-        .collect();
+        .zip(&levels)
+        .map(|(e, &k)| {
+            if e.pixels > 0.0 {
+                e.over[k] / e.pixels
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
+/// Each estimate's level: from every patch at its coarsest, each step
+/// takes the patch and finer level that removes the most pixels over tau
+/// per triangle added, until what remains over tau fits `budget`.
+fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
+    use std::cmp::Ordering;
+    use std::collections::BinaryHeap;
+    let triangles = |k: usize| 2.0 * 4f64.powi(k as i32);
+    let mut level = vec![0; estimates.len()];
     let mut over: f64 = estimates.iter().zip(&level).map(|(e, &k)| e.over[k]).sum();
     // The best finer level from `from`: (pixels removed per triangle, level).
     let best = |e: &Estimate, from: usize| -> Option<(f64, usize)> {
@@ -446,23 +517,13 @@ fn allocate(estimates: &[Estimate], viewport_pixels: f64) -> Vec<f64> {
             heap.push(Step(g, i, next));
         }
     }
-    estimates
-        .iter()
-        .zip(&level)
-        .map(|(e, &k)| {
-            if e.pixels > 0.0 {
-                e.over[k] / e.pixels
-            } else {
-                0.0
-            }
-        })
-        .collect()
+    level
 }
 
 /// The smallest error that at most `fraction` of the pixels of `items`
-/// (error, pixels) and of `within` more pixels (error 0) exceed.
-fn weighted_percentile(items: &mut [(f64, f64)], within: f64, fraction: f64) -> f64 {
-    let total: f64 = items.iter().map(|i| i.1).sum::<f64>() + within;
+/// (error, pixels) exceed.
+fn weighted_percentile(items: &mut [(f64, f64)], fraction: f64) -> f64 {
+    let total: f64 = items.iter().map(|i| i.1).sum::<f64>();
     largest_within(items, fraction * total)
 }
 
@@ -496,6 +557,10 @@ struct PatchSamples<'a> {
     /// seen sample (only geomorphing blends two levels).
     signed: Vec<Signed>,
     keep_signed: bool,
+    /// The last measured level's (error in pixels, face-on error in
+    /// pixels) per sample, row-major over the rect, both signed (drawn
+    /// below the reference is positive).
+    field: Vec<(f64, f64)>,
 }
 
 /// One seen sample's error at a measured level, signed (drawn above the
@@ -506,8 +571,11 @@ struct Signed {
     sample: u32,
     /// Error in pixels, signed.
     px: f64,
-    /// Pixels a moved silhouette sweeps, signed alike (0 off a crest).
-    swept: f64,
+    /// How far a silhouette moves (`PatchSamples::field`), signed alike.
+    moved: f64,
+    /// `Seen::crest_width` and `Seen::crest_px`.
+    crest_width: f64,
+    crest_px: f64,
     /// The sample's pixels.
     pixels: f64,
 }
@@ -522,12 +590,25 @@ struct Seen {
     /// The ray's fall `t` per unit of horizontal travel; infinite straight
     /// down.
     fall: f64,
-    /// The pixels of the sample's cell; 0 where hidden, out of view or
-    /// facing away.
+    /// The pixels of the ground the sample stands for (see the module
+    /// documentation); 0 where hidden, out of view or facing away.
     pixels: f64,
     /// On a silhouette (`Viewshed::crest`): the pixels across the sample's
     /// cell, along which a vertical error moves the silhouette; else 0.
     crest_width: f64,
+    /// On a silhouette, the error of the pixels it sweeps: the height its
+    /// line of sight falls to the hidden ground's end, in pixels at the
+    /// sample; infinite where the sky lies behind.
+    crest_px: f64,
+    /// On a silhouette, how far it rises above the horizon in front of it,
+    /// in pixels: the silhouette sinks no further before nearer ground
+    /// takes it over.
+    crest_rise_px: f64,
+    /// The reference's own slope along the ray.
+    ground_rise: f64,
+    /// Horizontal distance from the sample to the terrain's edge along the
+    /// ray.
+    beyond: f64,
 }
 
 impl<'a> PatchSamples<'a> {
@@ -546,29 +627,46 @@ impl<'a> PatchSamples<'a> {
         let spacing = info.spacing();
         let eye = view.eye_local.as_dvec3();
         let k = f64::from(view.pixels_per_radian);
-        let cell_pixels = spacing.x * spacing.y * k * k;
-        let cell_extent = Vec3::new(spacing.x as f32, 0.0, spacing.y as f32);
+        let cell_area = spacing.x * spacing.y;
+        // A pixel `a` radians off the view axis covers cos^3(a) / K^2
+        // steradians. The axis is along the sum of the four side planes'
+        // inward normals.
+        let forward = view.frustum.planes[..4]
+            .iter()
+            .map(|p| p.truncate().as_dvec3())
+            .sum::<DVec3>()
+            .normalize_or_zero();
+        let per_steradian = |rel: DVec3| {
+            let cos = (rel.dot(forward) / rel.length()).max(0.1);
+            k * k / (cos * cos * cos)
+        };
         let (w, d) = (map.width(), map.depth());
         let h = |r: usize, c: usize| f64::from(map.get(r, c));
-        let unseen = Seen {
-            face_on: 0.0,
-            dir: DVec2::X,
-            fall: 0.0,
-            pixels: 0.0,
-            crest_width: 0.0,
-        };
+        // The terrain's horizontal extent (local x, then local z).
+        let x_range = (info.local_x(0), info.local_x(w - 1));
+        let z_range = (info.local_z(d - 1), info.local_z(0));
         let mut seen = Vec::with_capacity((side + 1) * (side + 1));
         for r in rect.row0..=rect.row1 {
             for c in rect.col0..=rect.col1 {
                 let rel = DVec3::new(info.local_x(c), h(r, c), info.local_z(r)) - eye;
-                // A sample within a cell of the frustum still counts: near
-                // the eye a cell spans much of the screen, and the error at
-                // a vertex just out of view reaches into it.
-                let in_view = !view.frustum.aabb_outside(rel.as_vec3(), cell_extent);
-                if !in_view || viewshed.hidden(r, c) {
-                    seen.push(unseen);
-                    continue;
-                }
+                // A sample outside the frustum or hidden shows no pixels.
+                // Its exposure is already cut to the frustum's height, and
+                // the ground it stands for may show while the sample itself
+                // lies above or below the view: only the side planes and
+                // the near plane are tested where it has one.
+                let within = |planes: &[usize]| {
+                    planes.iter().all(|&i| {
+                        let p = view.frustum.planes[i].as_dvec4();
+                        p.truncate().dot(rel) + p.w >= 0.0
+                    })
+                };
+                let in_view = if viewshed.exposure(r, c).is_some() {
+                    within(&[0, 1, 4])
+                } else {
+                    within(&[0, 1, 2, 3, 4])
+                };
+                let shown = in_view && !viewshed.hidden(r, c);
+                let shown = if shown { 1.0 } else { 0.0 };
                 let horizontal = DVec2::new(rel.x, rel.z);
                 let reach = horizontal.length();
                 let distance = rel.length().max(f64::MIN_POSITIVE);
@@ -578,8 +676,14 @@ impl<'a> PatchSamples<'a> {
                         face_on: k / distance,
                         dir: DVec2::X,
                         fall: f64::INFINITY,
-                        pixels: (cell_pixels / (distance * distance)).min(view.viewport_pixels),
+                        pixels: shown
+                            * (cell_area / (distance * distance) * per_steradian(rel))
+                                .min(view.viewport_pixels),
                         crest_width: 0.0,
+                        crest_px: 0.0,
+                        crest_rise_px: 0.0,
+                        ground_rise: 0.0,
+                        beyond: 0.0,
                     });
                     continue;
                 }
@@ -592,17 +696,39 @@ impl<'a> PatchSamples<'a> {
                 let gx = (h(r, c1) - h(r, c0)) / ((c1 - c0) as f64 * spacing.x);
                 let gz = (h(r0, c) - h(r1, c)) / ((r1 - r0) as f64 * spacing.y);
                 let rise = gx * dir.x + gz * dir.y;
-                let solid_angle =
-                    (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance);
+                let crest = viewshed.crest(r, c).filter(|_| shown > 0.0);
+                let solid_angle = viewshed.exposure(r, c).unwrap_or_else(|| {
+                    (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance)
+                        * cell_area
+                });
                 seen.push(Seen {
                     face_on: k / distance,
                     dir,
                     fall,
-                    pixels: (solid_angle * cell_pixels).min(view.viewport_pixels),
-                    crest_width: if viewshed.crest(r, c) {
+                    pixels: shown * (solid_angle * per_steradian(rel)).min(view.viewport_pixels),
+                    crest_width: if crest.is_some() {
                         spacing.min_element() * k / distance
                     } else {
                         0.0
+                    },
+                    crest_px: crest.map_or(0.0, |crest| crest.fall * k / distance),
+                    crest_rise_px: crest
+                        .map_or(0.0, |crest| crest.rise * k * (1.0 + fall * fall).sqrt()),
+                    ground_rise: rise,
+                    beyond: {
+                        let (x, z) = (rel.x + eye.x, rel.z + eye.z);
+                        let across = |p: f64, d: f64, lo: f64, hi: f64| {
+                            if d > 0.0 {
+                                (hi - p) / d
+                            } else if d < 0.0 {
+                                (lo - p) / d
+                            } else {
+                                f64::INFINITY
+                            }
+                        };
+                        across(x, dir.x, x_range.0, x_range.1)
+                            .min(across(z, dir.y, z_range.0, z_range.1))
+                            .max(0.0)
                     },
                 });
             }
@@ -616,6 +742,7 @@ impl<'a> PatchSamples<'a> {
             scratch: Vec::new(),
             signed: Vec::new(),
             keep_signed: false,
+            field: Vec::new(),
         })
     }
 
@@ -634,9 +761,11 @@ impl<'a> PatchSamples<'a> {
             |r: usize, c: usize| f64::from(self.map.get(self.rect.row0 + r, self.rect.col0 + c));
         let inv = 1.0 / s as f64;
         let quad = DVec2::new(s as f64 * self.spacing.x, s as f64 * self.spacing.y);
-        let extent = quad.min_element();
+        let diagonal_length = quad.length();
         self.scratch.clear();
         self.signed.clear();
+        self.field.clear();
+        self.field.resize(stride * stride, (0.0, 0.0));
         for qi in 0..level {
             for qj in 0..level {
                 let (r0, c0) = (qi * s, qj * s);
@@ -651,9 +780,6 @@ impl<'a> PatchSamples<'a> {
                     let v = i as f64 * inv;
                     for j in 0..=cols {
                         let seen = self.seen[(r0 + i) * stride + c0 + j];
-                        if seen.pixels <= 0.0 {
-                            continue;
-                        }
                         let u = j as f64 * inv;
                         let here = h(r0 + i, c0 + j);
                         let (bc, ad) = quad_splits([a, b, c, d], (i, j), s);
@@ -664,38 +790,88 @@ impl<'a> PatchSamples<'a> {
                         };
                         let delta = error.abs();
                         // The drawn quad's slope along the ray (its
-                        // bilinear gradient; local z falls as rows rise),
-                        // counted face-on where the ray meets it no more
-                        // steeply than flat ground.
+                        // bilinear gradient; local z falls as rows rise).
                         let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
                         let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
                         let rise = gx * seen.dir.x + gz * seen.dir.y;
-                        // The meeting points lie `delta / meet` apart
-                        // horizontally; past the quad the drawn surface
-                        // is no longer this plane, so count it face-on.
-                        let meet = (rise + seen.fall).max(seen.fall.abs());
-                        let px = if seen.fall.is_infinite() || delta > meet * extent {
+                        // The ray meets the drawn surface `delta / meet`
+                        // on (or back) horizontally, `fall` times that
+                        // apart vertically, within the quad's diagonal: at
+                        // the quad's corners the drawn surface is the
+                        // reference, which the ray sinks into. Where the
+                        // ray sinks into the reference too slowly to be
+                        // `delta` deep within the diagonal, it may clear
+                        // the drawn surface and land anywhere on: counted
+                        // face-on, as the bound counts it, but no further
+                        // than the terrain's edge.
+                        let meet = rise + seen.fall;
+                        let travel = if meet > 0.0 {
+                            delta / meet
+                        } else {
+                            f64::INFINITY
+                        };
+                        let px = if seen.fall.is_infinite() {
                             delta * seen.face_on
                         } else {
-                            delta * seen.face_on * seen.fall.abs() / meet
+                            let sink = seen.ground_rise + seen.fall;
+                            if sink <= 0.0 || delta > sink * diagonal_length {
+                                delta.min(seen.fall.abs() * seen.beyond) * seen.face_on
+                            } else {
+                                (travel.min(diagonal_length) * seen.fall.abs()).min(delta)
+                                    * seen.face_on
+                            }
                         };
-                        self.scratch.push((px, seen.pixels));
-                        // The silhouette moves by about the face-on error,
-                        // and every pixel it sweeps shows other ground:
-                        // over any tolerance.
-                        let swept = delta * seen.face_on * seen.crest_width;
-                        if swept > 0.0 {
-                            self.scratch.push((f64::INFINITY, swept));
-                        }
-                        if self.keep_signed {
-                            self.signed.push(Signed {
-                                sample: ((r0 + i) * stride + c0 + j) as u32,
-                                px: px.copysign(error),
-                                swept: swept.copysign(error),
-                                pixels: seen.pixels,
-                            });
-                        }
+                        self.field[(r0 + i) * stride + c0 + j] =
+                            (px.copysign(error), error * seen.face_on);
                     }
+                }
+            }
+        }
+        // Each seen sample's pixels take its error; its neighbours' are all
+        // known now, seen or not.
+        let field = &self.field;
+        for r in 0..=n {
+            for c in 0..=n {
+                let i = r * stride + c;
+                let seen = self.seen[i];
+                if seen.pixels <= 0.0 {
+                    continue;
+                }
+                let (own, face_on) = field[i];
+                // A silhouette drawn higher rises by its face-on error. One
+                // drawn lower sinks by it, but no further than the ground
+                // in front of it (the neighbour towards the eye), itself
+                // drawn lower by its own error, then takes over.
+                let moved = if seen.crest_width > 0.0 && face_on > 0.0 {
+                    let (fr, fc) = (
+                        r.checked_add_signed(seen.dir.y.round() as isize),
+                        c.checked_add_signed(-seen.dir.x.round() as isize),
+                    );
+                    let front = match (fr, fc) {
+                        (Some(fr), Some(fc)) if fr <= n && fc <= n => field[fr * stride + fc].1,
+                        _ => face_on,
+                    };
+                    face_on.min(seen.crest_rise_px + front.max(0.0))
+                } else {
+                    face_on
+                };
+                self.scratch.push((own.abs(), seen.pixels));
+                if self.keep_signed {
+                    self.signed.push(Signed {
+                        sample: i as u32,
+                        px: own,
+                        moved,
+                        crest_width: seen.crest_width,
+                        crest_px: seen.crest_px,
+                        pixels: seen.pixels,
+                    });
+                }
+                if seen.crest_width > 0.0 {
+                    self.scratch.extend(
+                        silhouette(moved.abs(), seen.crest_width, seen.crest_px)
+                            .into_iter()
+                            .filter(|s| s.1 > 0.0),
+                    );
                 }
             }
         }

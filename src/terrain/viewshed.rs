@@ -16,11 +16,36 @@
 //!
 //! Outside the heightmap there is no terrain; an eye outside it sweeps
 //! from its nearest grid point beyond the edge.
+//!
+//! The sweep also measures what each sample shows. Its exposure is the
+//! solid angle its ring step adds to the view: the sample's wedge of
+//! azimuth times the rise, in sine of elevation, from the horizon
+//! interpolated along its line of sight (not the lower one) to the sample,
+//! within the frustum's lower and upper planes when one is given. Along a
+//! line of sight the rises add up to the ground seen, so partly hidden
+//! ground counts only what shows. A seen sample that hides the next one
+//! behind it is a crest; it records how far its line of sight falls to the
+//! first sample that shows again behind the hidden run (the sample whose
+//! elevation set the hidden run's horizon is followed along the sweep), or
+//! that none does.
 
 use glam::Vec3;
 
+use super::camera::Frustum;
 use super::heightmap::Heightmap;
 use super::TerrainInfo;
+
+/// A silhouette sample (`Viewshed::crest`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Crest {
+    /// The height its line of sight falls (or rises) from it to where the
+    /// hidden ground behind it ends; infinite where it never does (sky).
+    pub fall: f64,
+    /// The rise, in sine of elevation, from the horizon in front of it to
+    /// the sample: as far as the silhouette can sink before nearer ground
+    /// takes it over.
+    pub rise: f64,
+}
 
 /// The samples hidden from one eye.
 #[derive(Clone, Debug, Default)]
@@ -28,8 +53,16 @@ pub struct Viewshed {
     cols: usize,
     /// Per sample, row-major: hidden behind nearer terrain.
     hidden: Vec<bool>,
-    /// Per sample: seen, with ground right behind it hidden (a silhouette).
-    crest: Vec<bool>,
+    /// Per sample: NaN unless it is seen with ground right behind it hidden
+    /// (a silhouette); else the height its line of sight falls (or rises)
+    /// from it to where that hidden ground ends, infinite where it never
+    /// does (sky).
+    /// With it, per sample, the rise in sine of elevation from the horizon
+    /// behind it to the sample (0 where it does not rise above it).
+    crest: Vec<[f32; 2]>,
+    /// Per sample: the solid angle, in steradians, of the ground its ring
+    /// step raises the horizon by (see `exposure`); NaN where not swept.
+    exposure: Vec<f32>,
 }
 
 impl Viewshed {
@@ -43,15 +76,25 @@ impl Viewshed {
         eye_local: Vec3,
         margin: f64,
         max_ring: usize,
+        frustum: Option<&Frustum>,
     ) {
         let (cols, rows) = (map.width(), map.depth());
         self.cols = cols;
         self.hidden.clear();
         self.hidden.resize(cols * rows, false);
         self.crest.clear();
-        self.crest.resize(cols * rows, false);
-        // The horizon each sample passes on.
-        let mut horizon = vec![f32::NEG_INFINITY; cols * rows];
+        self.crest.resize(cols * rows, [f32::NAN, 0.0]);
+        self.exposure.clear();
+        self.exposure.resize(cols * rows, f32::NAN);
+        // The horizons each sample passes on: the lower of the two behind
+        // it (which samples it hides), and the two interpolated along the
+        // line of sight (which its exposure rises from).
+        let mut horizon = vec![[f32::NEG_INFINITY; 2]; cols * rows];
+        // The sample whose elevation sets each sample's lower horizon, and
+        // per such sample the largest height its line of sight falls or
+        // rises to where the ground it hides ends (NaN: none yet).
+        let mut source: Vec<u32> = (0..(cols * rows) as u32).collect();
+        let mut landing = vec![f32::NAN; cols * rows];
         let eye = eye_local.as_dvec3();
         // The eye in grid units (column, row), and its nearest grid point.
         let origin = info.origin();
@@ -65,11 +108,11 @@ impl Viewshed {
         let last = reach(ec, cols).max(reach(er, rows)).min(max_ring);
         let inside =
             |c: i64, r: i64| c >= 0 && r >= 0 && (c as usize) < cols && (r as usize) < rows;
-        let horizon_at = |horizon: &[f32], c: i64, r: i64| {
+        let horizon_at = |horizon: &[[f32; 2]], c: i64, r: i64| {
             if inside(c, r) {
                 horizon[r as usize * cols + c as usize]
             } else {
-                f32::NEG_INFINITY
+                [f32::NEG_INFINITY; 2]
             }
         };
         // A sample's height above the eye over its horizontal distance.
@@ -78,10 +121,44 @@ impl Viewshed {
             let reach = (dx * dx + dz * dz).sqrt().max(f64::MIN_POSITIVE);
             (f64::from(map.get(r, c)) - eye.y) / reach
         };
+        // The sine of the angle above the horizontal of an elevation.
+        let sine = |e: f64| {
+            if e.is_finite() {
+                e / e.hypot(1.0)
+            } else {
+                e.signum()
+            }
+        };
+        let spacing = info.spacing();
+        // The frustum's lower and upper planes (through the eye) bound the
+        // sine of elevation seen along a horizontal direction.
+        let vertical: Vec<glam::DVec4> = frustum
+            .map(|f| f.planes[2..4].iter().map(|p| p.as_dvec4()).collect())
+            .unwrap_or_default();
+        let in_view = |x: f64, z: f64| {
+            let (mut lo, mut hi) = (-1.0f64, 1.0f64);
+            for p in &vertical {
+                // Seen where p.xz . (x, z) cos(e) + p.y sin(e) >= 0 (x, z
+                // the unit direction).
+                let a = (p.x * x + p.z * z) / (x * x + z * z).sqrt().max(f64::MIN_POSITIVE);
+                if p.y > 0.0 {
+                    lo = lo.max(sine(-a / p.y));
+                } else if p.y < 0.0 {
+                    hi = hi.min(sine(-a / p.y));
+                } else if a < 0.0 {
+                    hi = -1.0;
+                }
+            }
+            (lo, hi)
+        };
         let (ec, er) = (ec as i64, er as i64);
         if inside(ec, er) {
             let (c, r) = (ec as usize, er as usize);
-            horizon[r * cols + c] = elevation(r, c) as f32;
+            // The eye's own grid point lies (nearly) straight below or
+            // above it: it hides nothing, and the first ring rises from
+            // straight down.
+            horizon[r * cols + c] = [f32::MIN; 2];
+            self.exposure[r * cols + c] = 0.0;
         }
         for k in 1..=last as i64 {
             // The ring's cells within the heightmap: rows er-k..=er+k,
@@ -99,31 +176,91 @@ impl Viewshed {
                     if c >= c_lo {
                         let (dc, dr) = (c - ec, r - er);
                         // The two cells of ring k-1 the line of sight
-                        // passes between.
-                        let (a, b) = if dc.abs() == dr.abs() {
+                        // passes between, and how far it lies from the
+                        // first towards the second.
+                        let (a, b, f) = if dc.abs() == dr.abs() {
                             let p = (c - dc.signum(), r - dr.signum());
-                            (p, p)
+                            (p, p, 0.0)
                         } else if dc.abs() > dr.abs() {
                             let cc = c - dc.signum();
                             let t = dr as f64 * (k - 1) as f64 / k as f64 + er as f64;
-                            ((cc, t.floor() as i64), (cc, t.ceil() as i64))
+                            ((cc, t.floor() as i64), (cc, t.ceil() as i64), t.fract())
                         } else {
                             let rr = r - dr.signum();
                             let t = dc as f64 * (k - 1) as f64 / k as f64 + ec as f64;
-                            ((t.floor() as i64, rr), (t.ceil() as i64, rr))
+                            ((t.floor() as i64, rr), (t.ceil() as i64, rr), t.fract())
                         };
-                        let behind =
-                            horizon_at(&horizon, a.0, a.1).min(horizon_at(&horizon, b.0, b.1));
+                        let (ha, hb) = (
+                            horizon_at(&horizon, a.0, a.1),
+                            horizon_at(&horizon, b.0, b.1),
+                        );
+                        let behind = ha[0].min(hb[0]);
+                        // The predecessor whose horizon is the lower one.
+                        let lower = if hb[0] < ha[0] { b } else { a };
+                        // Interpolated, or the one inside the map.
+                        let line = if ha[1] == f32::NEG_INFINITY || hb[1] == f32::NEG_INFINITY {
+                            ha[1].max(hb[1])
+                        } else {
+                            ha[1] + (hb[1] - ha[1]) * f.abs() as f32
+                        };
                         let i = r as usize * cols + c as usize;
                         let elevation = elevation(r as usize, c as usize);
                         self.hidden[i] = elevation + margin < f64::from(behind);
-                        horizon[i] = behind.max(elevation as f32);
+                        if inside(lower.0, lower.1) {
+                            let p = lower.1 as usize * cols + lower.0 as usize;
+                            if f64::from(behind) > elevation {
+                                source[i] = source[p];
+                            }
+                            if !self.hidden[i] && self.hidden[p] {
+                                // The hidden run behind the source ends here.
+                                let s = source[p] as usize;
+                                let fall = (map.get(s / cols, s % cols)
+                                    - map.get(r as usize, c as usize))
+                                .abs();
+                                landing[s] = landing[s].max(fall);
+                            }
+                        }
+                        horizon[i] = [behind.max(elevation as f32), line.max(elevation as f32)];
+                        // The ring step's wedge of azimuth: the sample's
+                        // width across the line of sight over its distance
+                        // (a ring's corner shares both sides' halves).
+                        let (x, z) = (
+                            (info.local_x(c as usize) - eye.x).abs(),
+                            (info.local_z(r as usize) - eye.z).abs(),
+                        );
+                        let wedge = if dc.abs() == dr.abs() {
+                            0.5 * (spacing.y * x + spacing.x * z)
+                        } else if dc.abs() > dr.abs() {
+                            spacing.y * x
+                        } else {
+                            spacing.x * z
+                        } / (x * x + z * z).max(f64::MIN_POSITIVE);
+                        // Nothing before the map's edge: no step to raise.
+                        // Only the part of the step within the frustum's
+                        // height counts.
+                        let rise = if line == f32::NEG_INFINITY {
+                            0.0
+                        } else {
+                            let (lo, hi) = in_view(
+                                info.local_x(c as usize) - eye.x,
+                                info.local_z(r as usize) - eye.z,
+                            );
+                            (sine(elevation).min(hi) - sine(f64::from(line)).max(lo)).max(0.0)
+                        };
+                        self.exposure[i] = (wedge * rise) as f32;
+                        self.crest[i][1] = if line == f32::NEG_INFINITY {
+                            0.0
+                        } else {
+                            (sine(elevation) - sine(f64::from(line))).max(0.0) as f32
+                        };
                         if self.hidden[i] {
                             // What hides it and is itself seen is a crest.
                             for (pc, pr) in [a, b] {
                                 if inside(pc, pr) {
                                     let j = pr as usize * cols + pc as usize;
-                                    self.crest[j] |= !self.hidden[j];
+                                    if !self.hidden[j] {
+                                        self.crest[j][0] = 0.0;
+                                    }
                                 }
                             }
                         }
@@ -132,16 +269,40 @@ impl Viewshed {
                 }
             }
         }
+        for ([crest, _], &s) in self.crest.iter_mut().zip(&source) {
+            if !crest.is_nan() {
+                let fall = landing[s as usize];
+                *crest = if fall.is_nan() { f32::INFINITY } else { fall };
+            }
+        }
     }
 
     /// Whether sample (row, col) is seen with ground right behind it
     /// hidden: a silhouette, which a drawn surface lying lower or higher
-    /// moves, uncovering or covering what is behind.
-    pub fn crest(&self, row: usize, col: usize) -> bool {
+    /// moves, uncovering or covering what is behind; if so, how far the
+    /// silhouette can move and what the moved pixels show (`Crest`).
+    pub fn crest(&self, row: usize, col: usize) -> Option<Crest> {
         self.crest
             .get(row * self.cols + col)
-            .copied()
-            .unwrap_or(false)
+            .filter(|[fall, _]| !fall.is_nan())
+            .map(|&[fall, rise]| Crest {
+                fall: f64::from(fall),
+                rise: f64::from(rise),
+            })
+    }
+
+    /// The solid angle, in steradians, that sample (row, col) adds to the
+    /// view: its wedge of azimuth (its width across the line of sight over
+    /// its distance) times the rise, in sine of elevation, from the horizon
+    /// behind it to the sample. Summed over the samples this is the ground
+    /// the eye sees, each part counted once: ground a nearer ridge hides,
+    /// wholly or in part, adds only what shows above it, and ground facing
+    /// away adds nothing. None where the sweep did not reach.
+    pub fn exposure(&self, row: usize, col: usize) -> Option<f64> {
+        self.exposure
+            .get(row * self.cols + col)
+            .filter(|e| !e.is_nan())
+            .map(|&e| f64::from(e))
     }
 
     /// Whether sample (row, col) is hidden.
