@@ -81,11 +81,10 @@ use super::Terrain;
 
 /// Share of the frame's terrain pixels the view's choice lets its modelled
 /// errors put over tau: half the 1 % a 99th percentile allows. The other
-/// half is left to what the samples do not model (errors between samples
-/// on the tessellator's other diagonal, stitched geomip sides, a ray
-/// meeting another plane than its quad's), which measured 1.1x to 1.5x the
-/// modelled pixels over tau on views from above when the whole 1 % was
-/// spent.
+/// half is left to what the samples do not model: errors between samples,
+/// the tessellator's transition triangles and stitched geomip sides, and
+/// rays that skim the drawn surface to land further on than the sample's
+/// own neighbourhood shows.
 pub const EXCEED_FRACTION: f64 = 0.005;
 
 /// Share of the frame's pixels above its 99th percentile.
@@ -817,8 +816,7 @@ impl<'a> PatchSamples<'a> {
                             if sink <= 0.0 || delta > sink * diagonal_length {
                                 delta.min(seen.fall.abs() * seen.beyond) * seen.face_on
                             } else {
-                                (travel.min(diagonal_length) * seen.fall.abs()).min(delta)
-                                    * seen.face_on
+                                travel.min(diagonal_length) * seen.fall.abs() * seen.face_on
                             }
                         };
                         self.field[(r0 + i) * stride + c0 + j] =
