@@ -65,6 +65,49 @@ pub struct Viewshed {
     exposure: Vec<f32>,
 }
 
+/// What a swept sample passes on to the next ring: the horizons (the
+/// lower of the two behind it and its own elevation, which samples it
+/// hides; the two interpolated along the line of sight, which its
+/// exposure rises from), the sample whose elevation sets the lower one,
+/// and whether it is hidden.
+#[derive(Clone, Copy, Debug)]
+struct Slot {
+    horizon: [f32; 2],
+    source: u32,
+    hidden: bool,
+}
+
+impl Slot {
+    /// A ring cell outside the heightmap: no terrain, no horizon.
+    const OUTSIDE: Slot = Slot {
+        horizon: [f32::NEG_INFINITY; 2],
+        source: u32::MAX,
+        hidden: false,
+    };
+}
+
+/// The place of the cell (dc, dr) from the eye's grid point in ring k's
+/// 8k cells (1 for the point itself): the top row left to right, the
+/// bottom row, then the left and right columns between them.
+fn ring_slot(dc: i64, dr: i64, k: i64) -> usize {
+    let slot = if k == 0 {
+        0
+    } else if dr == -k {
+        dc + k
+    } else if dr == k {
+        3 * k + 1 + dc
+    } else if dc == -k {
+        5 * k + 1 + dr
+    } else {
+        7 * k + dr
+    };
+    debug_assert!(
+        (dc.abs().max(dr.abs()) == k) && (0..(8 * k).max(1)).contains(&slot),
+        "({dc}, {dr}) is not on ring {k}"
+    );
+    slot as usize
+}
+
 impl Viewshed {
     /// Sweeps the viewshed of `eye_local` (relative to the terrain's
     /// centre) out to Chebyshev ring `max_ring` around it; samples past it
@@ -86,10 +129,6 @@ impl Viewshed {
         self.crest.resize(cols * rows, [f32::NAN, 0.0]);
         self.exposure.clear();
         self.exposure.resize(cols * rows, f32::NAN);
-        // The horizons each sample passes on: the lower of the two behind
-        // it (which samples it hides), and the two interpolated along the
-        // line of sight (which its exposure rises from).
-        let mut horizon = vec![[f32::NEG_INFINITY; 2]; cols * rows];
         // The sample whose elevation sets each sample's lower horizon, and
         // per such sample the largest height its line of sight falls or
         // rises to where the ground it hides ends (NaN: none yet).
@@ -108,19 +147,6 @@ impl Viewshed {
         let last = reach(ec, cols).max(reach(er, rows)).min(max_ring);
         let inside =
             |c: i64, r: i64| c >= 0 && r >= 0 && (c as usize) < cols && (r as usize) < rows;
-        let horizon_at = |horizon: &[[f32; 2]], c: i64, r: i64| {
-            if inside(c, r) {
-                horizon[r as usize * cols + c as usize]
-            } else {
-                [f32::NEG_INFINITY; 2]
-            }
-        };
-        // A sample's height above the eye over its horizontal distance.
-        let elevation = |r: usize, c: usize| {
-            let (dx, dz) = (info.local_x(c) - eye.x, info.local_z(r) - eye.z);
-            let reach = (dx * dx + dz * dz).sqrt().max(f64::MIN_POSITIVE);
-            (f64::from(map.get(r, c)) - eye.y) / reach
-        };
         // The sine of the angle above the horizontal of an elevation.
         let sine = |e: f64| {
             if e.is_finite() {
@@ -135,12 +161,13 @@ impl Viewshed {
         let vertical: Vec<glam::DVec4> = frustum
             .map(|f| f.planes[2..4].iter().map(|p| p.as_dvec4()).collect())
             .unwrap_or_default();
-        let in_view = |x: f64, z: f64| {
+        // (x, z) the horizontal offset from the eye, `reach` its length.
+        let in_view = |x: f64, z: f64, reach: f64| {
             let (mut lo, mut hi) = (-1.0f64, 1.0f64);
             for p in &vertical {
                 // Seen where p.xz . (x, z) cos(e) + p.y sin(e) >= 0 (x, z
                 // the unit direction).
-                let a = (p.x * x + p.z * z) / (x * x + z * z).sqrt().max(f64::MIN_POSITIVE);
+                let a = (p.x * x + p.z * z) / reach;
                 if p.y > 0.0 {
                     lo = lo.max(sine(-a / p.y));
                 } else if p.y < 0.0 {
@@ -152,15 +179,27 @@ impl Viewshed {
             (lo, hi)
         };
         let (ec, er) = (ec as i64, er as i64);
+        // What the last ring passes on to this one and this one to the
+        // next, in ring order (`ring_slot`): each ring reads only the one
+        // before it, kept together rather than spread over as many rows.
+        let mut previous: Vec<Slot> = Vec::new();
+        let mut current = vec![Slot::OUTSIDE];
         if inside(ec, er) {
-            let (c, r) = (ec as usize, er as usize);
+            let i = er as usize * cols + ec as usize;
             // The eye's own grid point lies (nearly) straight below or
             // above it: it hides nothing, and the first ring rises from
             // straight down.
-            horizon[r * cols + c] = [f32::MIN; 2];
-            self.exposure[r * cols + c] = 0.0;
+            current[0] = Slot {
+                horizon: [f32::MIN; 2],
+                source: i as u32,
+                hidden: false,
+            };
+            self.exposure[i] = 0.0;
         }
         for k in 1..=last as i64 {
+            std::mem::swap(&mut previous, &mut current);
+            current.clear();
+            current.resize(8 * k as usize, Slot::OUTSIDE);
             // The ring's cells within the heightmap: rows er-k..=er+k,
             // columns ec-k..=ec+k, on its border.
             let (r_lo, r_hi) = ((er - k).max(0), (er + k).min(rows as i64 - 1));
@@ -190,13 +229,13 @@ impl Viewshed {
                             let t = dc as f64 * (k - 1) as f64 / k as f64 + ec as f64;
                             ((t.floor() as i64, rr), (t.ceil() as i64, rr), t.fract())
                         };
-                        let (ha, hb) = (
-                            horizon_at(&horizon, a.0, a.1),
-                            horizon_at(&horizon, b.0, b.1),
-                        );
+                        let slot =
+                            |(pc, pr): (i64, i64)| previous[ring_slot(pc - ec, pr - er, k - 1)];
+                        let (sa, sb) = (slot(a), slot(b));
+                        let (ha, hb) = (sa.horizon, sb.horizon);
                         let behind = ha[0].min(hb[0]);
                         // The predecessor whose horizon is the lower one.
-                        let lower = if hb[0] < ha[0] { b } else { a };
+                        let lower = if hb[0] < ha[0] { sb } else { sa };
                         // Interpolated, or the one inside the map.
                         let line = if ha[1] == f32::NEG_INFINITY || hb[1] == f32::NEG_INFINITY {
                             ha[1].max(hb[1])
@@ -204,63 +243,67 @@ impl Viewshed {
                             ha[1] + (hb[1] - ha[1]) * f.abs() as f32
                         };
                         let i = r as usize * cols + c as usize;
-                        let elevation = elevation(r as usize, c as usize);
-                        self.hidden[i] = elevation + margin < f64::from(behind);
-                        if inside(lower.0, lower.1) {
-                            let p = lower.1 as usize * cols + lower.0 as usize;
+                        // The sample's offset from the eye, and its height
+                        // above the eye over its horizontal distance.
+                        let (dx, dz) = (
+                            info.local_x(c as usize) - eye.x,
+                            info.local_z(r as usize) - eye.z,
+                        );
+                        let reach_squared = dx * dx + dz * dz;
+                        let reach = reach_squared.sqrt().max(f64::MIN_POSITIVE);
+                        let elevation =
+                            (f64::from(map.get(r as usize, c as usize)) - eye.y) / reach;
+                        let hidden = elevation + margin < f64::from(behind);
+                        self.hidden[i] = hidden;
+                        if lower.source != Slot::OUTSIDE.source {
                             if f64::from(behind) > elevation {
-                                source[i] = source[p];
+                                source[i] = lower.source;
                             }
-                            if !self.hidden[i] && self.hidden[p] {
+                            if !hidden && lower.hidden {
                                 // The hidden run behind the source ends here.
-                                let s = source[p] as usize;
+                                let s = lower.source as usize;
                                 let fall = (map.get(s / cols, s % cols)
                                     - map.get(r as usize, c as usize))
                                 .abs();
                                 landing[s] = landing[s].max(fall);
                             }
                         }
-                        horizon[i] = [behind.max(elevation as f32), line.max(elevation as f32)];
+                        current[ring_slot(dc, dr, k)] = Slot {
+                            horizon: [behind.max(elevation as f32), line.max(elevation as f32)],
+                            source: source[i],
+                            hidden,
+                        };
                         // The ring step's wedge of azimuth: the sample's
                         // width across the line of sight over its distance
                         // (a ring's corner shares both sides' halves).
-                        let (x, z) = (
-                            (info.local_x(c as usize) - eye.x).abs(),
-                            (info.local_z(r as usize) - eye.z).abs(),
-                        );
+                        let (x, z) = (dx.abs(), dz.abs());
                         let wedge = if dc.abs() == dr.abs() {
                             0.5 * (spacing.y * x + spacing.x * z)
                         } else if dc.abs() > dr.abs() {
                             spacing.y * x
                         } else {
                             spacing.x * z
-                        } / (x * x + z * z).max(f64::MIN_POSITIVE);
+                        } / reach_squared.max(f64::MIN_POSITIVE);
                         // Nothing before the map's edge: no step to raise.
                         // Only the part of the step within the frustum's
                         // height counts.
-                        let rise = if line == f32::NEG_INFINITY {
-                            0.0
+                        let (rise, crest_rise) = if line == f32::NEG_INFINITY {
+                            (0.0, 0.0)
                         } else {
-                            let (lo, hi) = in_view(
-                                info.local_x(c as usize) - eye.x,
-                                info.local_z(r as usize) - eye.z,
-                            );
-                            (sine(elevation).min(hi) - sine(f64::from(line)).max(lo)).max(0.0)
+                            let (lo, hi) = in_view(dx, dz, reach);
+                            let (top, bottom) = (sine(elevation), sine(f64::from(line)));
+                            (
+                                (top.min(hi) - bottom.max(lo)).max(0.0),
+                                (top - bottom).max(0.0),
+                            )
                         };
                         self.exposure[i] = (wedge * rise) as f32;
-                        self.crest[i][1] = if line == f32::NEG_INFINITY {
-                            0.0
-                        } else {
-                            (sine(elevation) - sine(f64::from(line))).max(0.0) as f32
-                        };
-                        if self.hidden[i] {
+                        self.crest[i][1] = crest_rise as f32;
+                        if hidden {
                             // What hides it and is itself seen is a crest.
-                            for (pc, pr) in [a, b] {
-                                if inside(pc, pr) {
-                                    let j = pr as usize * cols + pc as usize;
-                                    if !self.hidden[j] {
-                                        self.crest[j][0] = 0.0;
-                                    }
+                            for ((pc, pr), p) in [(a, sa), (b, sb)] {
+                                if inside(pc, pr) && !p.hidden {
+                                    self.crest[pr as usize * cols + pc as usize][0] = 0.0;
                                 }
                             }
                         }
