@@ -244,9 +244,6 @@ float edge_distance(vec2 a, vec2 b, float y_lo, float y_hi) {
     return sqrt(dot(p, p) + dy * dy);
 }
 
-// Error-bounded tessellation factor of a span of `cells` cells: the
-// smallest power of two below `cells` whose error projects to at most
-// error_lod.x pixels at `distance`, else `cells` (a vertex on every sample).
 // Whether an error seen at `scale` pixels per unit is within tau pixels; a
 // zero error always is, even where the scale is infinite. Mirror:
 // terrain::lod::within_tolerance.
@@ -254,6 +251,9 @@ bool within_tolerance(float error, float scale, float tau) {
     return error == 0.0 || error * scale <= tau;
 }
 
+// Error-bounded tessellation factor of a span of `cells` cells: the
+// smallest power of two below `cells` whose error projects to at most
+// error_lod.x pixels at `distance`, else `cells` (a vertex on every sample).
 // errors[k] is the error of 2^k segments. Mirror: terrain::lod::error_tess_factor.
 float error_tess_factor(float errors[ERROR_LEVEL_COUNT], float distance, int cells) {
     float scale = frame.error_lod.y / max(distance, 1.17549435e-38);

@@ -7,6 +7,7 @@ use common::gpu::camera;
 use common::*;
 use glam::{DVec2, Vec3};
 use vkterrain::render::FrameView;
+use vkterrain::terrain::camera::{look_at, perspective, Frustum};
 use vkterrain::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
 use vkterrain::terrain::viewshed::Viewshed;
 use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
@@ -54,13 +55,26 @@ fn local(row: usize, col: usize, y: f32) -> Vec3 {
     Vec3::new(col as f32 - 32.0, y, 32.0 - row as f32)
 }
 
+/// The viewshed of a 65 x 65 unit-spaced `map` (see `local`) from `eye`,
+/// with `margin` and an optional frustum, swept to the map's edge.
+fn viewshed(map: &Heightmap, eye: Vec3, margin: f64, frustum: Option<&Frustum>) -> Viewshed {
+    let mut shed = Viewshed::default();
+    shed.sweep(
+        terrain(map.clone()).info(),
+        map,
+        eye,
+        margin,
+        usize::MAX,
+        frustum,
+    );
+    shed
+}
+
 #[test]
 fn a_wall_hides_the_ground_behind_it_and_not_in_front() {
     let map = wall_map(10.0);
-    let t = terrain(map.clone());
-    let mut shed = Viewshed::default();
     // Eye 2 above the ground at row 5, in the middle column.
-    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.0, None);
     for c in 0..65 {
         assert!(!shed.hidden(10, c), "in front of the wall, column {c}");
         assert!(!shed.hidden(20, c), "the wall itself, column {c}");
@@ -72,7 +86,7 @@ fn a_wall_hides_the_ground_behind_it_and_not_in_front() {
     // A wall no higher than the eye hides only what its line of sight
     // crosses below it: the ground just behind it.
     let low = wall_map(1.0);
-    shed.sweep(t.info(), &low, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&low, local(5, 32, 2.0), 0.0, None);
     assert!(shed.hidden(21, 32));
     assert!(
         !shed.hidden(64, 32),
@@ -83,9 +97,7 @@ fn a_wall_hides_the_ground_behind_it_and_not_in_front() {
 #[test]
 fn the_top_of_a_wall_that_hides_ground_is_a_crest_and_open_ground_is_not() {
     let map = wall_map(10.0);
-    let t = terrain(map.clone());
-    let mut shed = Viewshed::default();
-    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.0, None);
     // The wall's samples in front of the eye hide the ground behind them.
     for c in 28..=36 {
         assert!(shed.crest(20, c).is_some(), "the wall at column {c}");
@@ -96,7 +108,7 @@ fn the_top_of_a_wall_that_hides_ground_is_a_crest_and_open_ground_is_not() {
     }
     // With no wall nothing is hidden, so nothing is a crest.
     let flat = wall_map(0.0);
-    shed.sweep(t.info(), &flat, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&flat, local(5, 32, 2.0), 0.0, None);
     assert!((0..65).all(|r| (0..65).all(|c| shed.crest(r, c).is_none())));
 }
 
@@ -104,9 +116,7 @@ fn the_top_of_a_wall_that_hides_ground_is_a_crest_and_open_ground_is_not() {
 fn a_lone_peak_hides_only_its_own_line_and_the_margin_uncovers_the_horizon() {
     let spike = Heightmap::from_fn(65, 65, |r, c| if (r, c) == (20, 32) { 50.0 } else { 0.0 })
         .expect("valid size");
-    let t = terrain(spike.clone());
-    let mut shed = Viewshed::default();
-    shed.sweep(t.info(), &spike, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&spike, local(5, 32, 2.0), 0.0, None);
     // Only samples on the very line of sight through the peak are hidden
     // (column 32 behind it); one sample is never a wall on both sides of
     // any other ray.
@@ -121,29 +131,20 @@ fn a_lone_peak_hides_only_its_own_line_and_the_margin_uncovers_the_horizon() {
     // seen: the wall's top at row 20 is 8 above the eye 15 away (0.53);
     // the ground at row 40 is 2 below the eye 35 away (-0.057).
     let map = wall_map(10.0);
-    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.5, usize::MAX, None);
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.5, None);
     assert!(
         shed.hidden(40, 32),
         "0.59 below its horizon, past a 0.5 margin"
     );
-    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.7, usize::MAX, None);
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.7, None);
     assert!(!shed.hidden(40, 32), "within a 0.7 margin");
 }
 
 #[test]
 fn an_eye_outside_the_map_sweeps_from_beyond_its_edge() {
     let map = wall_map(10.0);
-    let t = terrain(map.clone());
-    let mut shed = Viewshed::default();
     // 40 beyond the near edge (row 0 is at local z = 32), 3 above ground.
-    shed.sweep(
-        t.info(),
-        &map,
-        Vec3::new(0.0, 3.0, 72.0),
-        0.0,
-        usize::MAX,
-        None,
-    );
+    let shed = viewshed(&map, Vec3::new(0.0, 3.0, 72.0), 0.0, None);
     assert!(!shed.hidden(0, 32) && !shed.hidden(19, 32));
     assert!(shed.hidden(30, 32), "behind the wall from outside too");
 }
@@ -154,9 +155,7 @@ fn exposures_add_up_to_the_ground_seen_and_nothing_hidden() {
     // square's solid angle, 4 asin(a^2 / (a^2 + h^2)) for half side a at
     // depth h.
     let flat = wall_map(0.0);
-    let t = terrain(flat.clone());
-    let mut shed = Viewshed::default();
-    shed.sweep(t.info(), &flat, local(32, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&flat, local(32, 32, 2.0), 0.0, None);
     let total: f64 = (0..65)
         .flat_map(|r| (0..65).map(move |c| (r, c)))
         .map(|(r, c)| shed.exposure(r, c).expect("swept"))
@@ -169,49 +168,32 @@ fn exposures_add_up_to_the_ground_seen_and_nothing_hidden() {
     // Behind a wall, ground it hides adds nothing, and the wall's face adds
     // what rises above the ground in front of it.
     let map = wall_map(10.0);
-    shed.sweep(t.info(), &map, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.0, None);
     assert!((21..65).all(|r| shed.exposure(r, 32) == Some(0.0)));
     let ground = shed.exposure(19, 32).expect("swept");
     assert!(shed.exposure(20, 32).expect("swept") > 10.0 * ground);
     // A frustum looking up above the horizon sees no ground at all.
-    let view = vkterrain::terrain::camera::perspective(0.5, 1.0, 0.1, 1000.0)
-        * vkterrain::terrain::camera::look_at(Vec3::ZERO, Vec3::new(0.0, 1.0, -1.0), Vec3::Y);
-    let up = vkterrain::terrain::camera::Frustum::from_view_proj(view);
-    shed.sweep(
-        t.info(),
-        &flat,
-        local(32, 32, 2.0),
-        0.0,
-        usize::MAX,
-        Some(&up),
-    );
+    let view = perspective(0.5, 1.0, 0.1, 1000.0)
+        * look_at(Vec3::ZERO, Vec3::new(0.0, 1.0, -1.0), Vec3::Y);
+    let up = Frustum::from_view_proj(view);
+    let shed = viewshed(&flat, local(32, 32, 2.0), 0.0, Some(&up));
     assert!((0..65).all(|r| (0..65).all(|c| shed.exposure(r, c) == Some(0.0))));
     // Looking level, it sees the ground from its lower plane, 0.25 below
     // the horizon, on: from 2 / tan(0.25) = 7.8 ahead.
-    let level = vkterrain::terrain::camera::perspective(0.5, 1.0, 0.1, 1000.0)
-        * vkterrain::terrain::camera::look_at(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
-    let level = vkterrain::terrain::camera::Frustum::from_view_proj(level);
-    shed.sweep(
-        t.info(),
-        &flat,
-        local(32, 32, 2.0),
-        0.0,
-        usize::MAX,
-        Some(&level),
-    );
+    let level = perspective(0.5, 1.0, 0.1, 1000.0) * look_at(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y);
+    let level = Frustum::from_view_proj(level);
+    let shed = viewshed(&flat, local(32, 32, 2.0), 0.0, Some(&level));
     assert_eq!(shed.exposure(37, 32), Some(0.0), "5 ahead, below the view");
     assert!(shed.exposure(52, 32).expect("swept") > 0.0, "20 ahead");
 }
 
 #[test]
 fn a_crest_knows_how_far_its_line_of_sight_falls_behind_it() {
-    let t = terrain(wall_map(0.0));
-    let mut shed = Viewshed::default();
     // A wall 1 high seen from 2 high, 15 rows in front of it: the line of
     // sight over it falls 1 in 15 and meets the ground (height 0) again 30
     // rows from the eye, 1 below the wall's top.
     let low = wall_map(1.0);
-    shed.sweep(t.info(), &low, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&low, local(5, 32, 2.0), 0.0, None);
     let crest = shed.crest(20, 32).expect("the wall's top is a crest");
     assert!((crest.fall - 1.0).abs() < 1e-6, "{crest:?}");
     // It rises above the ground in front of it by the sines of elevation
@@ -223,7 +205,7 @@ fn a_crest_knows_how_far_its_line_of_sight_falls_behind_it() {
     );
     // Over a wall above the eye the line of sight rises into the sky.
     let high = wall_map(10.0);
-    shed.sweep(t.info(), &high, local(5, 32, 2.0), 0.0, usize::MAX, None);
+    let shed = viewshed(&high, local(5, 32, 2.0), 0.0, None);
     assert_eq!(shed.crest(20, 32).map(|c| c.fall), Some(f64::INFINITY));
 }
 

@@ -558,7 +558,8 @@ struct PatchSamples<'a> {
     keep_signed: bool,
     /// The last measured level's (error in pixels, face-on error in
     /// pixels) per sample, row-major over the rect, both signed (drawn
-    /// below the reference is positive).
+    /// below the reference is positive); the first is 0 where the sample
+    /// shows no pixels.
     field: Vec<(f64, f64)>,
 }
 
@@ -659,7 +660,8 @@ impl<'a> PatchSamples<'a> {
                         p.truncate().dot(rel) + p.w >= 0.0
                     })
                 };
-                let in_view = if viewshed.exposure(r, c).is_some() {
+                let exposure = viewshed.exposure(r, c);
+                let in_view = if exposure.is_some() {
                     within(&[0, 1, 4])
                 } else {
                     within(&[0, 1, 2, 3, 4])
@@ -696,7 +698,7 @@ impl<'a> PatchSamples<'a> {
                 let gz = (h(r0, c) - h(r1, c)) / ((r1 - r0) as f64 * spacing.y);
                 let rise = gx * dir.x + gz * dir.y;
                 let crest = viewshed.crest(r, c).filter(|_| shown > 0.0);
-                let solid_angle = viewshed.exposure(r, c).unwrap_or_else(|| {
+                let solid_angle = exposure.unwrap_or_else(|| {
                     (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance)
                         * cell_area
                 });
@@ -788,11 +790,6 @@ impl<'a> PatchSamples<'a> {
                             Diagonal::Either => here - bc,
                         };
                         let delta = error.abs();
-                        // The drawn quad's slope along the ray (its
-                        // bilinear gradient; local z falls as rows rise).
-                        let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
-                        let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
-                        let rise = gx * seen.dir.x + gz * seen.dir.y;
                         // The ray meets the drawn surface `delta / meet`
                         // on (or back) horizontally, `fall` times that
                         // apart vertically, within the quad's diagonal: at
@@ -802,20 +799,29 @@ impl<'a> PatchSamples<'a> {
                         // `delta` deep within the diagonal, it may clear
                         // the drawn surface and land anywhere on: counted
                         // face-on, as the bound counts it, but no further
-                        // than the terrain's edge.
-                        let meet = rise + seen.fall;
-                        let travel = if meet > 0.0 {
-                            delta / meet
-                        } else {
-                            f64::INFINITY
-                        };
-                        let px = if seen.fall.is_infinite() {
+                        // than the terrain's edge. A sample showing no
+                        // pixels needs only its face-on error, which a
+                        // silhouette in front of it reads.
+                        let px = if seen.pixels <= 0.0 {
+                            0.0
+                        } else if seen.fall.is_infinite() {
                             delta * seen.face_on
                         } else {
                             let sink = seen.ground_rise + seen.fall;
                             if sink <= 0.0 || delta > sink * diagonal_length {
                                 delta.min(seen.fall.abs() * seen.beyond) * seen.face_on
                             } else {
+                                // The drawn quad's slope along the ray (its
+                                // bilinear gradient; local z falls as rows
+                                // rise).
+                                let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
+                                let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
+                                let meet = gx * seen.dir.x + gz * seen.dir.y + seen.fall;
+                                let travel = if meet > 0.0 {
+                                    delta / meet
+                                } else {
+                                    f64::INFINITY
+                                };
                                 travel.min(diagonal_length) * seen.fall.abs() * seen.face_on
                             }
                         };
