@@ -376,3 +376,53 @@ fn geomip_morph_limits_are_factors_for_the_level_each_patch_expects() {
     // Somewhere the blend would go over: not every factor is free.
     assert!(limits.iter().any(|&(_, m)| m < 1.0), "{limits:?}");
 }
+
+#[test]
+fn the_far_remainders_are_measured_as_their_path_lays_them() {
+    // 59 x 71 samples in 16-cell patches: the last column of patches is 10
+    // cells wide and the last row 6 deep.
+    let hills = |r: usize, c: usize| {
+        let (r, c) = (r as f32, c as f32);
+        10.0 + 10.0 * (c / 5.0).sin() * (r / 7.0).cos() + 0.05 * r
+    };
+    let t = terrain(Heightmap::from_fn(59, 71, hills).expect("valid size"));
+    let grid = t.grid();
+    let remainders: Vec<usize> = (0..grid.patch_count())
+        .filter(|&p| {
+            let rect = grid.sample_rect(grid.patch_id(p));
+            rect.cells_x() != 16 || rect.cells_z() != 16
+        })
+        .collect();
+    assert_eq!(remainders.len(), 4 + 5 - 1);
+    // `view_table_for` measures against the tess path's bound.
+    let (bound, _) = t.error_tables();
+    for diagonal in [Diagonal::Either, Diagonal::Reference] {
+        // Low over the near corner, looking across to the far remainders.
+        let view = view_table_for(&t, [-29.0, 25.0, 35.0], [29.0, 20.0, -35.0], 1.0, diagonal);
+        assert_within_bound(&view, bound);
+        let relaxed = remainders
+            .iter()
+            .filter(|&&p| {
+                (0..ErrorTable::LEVELS).any(|k| view.table.patch(p)[k] < bound.patch(p)[k])
+            })
+            .count();
+        assert!(
+            relaxed >= remainders.len() / 2,
+            "{diagonal:?}: {relaxed} of {} remainders relaxed",
+            remainders.len()
+        );
+    }
+    // A plane is drawn exactly at every level, vertices between samples
+    // included.
+    let plane = terrain(
+        Heightmap::from_fn(59, 71, |r, c| 0.3 * c as f32 - 0.2 * r as f32).expect("valid size"),
+    );
+    for diagonal in [Diagonal::Either, Diagonal::Reference] {
+        let view = view_table_for(&plane, [-29.0, 5.0, 35.0], [0.0, 0.0, 0.0], 1.0, diagonal);
+        assert!(
+            view.table.as_slice().iter().all(|&e| e < 1e-4),
+            "{diagonal:?}"
+        );
+        assert!(view.predicted_p99_px < 1e-3, "{}", view.predicted_p99_px);
+    }
+}

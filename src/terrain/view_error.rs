@@ -20,9 +20,20 @@
 //! so a ray that grazes the drawn surface meets it within the quad. That
 //! holds only while the ray sinks into the reference (rising `s_ref` along
 //! it) fast enough to be `|delta|` deep within the diagonal; a ray that
-//! sinks slower may clear the drawn surface and land anywhere on, and its
-//! error is counted face-on, as the bound counts it, though never more than
-//! `|t|` times the run to the terrain's edge.
+//! sinks slower may clear the drawn surface and land further on. That ray
+//! is followed over the level's quads to where it meets the drawn surface
+//! (`PatchSamples::landing`). One that leaves the patch first is counted
+//! face-on, as the bound counts it, since the neighbours' levels are not
+//! known, though never more than `|t|` times the run to the terrain's
+//! edge.
+//!
+//! **Which vertices.** A level is laid over the patch as its path draws
+//! it (`Layout`): the tessellator cuts each side into 2^k equal segments
+//! whatever its cells, so on the far remainders (patches narrower than the
+//! rest, where the map's size is not a multiple of the patch size) vertices
+//! fall between samples and take the reference's height there; the geomip
+//! template takes every (N / 2^k)-th sample, clamped to the patch's far
+//! sides.
 //!
 //! **Which pixels.** Each sample stands for the ground its viewshed ring
 //! step adds to the view (`Viewshed::exposure`): the solid angle between
@@ -72,7 +83,7 @@ use glam::{DVec2, DVec3, Vec3};
 use super::camera::Frustum;
 use rayon::prelude::*;
 
-use super::error_table::{quad_splits, ErrorTable, LEVEL_COUNT};
+use super::error_table::{ErrorTable, LEVEL_COUNT};
 use super::grid::SampleRect;
 use super::heightmap::Heightmap;
 use super::lod::{patch_box_distance, within_tolerance};
@@ -87,6 +98,11 @@ use super::Terrain;
 /// own neighbourhood shows.
 pub const EXCEED_FRACTION: f64 = 0.005;
 
+/// Most half-cell steps a ray is followed to where it meets a drawn
+/// surface (`PatchSamples::landing`); a ray that runs further counts as
+/// not meeting it.
+const MAX_LANDING_STEPS: f64 = 256.0;
+
 /// Share of the frame's pixels above its 99th percentile.
 const P99_FRACTION: f64 = 0.01;
 
@@ -98,6 +114,83 @@ pub enum Diagonal {
     /// The reference's (upper-right to lower-left), as the geomip path
     /// draws every quad.
     Reference,
+}
+
+/// How a path lays a level's vertices over a patch, along one side of
+/// `cells` cells.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Layout {
+    /// The tessellator's (`Diagonal::Either`): level k cuts each side into
+    /// 2^k equal segments, whatever its cells; a vertex between samples
+    /// takes the reference's height there (`Heightmap::interpolate`, as
+    /// the evaluation shader reads it). A patch is drawn at full resolution
+    /// from the first level whose segments reach its smaller side.
+    Tessellated,
+    /// The geomip template's (`Diagonal::Reference`): level k takes every
+    /// (N / 2^k)-th sample of a template of N cells a side, clamped to the
+    /// patch's far sides (the far remainders are narrower); level log2 N
+    /// is full resolution.
+    Template(usize),
+}
+
+impl Layout {
+    /// The layout the path drawing `diagonal` uses, for patches of
+    /// `cells_per_patch` cells.
+    fn of(diagonal: Diagonal, cells_per_patch: usize) -> Self {
+        match diagonal {
+            Diagonal::Either => Layout::Tessellated,
+            Diagonal::Reference => Layout::Template(cells_per_patch),
+        }
+    }
+
+    /// Level `k`'s vertex positions along a side of `cells` cells, in
+    /// samples from its start: increasing, from 0 to `cells`.
+    fn vertices(self, k: usize, cells: usize) -> Vec<f64> {
+        match self {
+            Layout::Tessellated => {
+                let segments = 1usize << k;
+                (0..=segments)
+                    .map(|i| (i * cells) as f64 / segments as f64)
+                    .collect()
+            }
+            Layout::Template(n) => {
+                let step = (n >> k).max(1);
+                (0..cells)
+                    .step_by(step)
+                    .chain(std::iter::once(cells))
+                    .map(|v| v as f64)
+                    .collect()
+            }
+        }
+    }
+
+    /// The full-resolution level's index for a patch of `cells` (columns,
+    /// rows).
+    fn full(self, (cx, cz): (usize, usize)) -> usize {
+        match self {
+            Layout::Tessellated => cx.min(cz).next_power_of_two().trailing_zeros() as usize,
+            Layout::Template(n) => n.trailing_zeros() as usize,
+        }
+    }
+}
+
+/// The height at (u, v) in a quad [A upper-left, B upper-right, C
+/// lower-left, D lower-right] split like the reference, along B-C.
+fn split_reference([a, b, c, d]: [f64; 4], u: f64, v: f64) -> f64 {
+    if u + v <= 1.0 {
+        a + u * (b - a) + v * (c - a)
+    } else {
+        d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
+    }
+}
+
+/// The same quad split along the other diagonal, A-D.
+fn split_other([a, b, c, d]: [f64; 4], u: f64, v: f64) -> f64 {
+    if u >= v {
+        a + u * (b - a) + v * (d - b)
+    } else {
+        a + v * (c - a) + u * (d - c)
+    }
 }
 
 /// What the view is: the eye relative to the terrain's centre, the
@@ -150,8 +243,11 @@ struct Estimate {
     /// The first level the bound accepts (at most `full`): the levels
     /// below it are the measured ones.
     from: usize,
-    /// The full-resolution level's index: log2 of the side.
+    /// The full-resolution level's index (`Layout::full`).
     full: usize,
+    /// Triangles at full resolution (the reference's own); a coarser level
+    /// k draws 2 x 4^k.
+    full_triangles: f64,
 }
 
 /// The error table `bound` as this view sees it, for the patches `wanted`
@@ -161,8 +257,8 @@ struct Estimate {
 /// all but its share of pixels stay within, in the table's units. Levels
 /// stay non-increasing as they rise, and no level gets more than its bound.
 /// Only the levels the bound rejects from a patch's nearest point are
-/// measured. Patches that are not square with a power of two cells a side
-/// (the far remainders) keep their bounds. A patch the eye is inside has no
+/// measured, the far remainders' as their path lays them (`Layout`). A
+/// patch the eye is inside has no
 /// nearest distance to scale by: its accepted levels get error 0
 /// (`within_tolerance`), the others keep their bounds.
 pub fn view_error_table(
@@ -199,9 +295,10 @@ pub fn view_error_table(
         .map(|p| wanted[p] && accepted(p) > 0)
         .collect();
     let viewshed = sweep_viewshed(terrain, heightmap, view, &measured);
+    let layout = Layout::of(diagonal, grid.cells_per_patch());
     let samples = |p: usize| {
         let rect = grid.sample_rect(grid.patch_id(p));
-        PatchSamples::new(heightmap, rect, info, view, &viewshed)
+        PatchSamples::new(heightmap, rect, layout, info, view, &viewshed)
     };
     // First pass: each patch's seen pixels, and its pixels over tau at
     // every level the bound rejects.
@@ -209,13 +306,16 @@ pub fn view_error_table(
         .into_par_iter()
         .filter(|&p| measured[p])
         .filter_map(|p| {
-            let mut patch = samples(p)?;
-            let full = patch.side.trailing_zeros() as usize;
+            let mut patch = samples(p);
+            let full = patch.full();
+            if full == 0 {
+                return None;
+            }
             let from = accepted(p).min(full);
             let distance = distance(p);
             let mut over = [0.0; LEVEL_COUNT];
             for (k, o) in over.iter_mut().enumerate().take(from) {
-                patch.level(1 << k, diagonal);
+                patch.level(k, diagonal);
                 *o = patch.over(tau);
             }
             // A level's table entry is the largest of it and every finer
@@ -231,6 +331,7 @@ pub fn view_error_table(
                 over,
                 from,
                 full,
+                full_triangles: 2.0 * (patch.cells.0 * patch.cells.1) as f64,
             })
         })
         .collect();
@@ -248,14 +349,14 @@ pub fn view_error_table(
         .filter_map(|(e, &share)| {
             let (p, from) = (e.patch, e.from);
             let d = f64::from(e.distance);
-            let mut patch = samples(p)?;
+            let mut patch = samples(p);
             patch.keep_signed = diagonal == Diagonal::Reference;
             let own = bound.patch(p);
             let mut levels: [f32; LEVEL_COUNT] = own.try_into().expect("LEVEL_COUNT levels");
             let mut seen = vec![Vec::new(); e.full + 1];
             let mut signed = vec![Vec::new(); e.full + 1];
             for (k, level) in levels.iter_mut().enumerate().take(from) {
-                patch.level(1 << k, diagonal);
+                patch.level(k, diagonal);
                 let px = patch.percentile(share * e.pixels);
                 if d > 0.0 {
                     *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
@@ -292,7 +393,7 @@ pub fn view_error_table(
                 vec![(0.0, e.pixels)]
             } else {
                 if chosen >= from {
-                    patch.level(1 << chosen, diagonal);
+                    patch.level(chosen, diagonal);
                     seen[chosen] = std::mem::take(&mut patch.scratch);
                 }
                 std::mem::take(&mut seen[chosen])
@@ -473,7 +574,13 @@ fn allocate(
 fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
     use std::cmp::Ordering;
     use std::collections::BinaryHeap;
-    let triangles = |k: usize| 2.0 * 4f64.powi(k as i32);
+    let triangles = |e: &Estimate, k: usize| {
+        if k == e.full {
+            e.full_triangles
+        } else {
+            2.0 * 4f64.powi(k as i32)
+        }
+    };
     let mut level = vec![0; estimates.len()];
     let mut over: f64 = estimates.iter().zip(&level).map(|(e, &k)| e.over[k]).sum();
     // The best finer level from `from`: (pixels removed per triangle, level).
@@ -481,7 +588,8 @@ fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
         (from + 1..=e.full)
             .filter(|&k| e.over[k] < e.over[from])
             .map(|k| {
-                let gain = (e.over[from] - e.over[k]) / (triangles(k) - triangles(from));
+                let added = (triangles(e, k) - triangles(e, from)).max(1.0);
+                let gain = (e.over[from] - e.over[k]) / added;
                 (gain, k)
             })
             .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -544,8 +652,14 @@ fn largest_within(items: &mut [(f64, f64)], allowed: f64) -> f64 {
 struct PatchSamples<'a> {
     map: &'a Heightmap,
     rect: SampleRect,
-    /// Cells a side.
-    side: usize,
+    /// Cells across (columns) and down (rows).
+    cells: (usize, usize),
+    /// How the path lays a level's vertices over the patch.
+    layout: Layout,
+    /// The last measured level's vertex columns and rows, patch-local, in
+    /// samples: the quads' sides.
+    columns: Vec<f64>,
+    rows: Vec<f64>,
     /// Per sample, row-major over the rect.
     seen: Vec<Seen>,
     /// Sample spacing (dx, dz).
@@ -612,18 +726,15 @@ struct Seen {
 }
 
 impl<'a> PatchSamples<'a> {
-    /// None unless the patch is square with a power of two cells a side.
     fn new(
         map: &'a Heightmap,
         rect: SampleRect,
+        layout: Layout,
         info: &super::TerrainInfo,
         view: &ViewLod,
         viewshed: &Viewshed,
-    ) -> Option<Self> {
-        let side = rect.cells_x();
-        if side != rect.cells_z() || !side.is_power_of_two() {
-            return None;
-        }
+    ) -> Self {
+        let cells = (rect.cells_x(), rect.cells_z());
         let spacing = info.spacing();
         let eye = view.eye_local.as_dvec3();
         let k = f64::from(view.pixels_per_radian);
@@ -645,7 +756,7 @@ impl<'a> PatchSamples<'a> {
         // The terrain's horizontal extent (local x, then local z).
         let x_range = (info.local_x(0), info.local_x(w - 1));
         let z_range = (info.local_z(d - 1), info.local_z(0));
-        let mut seen = Vec::with_capacity((side + 1) * (side + 1));
+        let mut seen = Vec::with_capacity((cells.0 + 1) * (cells.1 + 1));
         for r in rect.row0..=rect.row1 {
             for c in rect.col0..=rect.col1 {
                 let rel = DVec3::new(info.local_x(c), h(r, c), info.local_z(r)) - eye;
@@ -734,17 +845,25 @@ impl<'a> PatchSamples<'a> {
                 });
             }
         }
-        Some(PatchSamples {
+        PatchSamples {
             map,
             rect,
-            side,
+            cells,
+            layout,
+            columns: Vec::new(),
+            rows: Vec::new(),
             seen,
             spacing,
             scratch: Vec::new(),
             signed: Vec::new(),
             keep_signed: false,
             field: Vec::new(),
-        })
+        }
+    }
+
+    /// The full-resolution level's index (`Layout::full`).
+    fn full(&self) -> usize {
+        self.layout.full(self.cells)
     }
 
     /// The patch's seen pixels.
@@ -752,42 +871,62 @@ impl<'a> PatchSamples<'a> {
         self.seen.iter().map(|s| s.pixels).sum()
     }
 
-    /// Measures `level` segments a side (a divisor of the side, below it)
-    /// into `scratch`: each seen sample's error in pixels and its pixels.
-    fn level(&mut self, level: usize, diagonal: Diagonal) {
-        let n = self.side;
-        let s = n / level;
-        let stride = n + 1;
-        let h =
-            |r: usize, c: usize| f64::from(self.map.get(self.rect.row0 + r, self.rect.col0 + c));
-        let inv = 1.0 / s as f64;
-        let quad = DVec2::new(s as f64 * self.spacing.x, s as f64 * self.spacing.y);
-        let diagonal_length = quad.length();
+    /// Measures level `k` (2^k segments a side, `Layout::vertices`) into
+    /// `scratch`: each seen sample's error in pixels and its pixels.
+    fn level(&mut self, k: usize, diagonal: Diagonal) {
+        let (cx, cz) = self.cells;
+        self.columns = self.layout.vertices(k, cx);
+        self.rows = self.layout.vertices(k, cz);
+        let stride = cx + 1;
+        let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
+        let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
         self.scratch.clear();
         self.signed.clear();
         self.field.clear();
-        self.field.resize(stride * stride, (0.0, 0.0));
-        for qi in 0..level {
-            for qj in 0..level {
-                let (r0, c0) = (qi * s, qj * s);
+        self.field.resize(stride * (cz + 1), (0.0, 0.0));
+        let (columns, rows) = (&self.columns, &self.rows);
+        for (qi, z) in rows.windows(2).enumerate() {
+            let last_row = qi + 2 == rows.len();
+            for (qj, x) in columns.windows(2).enumerate() {
+                let last_column = qj + 2 == columns.len();
                 // A upper-left, B upper-right, C lower-left, D lower-right.
-                let (a, b) = (h(r0, c0), h(r0, c0 + s));
-                let (c, d) = (h(r0 + s, c0), h(r0 + s, c0 + s));
-                // Samples on a quad's right or lower border belong to the
-                // next quad, except at the patch's own far borders.
-                let rows = if qi + 1 == level { s } else { s - 1 };
-                let cols = if qj + 1 == level { s } else { s - 1 };
-                for i in 0..=rows {
-                    let v = i as f64 * inv;
-                    for j in 0..=cols {
-                        let seen = self.seen[(r0 + i) * stride + c0 + j];
-                        let u = j as f64 * inv;
-                        let here = h(r0 + i, c0 + j);
-                        let (bc, ad) = quad_splits([a, b, c, d], (i, j), s);
+                let (a, b) = (at(z[0], x[0]), at(z[0], x[1]));
+                let (c, d) = (at(z[1], x[0]), at(z[1], x[1]));
+                let quad = DVec2::new(
+                    (x[1] - x[0]) * self.spacing.x,
+                    (z[1] - z[0]) * self.spacing.y,
+                );
+                let diagonal_length = quad.length();
+                let (inv_u, inv_v) = (1.0 / (x[1] - x[0]), 1.0 / (z[1] - z[0]));
+                // The samples in the quad; those on its right or lower side
+                // belong to the next quad, except at the patch's own far
+                // sides.
+                let samples = |lo: f64, hi: f64, last: bool| {
+                    let first = lo.ceil() as usize;
+                    let end = if last {
+                        hi.floor() as usize + 1
+                    } else {
+                        hi.ceil() as usize
+                    };
+                    first..end
+                };
+                for r in samples(z[0], z[1], last_row) {
+                    let v = (r as f64 - z[0]) * inv_v;
+                    for cc in samples(x[0], x[1], last_column) {
+                        let u = (cc as f64 - x[0]) * inv_u;
+                        let seen = self.seen[r * stride + cc];
+                        let here = f64::from(self.map.get(self.rect.row0 + r, self.rect.col0 + cc));
                         let error = match diagonal {
-                            Diagonal::Reference => here - bc,
-                            Diagonal::Either if (here - ad).abs() > (here - bc).abs() => here - ad,
-                            Diagonal::Either => here - bc,
+                            Diagonal::Reference => here - split_reference([a, b, c, d], u, v),
+                            Diagonal::Either => {
+                                let bc = here - split_reference([a, b, c, d], u, v);
+                                let ad = here - split_other([a, b, c, d], u, v);
+                                if ad.abs() > bc.abs() {
+                                    ad
+                                } else {
+                                    bc
+                                }
+                            }
                         };
                         let delta = error.abs();
                         // The ray meets the drawn surface `delta / meet`
@@ -797,11 +936,10 @@ impl<'a> PatchSamples<'a> {
                         // reference, which the ray sinks into. Where the
                         // ray sinks into the reference too slowly to be
                         // `delta` deep within the diagonal, it may clear
-                        // the drawn surface and land anywhere on: counted
-                        // face-on, as the bound counts it, but no further
-                        // than the terrain's edge. A sample showing no
-                        // pixels needs only its face-on error, which a
-                        // silhouette in front of it reads.
+                        // the drawn surface: followed to where it lands
+                        // (`landing`). A sample showing no pixels needs
+                        // only its face-on error, which a silhouette in
+                        // front of it reads.
                         let px = if seen.pixels <= 0.0 {
                             0.0
                         } else if seen.fall.is_infinite() {
@@ -809,7 +947,9 @@ impl<'a> PatchSamples<'a> {
                         } else {
                             let sink = seen.ground_rise + seen.fall;
                             if sink <= 0.0 || delta > sink * diagonal_length {
-                                delta.min(seen.fall.abs() * seen.beyond) * seen.face_on
+                                self.landing(diagonal, (r, cc), &seen, error)
+                                    * seen.fall.abs()
+                                    * seen.face_on
                             } else {
                                 // The drawn quad's slope along the ray (its
                                 // bilinear gradient; local z falls as rows
@@ -825,8 +965,7 @@ impl<'a> PatchSamples<'a> {
                                 travel.min(diagonal_length) * seen.fall.abs() * seen.face_on
                             }
                         };
-                        self.field[(r0 + i) * stride + c0 + j] =
-                            (px.copysign(error), error * seen.face_on);
+                        self.field[r * stride + cc] = (px.copysign(error), error * seen.face_on);
                     }
                 }
             }
@@ -834,8 +973,8 @@ impl<'a> PatchSamples<'a> {
         // Each seen sample's pixels take its error; its neighbours' are all
         // known now, seen or not.
         let field = &self.field;
-        for r in 0..=n {
-            for c in 0..=n {
+        for r in 0..=cz {
+            for c in 0..=cx {
                 let i = r * stride + c;
                 let seen = self.seen[i];
                 if seen.pixels <= 0.0 {
@@ -852,7 +991,7 @@ impl<'a> PatchSamples<'a> {
                         c.checked_add_signed(-seen.dir.x.round() as isize),
                     );
                     let front = match (fr, fc) {
-                        (Some(fr), Some(fc)) if fr <= n && fc <= n => field[fr * stride + fc].1,
+                        (Some(fr), Some(fc)) if fr <= cz && fc <= cx => field[fr * stride + fc].1,
                         _ => face_on,
                     };
                     face_on.min(seen.crest_rise_px + front.max(0.0))
@@ -881,6 +1020,85 @@ impl<'a> PatchSamples<'a> {
         }
     }
 
+    /// How far (horizontally) the ray through sample `at` (patch-local row,
+    /// column) runs from the reference to the drawn surface of the last
+    /// measured level, where the ray sinks into the reference too slowly
+    /// for the quad's diagonal to bound it: marched in half-cell steps over
+    /// the level's quads. Drawn below the reference (`error` > 0), the ray
+    /// runs on until the drawn surface rises to it; drawn above, it met the
+    /// drawn surface before the sample, where that surface last rose above
+    /// it. The tessellator may split a quad along either diagonal: the
+    /// march takes the one that keeps the ray off the surface longer. The
+    /// run is at most what puts the two points `|error|` apart vertically
+    /// (the face-on error, as the bound counts it) and no further than the
+    /// terrain's edge; a ray that leaves the patch first counts as running
+    /// all that way, since the neighbours' levels are not known here.
+    fn landing(
+        &self,
+        diagonal: Diagonal,
+        (row, col): (usize, usize),
+        seen: &Seen,
+        error: f64,
+    ) -> f64 {
+        let delta = error.abs();
+        let fall = seen.fall.abs().max(f64::MIN_POSITIVE);
+        let limit = (delta / fall).min(seen.beyond);
+        let step = 0.5 * self.spacing.min_element();
+        let steps = (limit / step).ceil().min(MAX_LANDING_STEPS) as usize;
+        let (cx, cz) = (self.cells.0 as f64, self.cells.1 as f64);
+        let below = error > 0.0;
+        // Drawn below: forward, the ray above the surface until it lands.
+        // Drawn above: backward, the ray below the surface until it leaves.
+        let sign = if below { 1.0 } else { -1.0 };
+        let here = f64::from(self.map.get(self.rect.row0 + row, self.rect.col0 + col));
+        // Samples moved per unit of horizontal travel; local z falls as
+        // rows rise.
+        let (dc, dr) = (
+            sign * seen.dir.x / self.spacing.x,
+            -sign * seen.dir.y / self.spacing.y,
+        );
+        let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
+        let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
+        // The quad along one axis holding `p`: the last side at or before it.
+        let quad = |sides: &[f64], p: f64| {
+            sides.partition_point(|&l| l <= p).clamp(1, sides.len() - 1) - 1
+        };
+        // The drawn surface `x` along the ray, None off the patch.
+        let drawn = |x: f64| -> Option<f64> {
+            let (c, r) = (col as f64 + x * dc, row as f64 + x * dr);
+            if !(0.0..=cx).contains(&c) || !(0.0..=cz).contains(&r) {
+                return None;
+            }
+            let (qj, qi) = (quad(&self.columns, c), quad(&self.rows, r));
+            let (x0, x1) = (self.columns[qj], self.columns[qj + 1]);
+            let (z0, z1) = (self.rows[qi], self.rows[qi + 1]);
+            let corners = [at(z0, x0), at(z0, x1), at(z1, x0), at(z1, x1)];
+            let (u, v) = ((c - x0) / (x1 - x0), (r - z0) / (z1 - z0));
+            let bc = split_reference(corners, u, v);
+            Some(match diagonal {
+                Diagonal::Reference => bc,
+                Diagonal::Either if below => bc.min(split_other(corners, u, v)),
+                Diagonal::Either => bc.max(split_other(corners, u, v)),
+            })
+        };
+        // The ray's clearance from the drawn surface: positive while it has
+        // not met it (forward) or is still under it (backward). The ray
+        // rises `fall` per unit back towards the eye.
+        let (mut before, mut previous) = (0.0, delta);
+        for k in 1..=steps {
+            let x = (k as f64 * step).min(limit);
+            let Some(surface) = drawn(x) else {
+                return limit;
+            };
+            let gap = sign * (here - sign * fall * x - surface);
+            if gap <= 0.0 {
+                return before + (x - before) * previous / (previous - gap);
+            }
+            (before, previous) = (x, gap);
+        }
+        limit
+    }
+
     /// The measured level's pixels over `tau` pixels of error.
     fn over(&self, tau: f64) -> f64 {
         self.scratch.iter().filter(|s| s.0 > tau).map(|s| s.1).sum()
@@ -892,5 +1110,132 @@ impl<'a> PatchSamples<'a> {
         // Pixels handed out as a level's pixels over tau must all get
         // through, whatever the order of the sums.
         largest_within(&mut self.scratch, allowed * (1.0 + 1e-9))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_tessellator_cuts_any_side_evenly_and_the_template_clamps_to_it() {
+        let tess = Layout::Tessellated;
+        assert_eq!(tess.vertices(2, 16), [0.0, 4.0, 8.0, 12.0, 16.0]);
+        assert_eq!(tess.vertices(2, 10), [0.0, 2.5, 5.0, 7.5, 10.0]);
+        // Full resolution from the first level reaching the smaller side.
+        assert_eq!(tess.full((16, 16)), 4);
+        assert_eq!(tess.full((10, 16)), 4);
+        assert_eq!(tess.full((16, 8)), 3);
+        assert_eq!(tess.full((1, 16)), 0);
+        let template = Layout::Template(16);
+        assert_eq!(template.vertices(2, 16), [0.0, 4.0, 8.0, 12.0, 16.0]);
+        assert_eq!(template.vertices(2, 10), [0.0, 4.0, 8.0, 10.0]);
+        assert_eq!(template.vertices(0, 10), [0.0, 10.0]);
+        assert_eq!(template.vertices(4, 3), [0.0, 1.0, 2.0, 3.0]);
+        assert_eq!(template.full((10, 6)), 4);
+    }
+
+    #[test]
+    fn both_splits_meet_the_corners_and_the_reference_split_is_the_maps() {
+        let corners = [1.0, 2.0, 4.0, 8.0];
+        for split in [split_reference, split_other] {
+            for (u, v, h) in [
+                (0.0, 0.0, 1.0),
+                (1.0, 0.0, 2.0),
+                (0.0, 1.0, 4.0),
+                (1.0, 1.0, 8.0),
+            ] {
+                assert_eq!(split(corners, u, v), h);
+            }
+        }
+        // The map's split runs from upper-right to lower-left.
+        let map = Heightmap::from_heights(2, 2, vec![1.0, 2.0, 4.0, 8.0]).expect("valid size");
+        for (u, v) in [(0.25, 0.25), (0.75, 0.5), (0.5, 0.5), (0.9, 0.8)] {
+            assert!((split_reference(corners, u, v) - map.interpolate(u, v)).abs() < 1e-12);
+        }
+        assert_eq!(split_other(corners, 0.5, 0.5), 4.5);
+        assert_eq!(split_reference(corners, 0.5, 0.5), 3.0);
+    }
+
+    /// A 33 x 33 unit-spaced map rising `slope` per column, with `bump`
+    /// added at sample (8, 8), and its patch of rows and columns 0-16.
+    fn ramp(slope: f32, bump: f32) -> Heightmap {
+        Heightmap::from_fn(33, 33, |r, c| {
+            slope * c as f32 + if (r, c) == (8, 8) { bump } else { 0.0 }
+        })
+        .expect("valid size")
+    }
+
+    /// Patch 0-16 of `map` at level `k` of `layout`, for `landing` alone.
+    fn patch(map: &Heightmap, layout: Layout, k: usize) -> PatchSamples<'_> {
+        let cells = (16, 16);
+        PatchSamples {
+            map,
+            rect: SampleRect {
+                row0: 0,
+                row1: 16,
+                col0: 0,
+                col1: 16,
+            },
+            cells,
+            layout,
+            columns: layout.vertices(k, cells.0),
+            rows: layout.vertices(k, cells.1),
+            seen: Vec::new(),
+            spacing: DVec2::ONE,
+            scratch: Vec::new(),
+            signed: Vec::new(),
+            keep_signed: false,
+            field: Vec::new(),
+        }
+    }
+
+    /// A sample seen along +x, falling `fall` per unit.
+    fn along_x(fall: f64, beyond: f64) -> Seen {
+        Seen {
+            face_on: 1.0,
+            dir: DVec2::X,
+            fall,
+            pixels: 1.0,
+            crest_width: 0.0,
+            crest_px: 0.0,
+            crest_rise_px: 0.0,
+            ground_rise: 0.0,
+            beyond,
+        }
+    }
+
+    #[test]
+    fn a_skimming_ray_lands_where_the_drawn_ramp_rises_to_it() {
+        // The coarsest level draws the ramp without the bump: the ray over
+        // the bump's top falls 0.05 a unit onto ground rising 0.1, so
+        // drawn 3 below the reference it runs 3 / 0.15 = 20 on... past the
+        // patch's far side (8 + 20 > 16): as far as face-on.
+        let map = ramp(0.1, 3.0);
+        for diagonal in [Diagonal::Reference, Diagonal::Either] {
+            for layout in [Layout::Tessellated, Layout::Template(16)] {
+                let p = patch(&map, layout, 0);
+                let run = p.landing(diagonal, (8, 8), &along_x(0.05, 100.0), 3.0);
+                assert_eq!(run, 3.0 / 0.05, "{diagonal:?} {layout:?}");
+                // Rising 0.4 a unit it lands within the patch, 6 on.
+                let steep = ramp(0.4, 3.0);
+                let p = patch(&steep, layout, 0);
+                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), 3.0);
+                // Heights are f32: the ramp is straight to rounding.
+                assert!((run - 6.0).abs() < 1e-5, "{diagonal:?} {layout:?}: {run}");
+                // A pit drawn 3 above: the ray met the drawn ramp 6 before.
+                let pit = ramp(0.4, -3.0);
+                let p = patch(&pit, layout, 0);
+                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), -3.0);
+                // Heights are f32: the ramp is straight to rounding.
+                assert!((run - 6.0).abs() < 1e-5, "{diagonal:?} {layout:?}: {run}");
+            }
+        }
+        // Never past the terrain's edge.
+        let p = patch(&map, Layout::Tessellated, 0);
+        assert_eq!(
+            p.landing(Diagonal::Either, (8, 8), &along_x(0.05, 5.0), 3.0),
+            5.0
+        );
     }
 }
