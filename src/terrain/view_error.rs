@@ -49,7 +49,10 @@
 //! (`Viewshed::crest`) is on a silhouette: a vertical error there moves the
 //! silhouette by its face-on size, but no further than the sample rises
 //! above the horizon in front of it (below that, nearer ground is the
-//! silhouette). Each pixel it sweeps shows the silhouette in one render and
+//! silhouette), and, drawn lower, no further than the highest the level's
+//! drawn surface rises along its line of sight within the patch (a vertex
+//! in front of or behind it may hold the outline up;
+//! `PatchSamples::sunk_silhouette`). Each pixel it sweeps shows the silhouette in one render and
 //! the ground where its line of sight lands in the other: as far apart, in
 //! pixels, as the line of sight falls between them, seen at the sample.
 //! Against the sky, each is off by its distance to the moved silhouette.
@@ -675,6 +678,8 @@ struct PatchSamples<'a> {
     /// below the reference is positive); the first is 0 where the sample
     /// shows no pixels.
     field: Vec<(f64, f64)>,
+    /// The viewport's pixels per radian (K).
+    pixels_per_radian: f64,
 }
 
 /// One seen sample's error at a measured level, signed (drawn above the
@@ -723,6 +728,8 @@ struct Seen {
     /// Horizontal distance from the sample to the terrain's edge along the
     /// ray.
     beyond: f64,
+    /// Horizontal distance from the eye.
+    reach: f64,
 }
 
 impl<'a> PatchSamples<'a> {
@@ -796,6 +803,7 @@ impl<'a> PatchSamples<'a> {
                         crest_rise_px: 0.0,
                         ground_rise: 0.0,
                         beyond: 0.0,
+                        reach: 0.0,
                     });
                     continue;
                 }
@@ -827,6 +835,7 @@ impl<'a> PatchSamples<'a> {
                     crest_rise_px: crest
                         .map_or(0.0, |crest| crest.rise * k * (1.0 + fall * fall).sqrt()),
                     ground_rise: rise,
+                    reach,
                     beyond: {
                         let (x, z) = (rel.x + eye.x, rel.z + eye.z);
                         let across = |p: f64, d: f64, lo: f64, hi: f64| {
@@ -858,6 +867,7 @@ impl<'a> PatchSamples<'a> {
             signed: Vec::new(),
             keep_signed: false,
             field: Vec::new(),
+            pixels_per_radian: k,
         }
     }
 
@@ -994,7 +1004,9 @@ impl<'a> PatchSamples<'a> {
                         (Some(fr), Some(fc)) if fr <= cz && fc <= cx => field[fr * stride + fc].1,
                         _ => face_on,
                     };
-                    face_on.min(seen.crest_rise_px + front.max(0.0))
+                    face_on
+                        .min(seen.crest_rise_px + front.max(0.0))
+                        .min(self.sunk_silhouette(diagonal, (r, c), &seen))
                 } else {
                     face_on
                 };
@@ -1045,7 +1057,6 @@ impl<'a> PatchSamples<'a> {
         let limit = (delta / fall).min(seen.beyond);
         let step = 0.5 * self.spacing.min_element();
         let steps = (limit / step).ceil().min(MAX_LANDING_STEPS) as usize;
-        let (cx, cz) = (self.cells.0 as f64, self.cells.1 as f64);
         let below = error > 0.0;
         // Drawn below: forward, the ray above the surface until it lands.
         // Drawn above: backward, the ray below the surface until it leaves.
@@ -1057,30 +1068,9 @@ impl<'a> PatchSamples<'a> {
             sign * seen.dir.x / self.spacing.x,
             -sign * seen.dir.y / self.spacing.y,
         );
-        let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
-        let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
-        // The quad along one axis holding `p`: the last side at or before it.
-        let quad = |sides: &[f64], p: f64| {
-            sides.partition_point(|&l| l <= p).clamp(1, sides.len() - 1) - 1
-        };
         // The drawn surface `x` along the ray, None off the patch.
-        let drawn = |x: f64| -> Option<f64> {
-            let (c, r) = (col as f64 + x * dc, row as f64 + x * dr);
-            if !(0.0..=cx).contains(&c) || !(0.0..=cz).contains(&r) {
-                return None;
-            }
-            let (qj, qi) = (quad(&self.columns, c), quad(&self.rows, r));
-            let (x0, x1) = (self.columns[qj], self.columns[qj + 1]);
-            let (z0, z1) = (self.rows[qi], self.rows[qi + 1]);
-            let corners = [at(z0, x0), at(z0, x1), at(z1, x0), at(z1, x1)];
-            let (u, v) = ((c - x0) / (x1 - x0), (r - z0) / (z1 - z0));
-            let bc = split_reference(corners, u, v);
-            Some(match diagonal {
-                Diagonal::Reference => bc,
-                Diagonal::Either if below => bc.min(split_other(corners, u, v)),
-                Diagonal::Either => bc.max(split_other(corners, u, v)),
-            })
-        };
+        let drawn =
+            |x: f64| self.drawn_at(diagonal, below, row as f64 + x * dr, col as f64 + x * dc);
         // The ray's clearance from the drawn surface: positive while it has
         // not met it (forward) or is still under it (backward). The ray
         // rises `fall` per unit back towards the eye.
@@ -1097,6 +1087,62 @@ impl<'a> PatchSamples<'a> {
             (before, previous) = (x, gap);
         }
         limit
+    }
+
+    /// The last measured level's drawn surface at patch-local (row,
+    /// column), None off the patch. Where the tessellator may split a quad
+    /// along either diagonal, the `lower` of the two, else the higher.
+    fn drawn_at(&self, diagonal: Diagonal, lower: bool, r: f64, c: f64) -> Option<f64> {
+        let (cx, cz) = (self.cells.0 as f64, self.cells.1 as f64);
+        if !(0.0..=cx).contains(&c) || !(0.0..=cz).contains(&r) {
+            return None;
+        }
+        // The quad along one axis holding `p`: the last side at or before it.
+        let quad = |sides: &[f64], p: f64| {
+            sides.partition_point(|&l| l <= p).clamp(1, sides.len() - 1) - 1
+        };
+        let (qj, qi) = (quad(&self.columns, c), quad(&self.rows, r));
+        let (x0, x1) = (self.columns[qj], self.columns[qj + 1]);
+        let (z0, z1) = (self.rows[qi], self.rows[qi + 1]);
+        let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
+        let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
+        let corners = [at(z0, x0), at(z0, x1), at(z1, x0), at(z1, x1)];
+        let (u, v) = ((c - x0) / (x1 - x0), (r - z0) / (z1 - z0));
+        let bc = split_reference(corners, u, v);
+        Some(match diagonal {
+            Diagonal::Reference => bc,
+            Diagonal::Either if lower => bc.min(split_other(corners, u, v)),
+            Diagonal::Either => bc.max(split_other(corners, u, v)),
+        })
+    }
+
+    /// How far, in pixels, a silhouette at sample (row, col) drawn lower
+    /// sinks: from its own elevation down to the highest the drawn surface
+    /// rises along its line of sight within the patch (the crest's own
+    /// drawn point included; before and behind it other drawn points may
+    /// hold the outline up). Marched in half-cell steps.
+    fn sunk_silhouette(&self, diagonal: Diagonal, (row, col): (usize, usize), seen: &Seen) -> f64 {
+        let here = f64::from(self.map.get(self.rect.row0 + row, self.rect.col0 + col));
+        let eye_y = here + seen.fall * seen.reach;
+        let (dc, dr) = (seen.dir.x / self.spacing.x, -seen.dir.y / self.spacing.y);
+        let step = 0.5 * self.spacing.min_element();
+        let across =
+            (self.cells.0 as f64 * self.spacing.x).hypot(self.cells.1 as f64 * self.spacing.y);
+        let steps = (across / step).ceil() as i64;
+        let mut highest = f64::NEG_INFINITY;
+        for k in -steps..=steps {
+            let x = k as f64 * step;
+            if seen.reach + x <= 0.5 * step {
+                continue;
+            }
+            let Some(h) = self.drawn_at(diagonal, true, row as f64 + x * dr, col as f64 + x * dc)
+            else {
+                continue;
+            };
+            highest = highest.max((h - eye_y) / (seen.reach + x));
+        }
+        let drop = (-seen.fall - highest).max(0.0);
+        drop * self.pixels_per_radian / (1.0 + seen.fall * seen.fall)
     }
 
     /// The measured level's pixels over `tau` pixels of error.
@@ -1187,6 +1233,7 @@ mod tests {
             signed: Vec::new(),
             keep_signed: false,
             field: Vec::new(),
+            pixels_per_radian: 1000.0,
         }
     }
 
@@ -1202,6 +1249,7 @@ mod tests {
             crest_rise_px: 0.0,
             ground_rise: 0.0,
             beyond,
+            reach: 20.0,
         }
     }
 
@@ -1236,6 +1284,42 @@ mod tests {
         assert_eq!(
             p.landing(Diagonal::Either, (8, 8), &along_x(0.05, 5.0), 3.0),
             5.0
+        );
+    }
+
+    #[test]
+    fn a_sunk_silhouette_stops_where_a_drawn_vertex_in_front_holds_it() {
+        // Along row 8: a crest 3.2 high at column 9, seen rising 0.01 from
+        // 20 away at height 3, and a sample 3 high at column 8 in front.
+        // Level 2 has vertices on columns 0, 4, 8, 12 and 16: the crest is
+        // drawn 0.95 lower, but the vertex at column 8 keeps the outline
+        // at elevation 0, 0.01 below the crest's.
+        let map = Heightmap::from_fn(33, 33, |r, c| match (r, c) {
+            (8, 8) => 3.0,
+            (8, 9) => 3.2,
+            _ => 0.0,
+        })
+        .expect("valid size");
+        for diagonal in [Diagonal::Reference, Diagonal::Either] {
+            let p = patch(&map, Layout::Tessellated, 2);
+            let sunk = p.sunk_silhouette(diagonal, (8, 9), &along_x(-0.01, 100.0));
+            // f32 heights: 3.2 is 3.2 to 1e-7.
+            assert!(
+                (sunk - 0.01 * 1000.0 / 1.0001).abs() < 1e-3,
+                "{diagonal:?}: {sunk}"
+            );
+        }
+        // With nothing in front it sinks to the highest drawn point along
+        // its line of sight within the patch: flat ground at 0, highest in
+        // elevation at the patch's far side, 7 columns on (-3 / 27).
+        let lone = Heightmap::from_fn(33, 33, |r, c| if (r, c) == (8, 9) { 3.2 } else { 0.0 })
+            .expect("valid size");
+        let p = patch(&lone, Layout::Tessellated, 2);
+        let sunk = p.sunk_silhouette(Diagonal::Reference, (8, 9), &along_x(-0.01, 100.0));
+        let highest = -3.0 / 27.0;
+        assert!(
+            (sunk - (0.01 - highest) * 1000.0 / 1.0001).abs() < 1e-2,
+            "{sunk}"
         );
     }
 }
