@@ -212,10 +212,13 @@ pub struct ViewLod {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ViewErrors {
     pub table: ErrorTable,
-    /// The frame's 99th percentile error the choice expects, in pixels (its
-    /// own target is the 99.5th, `EXCEED_FRACTION`).
+    /// The 99th percentile error the choice expects over the measured
+    /// patches' pixels, each patch at the level its path is expected to
+    /// draw (geomip's stitching refines some past their own choice), in
+    /// pixels (the choice's own target is the 99.5th, `EXCEED_FRACTION`).
     pub predicted_p99_px: f32,
-    /// The largest error the choice expects on any seen sample, in pixels.
+    /// The largest error the choice expects on any seen sample, in pixels,
+    /// at the same levels.
     pub predicted_max_px: f32,
     /// Per patch, for `Diagonal::Reference` (geomorphing draws): the level
     /// index the choice expects and the largest morph factor towards the
@@ -349,7 +352,7 @@ pub fn view_error_table(
     let per_patch: Vec<Measured> = estimates
         .par_iter()
         .zip(shares.par_iter())
-        .filter_map(|(e, &share)| {
+        .filter_map(|(e, &(share, drawn))| {
             let (p, from) = (e.patch, e.from);
             let d = f64::from(e.distance);
             let mut patch = samples(p);
@@ -392,14 +395,17 @@ pub fn view_error_table(
                         morph_limit(finer, &signed[chosen - 1], tau, allowed),
                     )
                 });
-            let shown = if chosen == e.full {
+            // What it shows at the level it is drawn at: geomip's
+            // stitching may refine it past the chosen one.
+            let expected = chosen.max(drawn).min(e.full);
+            let shown = if expected == e.full {
                 vec![(0.0, e.pixels)]
             } else {
-                if chosen >= from {
-                    patch.level(chosen, diagonal);
-                    seen[chosen] = std::mem::take(&mut patch.scratch);
+                if expected >= from {
+                    patch.level(expected, diagonal);
+                    seen[expected] = std::mem::take(&mut patch.scratch);
                 }
-                std::mem::take(&mut seen[chosen])
+                std::mem::take(&mut seen[expected])
             };
             Some((p, levels, shown, limit))
         })
@@ -524,17 +530,19 @@ fn sweep_viewshed(
 /// refine a patch to within one level of its neighbours, which leaves
 /// fewer pixels over tau than the greedy choice spent: the greedy budget
 /// is raised, in steps, as far as the stitched levels still fit the
-/// frame's share.
+/// frame's share. With each share, the level the path is expected to draw
+/// the patch at: the greedy one, refined by the stitching.
 fn allocate(
     estimates: &[Estimate],
     viewport_pixels: f64,
     stitched: Option<&super::grid::PatchGrid>,
-) -> Vec<f64> {
+) -> Vec<(f64, usize)> {
     let total: f64 = estimates.iter().map(|e| e.pixels).sum();
     let budget = EXCEED_FRACTION * total.min(viewport_pixels);
     let over =
         |levels: &[usize]| -> f64 { estimates.iter().zip(levels).map(|(e, &k)| e.over[k]).sum() };
     let mut levels = greedy_levels(estimates, budget);
+    let mut drawn = levels.clone();
     if let Some(grid) = stitched {
         let count = LEVEL_COUNT;
         let balanced = |levels: &[usize]| -> Vec<usize> {
@@ -550,23 +558,26 @@ fn allocate(
                 .map(|e| count - 1 - usize::from(geomip[e.patch]))
                 .collect()
         };
+        drawn = balanced(&levels);
         for factor in [1.5, 2.0, 3.0, 4.0, 6.0, 8.0] {
             let wider = greedy_levels(estimates, factor * budget);
-            if over(&balanced(&wider)) > budget {
+            let refined = balanced(&wider);
+            if over(&refined) > budget {
                 break;
             }
-            levels = wider;
+            (levels, drawn) = (wider, refined);
         }
     }
     estimates
         .iter()
-        .zip(&levels)
-        .map(|(e, &k)| {
-            if e.pixels > 0.0 {
+        .zip(levels.iter().zip(&drawn))
+        .map(|(e, (&k, &d))| {
+            let share = if e.pixels > 0.0 {
                 e.over[k] / e.pixels
             } else {
                 0.0
-            }
+            };
+            (share, d)
         })
         .collect()
 }
