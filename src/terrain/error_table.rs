@@ -151,25 +151,41 @@ fn split(k: usize, cells: usize, level: usize) -> (usize, usize) {
     (n / level, n % level)
 }
 
-/// The heights of a quad's two triangulations at its lattice point (row
-/// `i`, column `j`) of `s` a side, from its corners A upper-left, B
-/// upper-right, C lower-left, D lower-right: (split B-C, the reference's:
-/// ABC above, DCB below; split A-D: ABD right of it, ACD left).
+/// The height at (u, v) in a quad [A upper-left, B upper-right, C
+/// lower-left, D lower-right] split along B-C, the reference's diagonal:
+/// on ABC where `upper` (u + v <= 1), else on DCB. The caller decides the
+/// side, exactly where it can.
 #[inline]
-pub(super) fn quad_splits([a, b, c, d]: [f64; 4], (i, j): (usize, usize), s: usize) -> (f64, f64) {
-    let inv = 1.0 / s as f64;
-    let (u, v) = (j as f64 * inv, i as f64 * inv);
-    let bc = if i + j <= s {
+pub(super) fn split_bc([a, b, c, d]: [f64; 4], u: f64, v: f64, upper: bool) -> f64 {
+    if upper {
         a + u * (b - a) + v * (c - a)
     } else {
         d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
-    };
-    let ad = if j >= i {
+    }
+}
+
+/// The same quad split along A-D: on ABD where `right` (u >= v), else on
+/// ACD.
+#[inline]
+pub(super) fn split_ad([a, b, c, d]: [f64; 4], u: f64, v: f64, right: bool) -> f64 {
+    if right {
         a + u * (b - a) + v * (d - b)
     } else {
         a + v * (c - a) + u * (d - c)
-    };
-    (bc, ad)
+    }
+}
+
+/// The heights of a quad's two triangulations at its lattice point (row
+/// `i`, column `j`) of `s` a side (`split_bc`, `split_ad`), the sides
+/// decided in whole numbers.
+#[inline]
+fn quad_splits(corners: [f64; 4], (i, j): (usize, usize), s: usize) -> (f64, f64) {
+    let inv = 1.0 / s as f64;
+    let (u, v) = (j as f64 * inv, i as f64 * inv);
+    (
+        split_bc(corners, u, v, i + j <= s),
+        split_ad(corners, u, v, j >= i),
+    )
 }
 
 /// Exact errors of one level over one patch whose quads are square runs of

@@ -86,7 +86,7 @@ use glam::{DVec2, DVec3, Vec3};
 use super::camera::Frustum;
 use rayon::prelude::*;
 
-use super::error_table::{ErrorTable, LEVEL_COUNT};
+use super::error_table::{split_ad, split_bc, ErrorTable, LEVEL_COUNT};
 use super::grid::SampleRect;
 use super::heightmap::Heightmap;
 use super::lod::{patch_box_distance, within_tolerance};
@@ -179,21 +179,13 @@ impl Layout {
 
 /// The height at (u, v) in a quad [A upper-left, B upper-right, C
 /// lower-left, D lower-right] split like the reference, along B-C.
-fn split_reference([a, b, c, d]: [f64; 4], u: f64, v: f64) -> f64 {
-    if u + v <= 1.0 {
-        a + u * (b - a) + v * (c - a)
-    } else {
-        d + (1.0 - u) * (c - d) + (1.0 - v) * (b - d)
-    }
+fn split_reference(corners: [f64; 4], u: f64, v: f64) -> f64 {
+    split_bc(corners, u, v, u + v <= 1.0)
 }
 
 /// The same quad split along the other diagonal, A-D.
-fn split_other([a, b, c, d]: [f64; 4], u: f64, v: f64) -> f64 {
-    if u >= v {
-        a + u * (b - a) + v * (d - b)
-    } else {
-        a + v * (c - a) + u * (d - c)
-    }
+fn split_other(corners: [f64; 4], u: f64, v: f64) -> f64 {
+    split_ad(corners, u, v, u >= v)
 }
 
 /// What the view is: the eye relative to the terrain's centre, the
