@@ -220,17 +220,15 @@ fn rough() -> Terrain {
     )
 }
 
-fn assert_within_bound(view: &ViewErrors, bound: &ErrorTable) {
-    for p in 0..bound.as_slice().len() / ErrorTable::LEVELS {
-        let (seen, own) = (view.table.patch(p), bound.patch(p));
+/// Every entry finite and not negative, and a patch's entries never rising
+/// with the level. An entry may pass the bound's: the bound projects the
+/// vertical error face-on, and a ray running on down ground that falls
+/// away from the eye shows more.
+fn assert_well_formed(view: &ViewErrors) {
+    for p in 0..view.table.as_slice().len() / ErrorTable::LEVELS {
+        let seen = view.table.patch(p);
         for k in 0..ErrorTable::LEVELS {
-            assert!(
-                seen[k] <= own[k],
-                "patch {p} level {k}: {} over {}",
-                seen[k],
-                own[k]
-            );
-            assert!(seen[k] >= 0.0 && seen[k].is_finite());
+            assert!(seen[k] >= 0.0 && seen[k].is_finite(), "patch {p} level {k}");
             if k + 1 < ErrorTable::LEVELS {
                 assert!(seen[k] >= seen[k + 1], "patch {p}: rises at level {k}");
             }
@@ -239,9 +237,8 @@ fn assert_within_bound(view: &ViewErrors, bound: &ErrorTable) {
 }
 
 #[test]
-fn never_above_the_bound_and_never_rising_with_the_level() {
+fn never_rising_with_the_level_and_within_tau_as_the_choice_expects() {
     let t = rough();
-    let (bound, _) = t.error_tables();
     for (eye, target) in [
         ([-30.0, 60.0, 40.0], [0.0, 30.0, 0.0]),
         ([-31.0, 25.0, 31.0], [31.0, 25.0, -31.0]),
@@ -250,13 +247,11 @@ fn never_above_the_bound_and_never_rising_with_the_level() {
     ] {
         for tau in [0.5, 1.0, 4.0] {
             let view = view_table(&t, eye, target, tau);
-            assert_within_bound(&view, bound);
-            // Levels the bound accepts from a patch's nearest point are not
-            // measured; on ground falling away from the eye the modelled
-            // error there can pass the face-on bound a little (4.15 px at
-            // 4 px from the first eye).
+            assert_well_formed(&view);
+            // The levels the bound accepts are measured too, so the choice
+            // keeps what it models within tau at its 99th percentile.
             assert!(
-                view.predicted_p99_px <= 1.05 * tau,
+                view.predicted_p99_px <= tau,
                 "from {eye:?} at {tau} px: the choice expects p99 {}",
                 view.predicted_p99_px
             );
@@ -331,7 +326,6 @@ fn a_plane_has_no_error_from_anywhere() {
 #[test]
 fn geomip_morph_limits_are_factors_for_the_level_each_patch_expects() {
     let t = rough();
-    let (bound, _) = t.error_tables();
     let eye = [-30.0, 60.0, 40.0];
     let target = [0.0, 30.0, 0.0];
     let tess = view_table(&t, eye, target, 1.0);
@@ -340,7 +334,7 @@ fn geomip_morph_limits_are_factors_for_the_level_each_patch_expects() {
         "the tessellator does not morph between levels"
     );
     let geomip = view_table_for(&t, eye, target, 1.0, Diagonal::Reference);
-    assert_within_bound(&geomip, bound);
+    assert_well_formed(&geomip);
     let limits: Vec<(usize, f32)> = geomip.morph_limits.iter().flatten().copied().collect();
     assert!(
         !limits.is_empty(),
@@ -399,7 +393,7 @@ fn the_far_remainders_are_measured_as_their_path_lays_them() {
     for diagonal in [Diagonal::Either, Diagonal::Reference] {
         // Low over the near corner, looking across to the far remainders.
         let view = view_table_for(&t, [-29.0, 25.0, 35.0], [29.0, 20.0, -35.0], 1.0, diagonal);
-        assert_within_bound(&view, bound);
+        assert_well_formed(&view);
         let relaxed = remainders
             .iter()
             .filter(|&&p| {

@@ -22,10 +22,20 @@
 //! it) fast enough to be `|delta|` deep within the diagonal; a ray that
 //! sinks slower may clear the drawn surface and land further on. That ray
 //! is followed over the level's quads to where it meets the drawn surface
-//! (`PatchSamples::landing`). One that leaves the patch first is counted
-//! face-on, as the bound counts it, since the neighbours' levels are not
-//! known, though never more than `|t|` times the run to the terrain's
-//! edge.
+//! (`PatchSamples::landing`); so is one over a drawn surface that falls
+//! away along it as fast as the ray falls (`s + t` <= 0), within the
+//! diagonal. A sample's vertices are the reference: its error, and its
+//! pixels' error, is zero whatever the slopes.
+//!
+//! **Escaping rays.** A ray that never lands (it leaves the patch, whose
+//! neighbours' levels are not known, or runs as far as puts it `|delta|`
+//! above the drawn surface) is counted face-on, as the bound counts it,
+//! though never more than `|t|` times the run to the terrain's edge. Only
+//! the sample's top rays escape: one `p` pixels lower passes the sample
+//! `p K / d` lower, under the drawn surface once that exceeds `|delta|`.
+//! So a band `|delta| K / d` pixels tall and the sample's width wide takes
+//! the face-on error, and the rest of the sample's pixels, whose rays meet
+//! the drawn surface in front of it, the local estimate.
 //!
 //! **Which vertices.** A level is laid over the patch as its path draws
 //! it (`Layout`): the tessellator cuts each side into 2^k equal segments
@@ -74,12 +84,18 @@
 //! its morph factor is capped where the blend would put more of its pixels
 //! over tau than its level does (`morph_limit`).
 //!
+//! **Which levels.** The bound projects the largest vertical error
+//! face-on; a ray running on down ground that falls away from the eye
+//! shows more than that. So the levels the bound accepts from a patch's
+//! nearest point are measured as well, up to the first that puts no pixel
+//! over tau, and only the levels from there on keep the bound's word.
+//! Patches whose coarsest level the bound accepts are not measured.
+//!
 //! **Units.** The result is given in the error table's units, a length at
 //! the patch's nearest point: the percentile in pixels times that distance
 //! over K. The control shader and every CPU choice use it exactly as they
 //! use the table, so nothing on the GPU changes, and both sides of a shared
-//! edge still agree. No level gets more than its bound, and levels stay
-//! non-increasing as they rise.
+//! edge still agree. Levels stay non-increasing as they rise.
 
 use glam::{DVec2, DVec3, Vec3};
 
@@ -238,8 +254,9 @@ struct Estimate {
     pixels: f64,
     /// Per level index: pixels over tau, 0 from `from` on.
     over: [f64; LEVEL_COUNT],
-    /// The first level the bound accepts (at most `full`): the levels
-    /// below it are the measured ones.
+    /// The first level that puts no pixel over tau, measured or accepted
+    /// by the bound (at most `full`): the levels below it are the measured
+    /// ones.
     from: usize,
     /// The full-resolution level's index (`Layout::full`).
     full: usize,
@@ -253,12 +270,12 @@ struct Estimate {
 /// frame's share of pixels over tau (`EXCEED_FRACTION`) is spent where it
 /// saves the most triangles, and each patch's levels get the error that
 /// all but its share of pixels stay within, in the table's units. Levels
-/// stay non-increasing as they rise, and no level gets more than its bound.
-/// Only the levels the bound rejects from a patch's nearest point are
-/// measured, the far remainders' as their path lays them (`Layout`). A
-/// patch the eye is inside has no
-/// nearest distance to scale by: its accepted levels get error 0
-/// (`within_tolerance`), the others keep their bounds.
+/// stay non-increasing as they rise. The levels the bound rejects from a
+/// patch's nearest point are measured, and the accepted ones up to the
+/// first with no pixel over tau, the far remainders' as their path lays
+/// them (`Layout`). A patch the eye is inside has no nearest distance to
+/// scale by: its accepted levels get error 0 (`within_tolerance`), the
+/// others keep their bounds.
 pub fn view_error_table(
     terrain: &Terrain,
     heightmap: &Heightmap,
@@ -309,12 +326,25 @@ pub fn view_error_table(
             if full == 0 {
                 return None;
             }
-            let from = accepted(p).min(full);
+            let mut from = accepted(p).min(full);
             let distance = distance(p);
             let mut over = [0.0; LEVEL_COUNT];
             for (k, o) in over.iter_mut().enumerate().take(from) {
                 patch.level(k, diagonal);
                 *o = patch.over(tau);
+            }
+            // The bound is the vertical error seen face-on; a ray running
+            // down a slope that falls away from the eye travels further to
+            // the drawn surface and shows more. The levels the bound
+            // accepts are measured too, up to the first with no pixel over
+            // tau.
+            while from < full {
+                patch.level(from, diagonal);
+                over[from] = patch.over(tau);
+                if over[from] <= 0.0 {
+                    break;
+                }
+                from += 1;
             }
             // A level's table entry is the largest of it and every finer
             // level's (see below), so it is within tau only where they all
@@ -357,7 +387,7 @@ pub fn view_error_table(
                 patch.level(k, diagonal);
                 let px = patch.percentile(share * e.pixels);
                 if d > 0.0 {
-                    *level = level.min((px * d / f64::from(view.pixels_per_radian)) as f32);
+                    *level = (px * d / f64::from(view.pixels_per_radian)) as f32;
                 } else if px <= tau {
                     // The eye is inside the patch's box, where every error
                     // but none projects to infinitely many pixels: an
@@ -451,24 +481,28 @@ const MORPH_STEPS: usize = 16;
 /// percentiles would put every morphing patch's share at tau and many of
 /// its pixels over.
 fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: f64) -> f32 {
-    // Both levels list the same seen samples; the finer one's (px, moved)
-    // by sample index, 0 where it is the reference.
+    // Both levels list the same seen samples; the finer one's by sample
+    // index, the reference (no error) where it is not listed.
     let finer = finer.unwrap_or_default();
     let samples = coarser.iter().chain(finer).map(|s| s.sample as usize + 1);
-    let mut finer_at = vec![(0.0, 0.0); samples.max().unwrap_or(0)];
+    let mut finer_at = vec![None; samples.max().unwrap_or(0)];
     for a in finer {
-        finer_at[a.sample as usize] = (a.px, a.moved);
+        finer_at[a.sample as usize] = Some(a);
     }
     let over = |m: f64| -> f64 {
         coarser
             .iter()
             .map(|b| {
-                let (a_px, a_moved) = finer_at[b.sample as usize];
-                let px = ((1.0 - m) * a_px + m * b.px).abs();
-                let moved = ((1.0 - m) * a_moved + m * b.moved).abs();
+                let a = finer_at[b.sample as usize];
+                let blend = |f: fn(&Signed) -> f64| ((1.0 - m) * a.map_or(0.0, f) + m * f(b)).abs();
+                let moved = blend(|s| s.moved);
                 let swept = silhouette(moved, b.crest_width, b.crest_px);
+                // Where either level's ray escapes, so may the blend's.
+                let band = a.map_or(0.0, |a| a.band).max(b.band);
+                let over_in = |px: f64, pixels: f64| if px > tau { pixels } else { 0.0 };
                 swept.iter().filter(|s| s.0 > tau).map(|s| s.1).sum::<f64>()
-                    + if px > tau { b.pixels } else { 0.0 }
+                    + over_in(blend(|s| s.face_on), band)
+                    + over_in(blend(|s| s.px), b.pixels - band)
             })
             .sum()
     };
@@ -683,6 +717,11 @@ struct PatchSamples<'a> {
     field: Vec<(f64, f64)>,
     /// The viewport's pixels per radian (K).
     pixels_per_radian: f64,
+    /// The last measured level's escaping band per sample, row-major over
+    /// the rect: the pixels whose rays pass over the drawn surface and
+    /// never land (taking the face-on error); 0 where the sample's ray
+    /// lands.
+    band: Vec<f64>,
 }
 
 /// One seen sample's error at a measured level, signed (drawn above the
@@ -693,6 +732,10 @@ struct Signed {
     sample: u32,
     /// Error in pixels, signed.
     px: f64,
+    /// Face-on error in pixels, signed alike, which the escaping band
+    /// (`PatchSamples::band`) takes.
+    face_on: f64,
+    band: f64,
     /// How far a silhouette moves (`PatchSamples::field`), signed alike.
     moved: f64,
     /// `Seen::crest_width` and `Seen::crest_px`.
@@ -871,6 +914,7 @@ impl<'a> PatchSamples<'a> {
             keep_signed: false,
             field: Vec::new(),
             pixels_per_radian: k,
+            band: Vec::new(),
         }
     }
 
@@ -897,6 +941,8 @@ impl<'a> PatchSamples<'a> {
         self.signed.clear();
         self.field.clear();
         self.field.resize(stride * (cz + 1), (0.0, 0.0));
+        self.band.clear();
+        self.band.resize(stride * (cz + 1), 0.0);
         let (columns, rows) = (&self.columns, &self.rows);
         for (qi, z) in rows.windows(2).enumerate() {
             let last_row = qi + 2 == rows.len();
@@ -953,32 +999,51 @@ impl<'a> PatchSamples<'a> {
                         // (`landing`). A sample showing no pixels needs
                         // only its face-on error, which a silhouette in
                         // front of it reads.
+                        let mut band = 0.0;
                         let px = if seen.pixels <= 0.0 {
                             0.0
                         } else if seen.fall.is_infinite() {
                             delta * seen.face_on
                         } else {
+                            // The drawn quad's slope along the ray (its
+                            // bilinear gradient; local z falls as rows
+                            // rise) and how fast the ray closes on it.
+                            let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
+                            let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
+                            let meet = gx * seen.dir.x + gz * seen.dir.y + seen.fall;
                             let sink = seen.ground_rise + seen.fall;
-                            if sink <= 0.0 || delta > sink * diagonal_length {
-                                self.landing(diagonal, (r, cc), &seen, error)
-                                    * seen.fall.abs()
-                                    * seen.face_on
+                            let travel = if sink <= 0.0 || delta > sink * diagonal_length {
+                                match self.landing(diagonal, (r, cc), &seen, error, f64::INFINITY) {
+                                    Ok(run) => run,
+                                    Err(limit) => {
+                                        // The ray through the sample never
+                                        // lands: only the rays within its
+                                        // face-on error below it pass over
+                                        // the drawn surface here, a band
+                                        // that many pixels tall and the
+                                        // sample's width wide. Those below
+                                        // meet the drawn surface in front.
+                                        let face_px = delta * seen.face_on;
+                                        let wide = self.spacing.min_element() * seen.face_on;
+                                        band = (face_px * wide).min(seen.pixels);
+                                        let near = if meet > 0.0 { delta / meet } else { limit };
+                                        near.min(diagonal_length).min(limit)
+                                    }
+                                }
+                            } else if meet > 0.0 {
+                                (delta / meet).min(diagonal_length)
                             } else {
-                                // The drawn quad's slope along the ray (its
-                                // bilinear gradient; local z falls as rows
-                                // rise).
-                                let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
-                                let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
-                                let meet = gx * seen.dir.x + gz * seen.dir.y + seen.fall;
-                                let travel = if meet > 0.0 {
-                                    delta / meet
-                                } else {
-                                    f64::INFINITY
-                                };
-                                travel.min(diagonal_length) * seen.fall.abs() * seen.face_on
-                            }
+                                // Where the drawn surface falls away along
+                                // the ray as fast as the ray falls, its
+                                // slope here says nothing of where they
+                                // meet: followed over the drawn quads.
+                                self.landing(diagonal, (r, cc), &seen, error, diagonal_length)
+                                    .unwrap_or_else(|limit| limit)
+                            };
+                            travel * seen.fall.abs() * seen.face_on
                         };
                         self.field[r * stride + cc] = (px.copysign(error), error * seen.face_on);
+                        self.band[r * stride + cc] = band;
                     }
                 }
             }
@@ -1013,11 +1078,19 @@ impl<'a> PatchSamples<'a> {
                 } else {
                     face_on
                 };
-                self.scratch.push((own.abs(), seen.pixels));
+                // The escaping band takes the face-on error, the rest the
+                // sample's own.
+                let band = self.band[i];
+                if band > 0.0 {
+                    self.scratch.push((face_on.abs(), band));
+                }
+                self.scratch.push((own.abs(), seen.pixels - band));
                 if self.keep_signed {
                     self.signed.push(Signed {
                         sample: i as u32,
                         px: own,
+                        face_on,
+                        band,
                         moved,
                         crest_width: seen.crest_width,
                         crest_px: seen.crest_px,
@@ -1054,10 +1127,11 @@ impl<'a> PatchSamples<'a> {
         (row, col): (usize, usize),
         seen: &Seen,
         error: f64,
-    ) -> f64 {
+        cap: f64,
+    ) -> Result<f64, f64> {
         let delta = error.abs();
         let fall = seen.fall.abs().max(f64::MIN_POSITIVE);
-        let limit = (delta / fall).min(seen.beyond);
+        let limit = (delta / fall).min(seen.beyond).min(cap);
         let step = 0.5 * self.spacing.min_element();
         let steps = (limit / step).ceil().min(MAX_LANDING_STEPS) as usize;
         let below = error > 0.0;
@@ -1080,16 +1154,14 @@ impl<'a> PatchSamples<'a> {
         let (mut before, mut previous) = (0.0, delta);
         for k in 1..=steps {
             let x = (k as f64 * step).min(limit);
-            let Some(surface) = drawn(x) else {
-                return limit;
-            };
+            let surface = drawn(x).ok_or(limit)?;
             let gap = sign * (here - sign * fall * x - surface);
             if gap <= 0.0 {
-                return before + (x - before) * previous / (previous - gap);
+                return Ok(before + (x - before) * previous / (previous - gap));
             }
             (before, previous) = (x, gap);
         }
-        limit
+        Err(limit)
     }
 
     /// The last measured level's drawn surface at patch-local (row,
@@ -1237,6 +1309,7 @@ mod tests {
             keep_signed: false,
             field: Vec::new(),
             pixels_per_radian: 1000.0,
+            band: Vec::new(),
         }
     }
 
@@ -1260,33 +1333,117 @@ mod tests {
     fn a_skimming_ray_lands_where_the_drawn_ramp_rises_to_it() {
         // The coarsest level draws the ramp without the bump: the ray over
         // the bump's top falls 0.05 a unit onto ground rising 0.1, so
-        // drawn 3 below the reference it runs 3 / 0.15 = 20 on... past the
-        // patch's far side (8 + 20 > 16): as far as face-on.
+        // drawn 3 below the reference it would run 3 / 0.15 = 20 on, past
+        // the patch's far side (8 + 20 > 16): it never lands, and runs as
+        // far as face-on.
         let map = ramp(0.1, 3.0);
+        let far = |diagonal, layout| {
+            let p = patch(&map, layout, 0);
+            p.landing(diagonal, (8, 8), &along_x(0.05, 100.0), 3.0, f64::INFINITY)
+        };
         for diagonal in [Diagonal::Reference, Diagonal::Either] {
             for layout in [Layout::Tessellated, Layout::Template(16)] {
-                let p = patch(&map, layout, 0);
-                let run = p.landing(diagonal, (8, 8), &along_x(0.05, 100.0), 3.0);
-                assert_eq!(run, 3.0 / 0.05, "{diagonal:?} {layout:?}");
+                assert_eq!(
+                    far(diagonal, layout),
+                    Err(3.0 / 0.05),
+                    "{diagonal:?} {layout:?}"
+                );
                 // Rising 0.4 a unit it lands within the patch, 6 on.
                 let steep = ramp(0.4, 3.0);
                 let p = patch(&steep, layout, 0);
-                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), 3.0);
+                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), 3.0, f64::INFINITY);
                 // Heights are f32: the ramp is straight to rounding.
+                let run = run.expect("lands");
                 assert!((run - 6.0).abs() < 1e-5, "{diagonal:?} {layout:?}: {run}");
                 // A pit drawn 3 above: the ray met the drawn ramp 6 before.
                 let pit = ramp(0.4, -3.0);
                 let p = patch(&pit, layout, 0);
-                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), -3.0);
-                // Heights are f32: the ramp is straight to rounding.
+                let run = p.landing(diagonal, (8, 8), &along_x(0.1, 100.0), -3.0, f64::INFINITY);
+                let run = run.expect("lands");
                 assert!((run - 6.0).abs() < 1e-5, "{diagonal:?} {layout:?}: {run}");
+                // Capped, it stops at the cap.
+                let p = patch(&map, layout, 0);
+                let capped = p.landing(diagonal, (8, 8), &along_x(0.05, 100.0), 3.0, 2.5);
+                assert_eq!(capped, Err(2.5), "{diagonal:?} {layout:?}");
             }
         }
         // Never past the terrain's edge.
         let p = patch(&map, Layout::Tessellated, 0);
         assert_eq!(
-            p.landing(Diagonal::Either, (8, 8), &along_x(0.05, 5.0), 3.0),
-            5.0
+            p.landing(
+                Diagonal::Either,
+                (8, 8),
+                &along_x(0.05, 5.0),
+                3.0,
+                f64::INFINITY
+            ),
+            Err(5.0)
+        );
+    }
+
+    /// `patch` with every sample seen along `seen`.
+    fn seen_patch<'a>(map: &'a Heightmap, layout: Layout, seen: Seen) -> PatchSamples<'a> {
+        let mut p = patch(map, layout, 0);
+        p.seen = vec![seen; 17 * 17];
+        p
+    }
+
+    #[test]
+    fn ground_drawn_exactly_shows_no_error_however_it_falls_away() {
+        // A plane falling 0.1 a unit away from the eye, seen falling only
+        // 0.05: the ray never meets the drawn surface near the sample, but
+        // every level draws the plane exactly, so no pixel is off.
+        let map = ramp(-0.1, 0.0);
+        for diagonal in [Diagonal::Reference, Diagonal::Either] {
+            for layout in [Layout::Tessellated, Layout::Template(16)] {
+                let mut p = seen_patch(&map, layout, along_x(0.05, 100.0));
+                for k in 0..=p.full() {
+                    p.level(k, diagonal);
+                    let worst = p.scratch.iter().map(|s| s.0).fold(0.0f64, f64::max);
+                    // Heights are f32: the plane is flat to rounding.
+                    assert!(worst < 1e-5, "{diagonal:?} {layout:?} level {k}: {worst}");
+                    assert_eq!(p.pixels(), 17.0 * 17.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn only_a_band_of_an_escaping_sample_takes_its_face_on_error() {
+        // A bump 3 high on flat ground, seen rising 0.01 a unit: drawn
+        // without it (level 0), the ray through its top never lands. Of
+        // its 10 pixels, the band 3 px tall (3 units face-on at 1 px a
+        // unit) and 1 px wide (one unit of spacing) takes 3 px; the other
+        // 7 meet the drawn ground within the quad's diagonal, rising 0.01
+        // a unit: 16 sqrt(2) x 0.01 px.
+        let map = ramp(0.0, 3.0);
+        let mut p = seen_patch(&map, Layout::Tessellated, along_x(-0.01, 100.0));
+        p.seen[8 * 17 + 8].pixels = 10.0;
+        p.level(0, Diagonal::Reference);
+        let near = 16.0 * 2f64.sqrt() * 0.01;
+        let off: Vec<(f64, f64)> = p.scratch.iter().copied().filter(|s| s.0 > 1e-9).collect();
+        assert_eq!(off.len(), 2, "{off:?}");
+        assert!(
+            (off[0].0 - 3.0).abs() < 1e-6 && (off[0].1 - 3.0).abs() < 1e-6,
+            "{off:?}"
+        );
+        assert!(
+            (off[1].0 - near).abs() < 1e-6 && (off[1].1 - 7.0).abs() < 1e-9,
+            "{off:?}"
+        );
+        // A sample with fewer pixels than the band gives them all.
+        p.seen[8 * 17 + 8].pixels = 2.0;
+        p.level(0, Diagonal::Reference);
+        let off: Vec<(f64, f64)> = p
+            .scratch
+            .iter()
+            .copied()
+            .filter(|s| s.1 > 0.0 && s.0 > 1e-9)
+            .collect();
+        assert_eq!(off.len(), 1, "{off:?}");
+        assert!(
+            (off[0].0 - 3.0).abs() < 1e-6 && (off[0].1 - 2.0).abs() < 1e-9,
+            "{off:?}"
         );
     }
 
