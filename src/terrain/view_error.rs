@@ -733,8 +733,9 @@ struct Signed {
     /// Error in pixels, signed.
     px: f64,
     /// Face-on error in pixels, signed alike, which the escaping band
-    /// (`PatchSamples::band`) takes.
+    /// takes.
     face_on: f64,
+    /// The sample's escaping band (`PatchSamples::band`), in pixels.
     band: f64,
     /// How far a silhouette moves (`PatchSamples::field`), signed alike.
     moved: f64,
@@ -1011,6 +1012,12 @@ impl<'a> PatchSamples<'a> {
                             let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
                             let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
                             let meet = gx * seen.dir.x + gz * seen.dir.y + seen.fall;
+                            // The run to the drawn quad's plane by its
+                            // slope here, within the diagonal; none where
+                            // the drawn surface falls away as fast as the
+                            // ray falls, since its slope then says nothing
+                            // of where they meet.
+                            let local = (meet > 0.0).then(|| (delta / meet).min(diagonal_length));
                             let sink = seen.ground_rise + seen.fall;
                             let travel = if sink <= 0.0 || delta > sink * diagonal_length {
                                 match self.landing(diagonal, (r, cc), &seen, error, f64::INFINITY) {
@@ -1026,19 +1033,16 @@ impl<'a> PatchSamples<'a> {
                                         let face_px = delta * seen.face_on;
                                         let wide = self.spacing.min_element() * seen.face_on;
                                         band = (face_px * wide).min(seen.pixels);
-                                        let near = if meet > 0.0 { delta / meet } else { limit };
-                                        near.min(diagonal_length).min(limit)
+                                        local.unwrap_or(diagonal_length).min(limit)
                                     }
                                 }
-                            } else if meet > 0.0 {
-                                (delta / meet).min(diagonal_length)
                             } else {
-                                // Where the drawn surface falls away along
-                                // the ray as fast as the ray falls, its
-                                // slope here says nothing of where they
-                                // meet: followed over the drawn quads.
-                                self.landing(diagonal, (r, cc), &seen, error, diagonal_length)
-                                    .unwrap_or_else(|limit| limit)
+                                // Without a local run the ray is followed
+                                // over the drawn quads, within the diagonal.
+                                local.unwrap_or_else(|| {
+                                    self.landing(diagonal, (r, cc), &seen, error, diagonal_length)
+                                        .unwrap_or_else(|limit| limit)
+                                })
                             };
                             travel * seen.fall.abs() * seen.face_on
                         };
@@ -1116,11 +1120,13 @@ impl<'a> PatchSamples<'a> {
     /// runs on until the drawn surface rises to it; drawn above, it met the
     /// drawn surface before the sample, where that surface last rose above
     /// it. The tessellator may split a quad along either diagonal: the
-    /// march takes the one that keeps the ray off the surface longer. The
-    /// run is at most what puts the two points `|error|` apart vertically
-    /// (the face-on error, as the bound counts it) and no further than the
-    /// terrain's edge; a ray that leaves the patch first counts as running
-    /// all that way, since the neighbours' levels are not known here.
+    /// march takes the one that keeps the ray off the surface longer.
+    /// `Ok(run)` where it meets the surface; `Err(limit)` where it does not
+    /// within the limit: what puts the two points `|error|` apart
+    /// vertically (the face-on error, as the bound counts it), the
+    /// terrain's edge or `cap`, whichever is nearest. A ray that leaves the
+    /// patch first does not meet it either, since the neighbours' levels
+    /// are not known here.
     fn landing(
         &self,
         diagonal: Diagonal,
