@@ -206,3 +206,36 @@ fn levels_by_projected_error() {
         .zip(&culled.levels)
         .all(|(s, c)| s <= c));
 }
+
+#[test]
+fn a_morph_limit_holds_for_the_sides_a_same_level_neighbour_shares() {
+    // Four patches in a row (16-cell patches, 5 levels), all at level 1
+    // but the last at level 2; every morph factor 0.9. The second patch's
+    // limit is 0.25 for the level it chose (table index 4 - 1 = 3).
+    let grid = vkterrain::terrain::PatchGrid::for_size(65, 17, 16);
+    let mut chosen = PatchLevels {
+        levels: vec![1, 1, 1, 2],
+        morph: vec![0.9; 4],
+    };
+    let limits = [None, Some((3, 0.25)), None, Some((3, 0.5))];
+    limit_morph(&mut chosen, &limits, &[true; 4], &grid);
+    // Its own factor, and its same-level neighbours' (a side takes the
+    // larger of the two), are capped; the limit for a level the last
+    // patch did not choose is not applied, and a coarser neighbour's
+    // side does not morph, so it is not capped by it.
+    assert_eq!(chosen.morph, [0.25, 0.25, 0.25, 0.9]);
+    for p in 0..3 {
+        let (interior, sides) = patch_morph(&chosen, &grid, grid.patch_id(p));
+        assert!(
+            interior <= 0.25 && sides.iter().all(|&s| s <= 0.25),
+            "patch {p}"
+        );
+    }
+    // A patch not drawn does not morph, and caps no neighbour.
+    let mut chosen = PatchLevels {
+        levels: vec![1, 1, 1, 1],
+        morph: vec![0.9; 4],
+    };
+    limit_morph(&mut chosen, &[None; 4], &[true, false, true, true], &grid);
+    assert_eq!(chosen.morph, [0.9, 0.0, 0.9, 0.9]);
+}

@@ -1515,8 +1515,7 @@ impl GeomipGeometry {
             ),
         };
         if let Some(v) = &view_errors {
-            let n = terrain.grid().cells_per_patch();
-            geomip::limit_morph(&mut chosen, &v.morph_limits, drawn, n);
+            geomip::limit_morph(&mut chosen, &v.morph_limits, drawn, terrain.grid());
         }
         self.set_draws(terrain, settings, drawn, &chosen);
         let LodMetric::Error(_) = settings.lod_metric else {

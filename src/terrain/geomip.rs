@@ -86,53 +86,63 @@ pub fn patch_indices(n: usize, level: usize, coarser: u8) -> Vec<u32> {
     for bi in 0..blocks {
         for bj in 0..blocks {
             let (i0, j0) = (bi * 2 * s, bj * 2 * s);
-            let mut touching = 0u8;
-            if bj == 0 {
-                touching |= LEFT;
-            }
-            if bi == 0 {
-                touching |= TOP;
-            }
-            if bj == blocks - 1 {
-                touching |= RIGHT;
-            }
-            if bi == blocks - 1 {
-                touching |= BOTTOM;
-            }
-            let stitched = touching & coarser;
+            let stitched = block_sides(bi, bj, blocks) & coarser;
             if stitched == 0 {
                 for (di, dj) in [(0, 0), (0, s), (s, 0), (s, s)] {
                     cell(&mut out, i0 + di, j0 + dj, s);
                 }
                 continue;
             }
-            // Fan from the centre over the block's ring, clockwise from the
-            // upper-left corner; a stitched side loses its midpoint.
-            let v = |di: usize, dj: usize| vertex(n, i0 + di, j0 + dj);
-            let (m, e) = (s, 2 * s);
-            let mut ring = vec![v(0, 0)];
-            if stitched & TOP == 0 {
-                ring.push(v(0, m));
-            }
-            ring.push(v(0, e));
-            if stitched & RIGHT == 0 {
-                ring.push(v(m, e));
-            }
-            ring.push(v(e, e));
-            if stitched & BOTTOM == 0 {
-                ring.push(v(e, m));
-            }
-            ring.push(v(e, 0));
-            if stitched & LEFT == 0 {
-                ring.push(v(m, 0));
-            }
-            let centre = v(m, m);
+            let v = |(di, dj): (usize, usize)| vertex(n, i0 + di, j0 + dj);
+            let ring: Vec<u32> = fan_ring(s, stitched).into_iter().map(v).collect();
+            let centre = v((s, s));
             for t in 0..ring.len() {
                 out.extend_from_slice(&[centre, ring[t], ring[(t + 1) % ring.len()]]);
             }
         }
     }
     out
+}
+
+/// The sides of a patch that 2x2 block (row `bi`, column `bj`) of a
+/// patch `blocks` blocks a side touches.
+pub fn block_sides(bi: usize, bj: usize, blocks: usize) -> u8 {
+    let mut touching = 0u8;
+    if bj == 0 {
+        touching |= LEFT;
+    }
+    if bi == 0 {
+        touching |= TOP;
+    }
+    if bj + 1 == blocks {
+        touching |= RIGHT;
+    }
+    if bi + 1 == blocks {
+        touching |= BOTTOM;
+    }
+    touching
+}
+
+/// The ring a stitched 2x2 block of cells of `step` samples is fanned over
+/// from its centre (`step`, `step`), as (row, column) offsets from its
+/// upper-left corner, clockwise from that corner: corners and side
+/// midpoints, less the midpoints of the `stitched` sides.
+pub fn fan_ring(step: usize, stitched: u8) -> Vec<(usize, usize)> {
+    let (m, e) = (step, 2 * step);
+    [
+        ((0, 0), 0),
+        ((0, m), TOP),
+        ((0, e), 0),
+        ((m, e), RIGHT),
+        ((e, e), 0),
+        ((e, m), BOTTOM),
+        ((e, 0), 0),
+        ((m, 0), LEFT),
+    ]
+    .into_iter()
+    .filter(|&(_, side)| stitched & side == 0)
+    .map(|(offset, _)| offset)
+    .collect()
 }
 
 /// The reference's own triangles over the first `cells` (columns, rows) of
@@ -381,26 +391,41 @@ pub fn select_levels_by_error(
 /// Caps each patch's morph factor at the view's limit for the level it
 /// expected (`ViewErrors::morph_limits`, by error table index: log2 of the
 /// segments a side). A patch balancing left finer morphs towards a level
-/// the view already accepts, and keeps its factor. A patch not `drawn` has
-/// no limit measured, and a side shared with it takes the larger of the
-/// two factors (`patch_morph`), so it does not morph: its drawn neighbours'
-/// sides follow their own limits.
+/// the view already accepts, and keeps its factor. A side shared with a
+/// patch of the same level takes the larger of the two factors
+/// (`patch_morph`), so each patch is capped by its same-level neighbours'
+/// limits as well: the side stays within both. A patch not `drawn` has no
+/// limit measured and does not morph: its drawn neighbours' sides follow
+/// their own limits.
 pub fn limit_morph(
     chosen: &mut PatchLevels,
     limits: &[Option<(usize, f32)>],
     drawn: &[bool],
-    cells_per_patch: usize,
+    grid: &PatchGrid,
 ) {
-    let top = level_count(cells_per_patch) - 1;
-    let patches = chosen.levels.iter().zip(&mut chosen.morph);
-    for (((level, morph), limit), &drawn) in patches.zip(limits).zip(drawn) {
-        if !drawn {
-            *morph = 0.0;
-        } else if let Some((k, cap)) = *limit {
-            if usize::from(*level) + k == top {
-                *morph = morph.min(cap);
-            }
-        }
+    let top = level_count(grid.cells_per_patch()) - 1;
+    let caps: Vec<f32> = (0..grid.patch_count())
+        .map(|p| match limits[p] {
+            _ if !drawn[p] => 0.0,
+            Some((k, cap)) if usize::from(chosen.levels[p]) + k == top => cap,
+            _ => 1.0,
+        })
+        .collect();
+    let (rows, cols) = (grid.patch_rows(), grid.patch_cols());
+    for p in 0..grid.patch_count() {
+        let (r, c) = (p / cols, p % cols);
+        let neighbours = [
+            (c > 0).then(|| p - 1),
+            (r > 0).then(|| p - cols),
+            (c + 1 < cols).then(|| p + 1),
+            (r + 1 < rows).then(|| p + cols),
+        ];
+        let cap = neighbours
+            .into_iter()
+            .flatten()
+            .filter(|&q| drawn[q] && chosen.levels[q] == chosen.levels[p])
+            .fold(caps[p], |cap, q| cap.min(caps[q]));
+        chosen.morph[p] = chosen.morph[p].min(cap);
     }
 }
 

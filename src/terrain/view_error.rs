@@ -77,12 +77,16 @@
 //! patch then has its own share `q` of its pixels, and each of its levels
 //! the error that all but `q` of its pixels stay within (a pixel-weighted
 //! percentile). Geomip draws refine patches to within one level of their
-//! neighbours afterwards, which leaves pixels over tau unspent: for them
-//! the greedy share is raised as far as the refined levels still fit.
+//! neighbours afterwards, which leaves pixels over tau unspent, and draw
+//! each side next to a coarser neighbour stitched, which may put more over
+//! tau: the 2x2 blocks of cells along it are fans that skip the
+//! neighbour's missing midpoints (`geomip::patch_indices`), measured as
+//! drawn (`PatchSamples::stitched`). For them the greedy share is raised,
+//! or lowered, to the largest whose refined and stitched levels still fit.
 //!
 //! **Geomorphing.** A geomip patch glides towards its next coarser level;
 //! its morph factor is capped where the blend would put more of its pixels
-//! over tau than its level does (`morph_limit`).
+//! over tau than its level does, stitched where it is (`morph_limit`).
 //!
 //! **Which levels.** The bound projects the largest vertical error
 //! face-on; a ray running on down ground that falls away from the eye
@@ -103,6 +107,7 @@ use super::camera::Frustum;
 use rayon::prelude::*;
 
 use super::error_table::{split_ad, split_bc, ErrorTable, LEVEL_COUNT};
+use super::geomip;
 use super::grid::SampleRect;
 use super::heightmap::Heightmap;
 use super::lod::{patch_box_distance, within_tolerance};
@@ -112,9 +117,10 @@ use super::Terrain;
 /// Share of the frame's terrain pixels the view's choice lets its modelled
 /// errors put over tau: half the 1 % a 99th percentile allows. The other
 /// half is left to what the samples do not model: errors between samples,
-/// the tessellator's transition triangles and stitched geomip sides, and
-/// rays that skim the drawn surface to land further on than the sample's
-/// own neighbourhood shows.
+/// the tessellator's transition triangles, geomip patches that balancing
+/// left finer than their choice gliding uncapped towards the next level,
+/// and rays that skim the drawn surface to land further on than the
+/// sample's own neighbourhood shows.
 pub const EXCEED_FRACTION: f64 = 0.005;
 
 /// Most half-cell steps a ray is followed to where it meets a drawn
@@ -222,7 +228,8 @@ pub struct ViewErrors {
     pub table: ErrorTable,
     /// The 99th percentile error the choice expects over the measured
     /// patches' pixels, each patch at the level its path is expected to
-    /// draw (geomip's stitching refines some past their own choice), in
+    /// draw (geomip's balancing refines some past their own choice, and
+    /// stitches their sides next to coarser neighbours), in
     /// pixels (the choice's own target is the 99.5th, `EXCEED_FRACTION`).
     pub predicted_p99_px: f32,
     /// The largest error the choice expects on any seen sample, in pixels,
@@ -363,7 +370,18 @@ pub fn view_error_table(
             })
         })
         .collect();
-    let stitched = (diagonal == Diagonal::Reference).then_some(grid);
+    // A geomip patch's pixels over tau at level `k` with `sides` stitched
+    // to coarser neighbours.
+    let stitched_over = |e: &Estimate, k: usize, sides: u8| {
+        let mut patch = samples(e.patch);
+        patch.stitched = sides;
+        patch.level(k, diagonal);
+        patch.over(tau)
+    };
+    let stitched = (diagonal == Diagonal::Reference).then_some(Stitching {
+        grid,
+        over: &stitched_over,
+    });
     let shares = allocate(&estimates, view.viewport_pixels, stitched);
 
     // Second pass: each measured patch's levels at its share. The levels
@@ -374,7 +392,7 @@ pub fn view_error_table(
     let per_patch: Vec<Measured> = estimates
         .par_iter()
         .zip(shares.par_iter())
-        .filter_map(|(e, &(share, drawn))| {
+        .filter_map(|(e, &(share, drawn, sides))| {
             let (p, from) = (e.patch, e.from);
             let d = f64::from(e.distance);
             let mut patch = samples(p);
@@ -405,22 +423,43 @@ pub fn view_error_table(
             let chosen = (0..e.full)
                 .find(|&k| within_tolerance(levels[k], scale, view.pixel_error))
                 .unwrap_or(e.full);
+            // What it shows at the level it is drawn at: geomip's
+            // balancing may refine it past the chosen one. Its stitched
+            // sides are known where it is drawn at the level the
+            // allocation balanced it to.
+            let expected = chosen.max(drawn).min(e.full);
+            let stitched = (expected == drawn && sides != 0).then(|| {
+                patch.stitched = sides;
+                patch.level(expected, diagonal);
+                let over = patch.over(tau);
+                let measured = (
+                    std::mem::take(&mut patch.scratch),
+                    std::mem::take(&mut patch.signed),
+                );
+                patch.stitched = 0;
+                (measured, over)
+            });
             // Geomorphing blends the chosen level into the next coarser
             // one; where that one was measured (the bound rejects it), the
-            // blend may put no more pixels over tau than the chosen level.
+            // blend may put no more pixels over tau than the chosen level,
+            // stitched where it is.
             let limit =
                 (diagonal == Diagonal::Reference && chosen > 0 && chosen - 1 < from).then(|| {
-                    let finer = (chosen < e.full).then(|| signed[chosen].as_slice());
-                    let allowed = if chosen < e.full { e.over[chosen] } else { 0.0 };
+                    let (finer, allowed) = match &stitched {
+                        Some(((_, signed), over)) if expected == chosen => {
+                            (Some(signed.as_slice()), *over)
+                        }
+                        _ if chosen < e.full => (Some(signed[chosen].as_slice()), e.over[chosen]),
+                        _ => (None, 0.0),
+                    };
                     (
                         chosen,
                         morph_limit(finer, &signed[chosen - 1], tau, allowed),
                     )
                 });
-            // What it shows at the level it is drawn at: geomip's
-            // stitching may refine it past the chosen one.
-            let expected = chosen.max(drawn).min(e.full);
-            let shown = if expected == e.full {
+            let shown = if let Some(((scratch, _), _)) = stitched {
+                scratch
+            } else if expected == e.full {
                 vec![(0.0, e.pixels)]
             } else {
                 if expected >= from {
@@ -550,28 +589,40 @@ fn sweep_viewshed(
     viewshed
 }
 
+/// How geomip draws stitch: the patch grid whose neighbours are balanced,
+/// and an estimate's pixels over tau at a level (its index) with the given
+/// sides stitched to coarser neighbours.
+struct Stitching<'a> {
+    grid: &'a super::grid::PatchGrid,
+    over: &'a (dyn Fn(&Estimate, usize, u8) -> f64 + Sync),
+}
+
 /// Each estimate's share of its own pixels that may exceed tau: the
 /// frame's `EXCEED_FRACTION` of its seen pixels (at most the viewport) is
 /// handed out greedily (`greedy_levels`). Geomip draws (`stitched`) then
 /// refine a patch to within one level of its neighbours, which leaves
-/// fewer pixels over tau than the greedy choice spent: the greedy budget
-/// is raised, in steps, as far as the stitched levels still fit the
-/// frame's share. With each share, the level the path is expected to draw
-/// the patch at: the greedy one, refined by the stitching.
+/// fewer pixels over tau than the greedy choice spent, and draw a side
+/// next to a coarser neighbour stitched, which may put more over tau: the
+/// greedy budget is raised, or lowered, in steps, to the largest whose
+/// balanced and stitched levels fit the frame's share. With each share,
+/// the level the path is expected to draw the patch at (the greedy one,
+/// refined by the balancing) and its stitched sides.
 fn allocate(
     estimates: &[Estimate],
     viewport_pixels: f64,
-    stitched: Option<&super::grid::PatchGrid>,
-) -> Vec<(f64, usize)> {
+    stitched: Option<Stitching>,
+) -> Vec<(f64, usize, u8)> {
     let total: f64 = estimates.iter().map(|e| e.pixels).sum();
     let budget = EXCEED_FRACTION * total.min(viewport_pixels);
-    let over =
-        |levels: &[usize]| -> f64 { estimates.iter().zip(levels).map(|(e, &k)| e.over[k]).sum() };
     let mut levels = greedy_levels(estimates, budget);
     let mut drawn = levels.clone();
-    if let Some(grid) = stitched {
+    let mut sides = vec![0u8; estimates.len()];
+    if let Some(stitching) = stitched {
+        let grid = stitching.grid;
         let count = LEVEL_COUNT;
-        let balanced = |levels: &[usize]| -> Vec<usize> {
+        // The levels balanced to within one of their neighbours, and each
+        // one's sides next to a coarser neighbour.
+        let balanced = |levels: &[usize]| -> (Vec<usize>, Vec<u8>) {
             // Geomip levels count down from the finest; patches without an
             // estimate (coarsest accepted, or not drawn) constrain nothing.
             let mut geomip = vec![(count - 1) as u8; grid.patch_count()];
@@ -581,29 +632,79 @@ fn allocate(
             super::geomip::balance(&mut geomip, grid);
             estimates
                 .iter()
-                .map(|e| count - 1 - usize::from(geomip[e.patch]))
-                .collect()
+                .map(|e| {
+                    let id = grid.patch_id(e.patch);
+                    let k = count - 1 - usize::from(geomip[e.patch]);
+                    (k, super::geomip::neighbour_masks(&geomip, grid, id).0)
+                })
+                .unzip()
         };
-        drawn = balanced(&levels);
-        for factor in [1.5, 2.0, 3.0, 4.0, 6.0, 8.0] {
-            let wider = greedy_levels(estimates, factor * budget);
-            let refined = balanced(&wider);
-            if over(&refined) > budget {
-                break;
+        // Stitched levels measured so far, by (estimate, level, sides).
+        let measured = std::sync::Mutex::new(std::collections::HashMap::new());
+        // The pixels over tau of the estimates at their balanced levels,
+        // stitched.
+        let over = |drawn: &[usize], sides: &[u8]| -> f64 {
+            (0..estimates.len())
+                .into_par_iter()
+                .map(|i| {
+                    let (e, k, s) = (&estimates[i], drawn[i], sides[i]);
+                    if s == 0 {
+                        return e.over[k];
+                    }
+                    let known = measured
+                        .lock()
+                        .expect("not poisoned")
+                        .get(&(i, k, s))
+                        .copied();
+                    let stitched_over = known.unwrap_or_else(|| {
+                        let o = (stitching.over)(e, k, s);
+                        measured.lock().expect("not poisoned").insert((i, k, s), o);
+                        o
+                    });
+                    stitched_over.max(e.over[k])
+                })
+                .sum()
+        };
+        let try_factor = |factor: f64| {
+            let greedy = greedy_levels(estimates, factor * budget);
+            let (refined, refined_sides) = balanced(&greedy);
+            let fits = over(&refined, &refined_sides) <= budget;
+            (fits, greedy, refined, refined_sides)
+        };
+        let (fits, greedy, refined, refined_sides) = try_factor(1.0);
+        (levels, drawn, sides) = (greedy, refined, refined_sides);
+        let (raise, lower) = (
+            [1.5, 2.0, 3.0, 4.0, 6.0, 8.0],
+            [0.7, 0.5, 0.35, 0.25, 0.15, 0.1, 0.0],
+        );
+        if fits {
+            for factor in raise {
+                let (fits, greedy, refined, refined_sides) = try_factor(factor);
+                if !fits {
+                    break;
+                }
+                (levels, drawn, sides) = (greedy, refined, refined_sides);
             }
-            (levels, drawn) = (wider, refined);
+        } else {
+            for factor in lower {
+                let (fits, greedy, refined, refined_sides) = try_factor(factor);
+                (levels, drawn, sides) = (greedy, refined, refined_sides);
+                if fits {
+                    break;
+                }
+            }
         }
     }
     estimates
         .iter()
-        .zip(levels.iter().zip(&drawn))
-        .map(|(e, (&k, &d))| {
+        .zip(levels.iter().zip(&drawn).zip(&sides))
+        .map(|(e, ((&k, &d), &s))| {
             let share = if e.pixels > 0.0 {
                 e.over[k] / e.pixels
             } else {
                 0.0
             };
-            (share, d)
+            (share, d, s)
         })
         .collect()
 }
@@ -700,6 +801,14 @@ struct PatchSamples<'a> {
     /// samples: the quads' sides.
     columns: Vec<f64>,
     rows: Vec<f64>,
+    /// The geomip template's step at the last measured level, in samples
+    /// (0 for the tessellator's layout).
+    step: usize,
+    /// Sides stitched to a coarser neighbour (`geomip::LEFT`, ...): the
+    /// template's blocks touching them are drawn as fans
+    /// (`geomip::patch_indices`). Only the template's levels of two or
+    /// more segments a side are stitched.
+    stitched: u8,
     /// Per sample, row-major over the rect.
     seen: Vec<Seen>,
     /// Sample spacing (dx, dz).
@@ -722,6 +831,15 @@ struct PatchSamples<'a> {
     /// never land (taking the face-on error); 0 where the sample's ray
     /// lands.
     band: Vec<f64>,
+}
+
+/// A stitched block of the geomip template (`PatchSamples::stitched_block`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Fan {
+    /// Its upper-left corner, patch-local (row, column).
+    corner: (usize, usize),
+    /// The stitched sides it touches.
+    sides: u8,
 }
 
 /// One seen sample's error at a measured level, signed (drawn above the
@@ -908,6 +1026,8 @@ impl<'a> PatchSamples<'a> {
             layout,
             columns: Vec::new(),
             rows: Vec::new(),
+            step: 0,
+            stitched: 0,
             seen,
             spacing,
             scratch: Vec::new(),
@@ -935,6 +1055,10 @@ impl<'a> PatchSamples<'a> {
         let (cx, cz) = self.cells;
         self.columns = self.layout.vertices(k, cx);
         self.rows = self.layout.vertices(k, cz);
+        self.step = match self.layout {
+            Layout::Template(n) => (n >> k).max(1),
+            Layout::Tessellated => 0,
+        };
         let stride = cx + 1;
         let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
         let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
@@ -958,6 +1082,7 @@ impl<'a> PatchSamples<'a> {
                 );
                 let diagonal_length = quad.length();
                 let (inv_u, inv_v) = (1.0 / (x[1] - x[0]), 1.0 / (z[1] - z[0]));
+                let fan = self.stitched_block(diagonal, qi, qj);
                 // The samples in the quad; those on its right or lower side
                 // belong to the next quad, except at the patch's own far
                 // sides.
@@ -976,8 +1101,12 @@ impl<'a> PatchSamples<'a> {
                         let u = (cc as f64 - x[0]) * inv_u;
                         let seen = self.seen[r * stride + cc];
                         let here = f64::from(self.map.get(self.rect.row0 + r, self.rect.col0 + cc));
+                        let fanned = fan.and_then(|f| self.fan_at(f, r as f64, cc as f64));
                         let error = match diagonal {
-                            Diagonal::Reference => here - split_reference([a, b, c, d], u, v),
+                            Diagonal::Reference => {
+                                here - fanned
+                                    .map_or_else(|| split_reference([a, b, c, d], u, v), |(h, _)| h)
+                            }
                             Diagonal::Either => {
                                 let bc = here - split_reference([a, b, c, d], u, v);
                                 let ad = here - split_other([a, b, c, d], u, v);
@@ -1009,8 +1138,13 @@ impl<'a> PatchSamples<'a> {
                             // The drawn quad's slope along the ray (its
                             // bilinear gradient; local z falls as rows
                             // rise) and how fast the ray closes on it.
-                            let gx = ((1.0 - v) * (b - a) + v * (d - c)) / quad.x;
-                            let gz = -((1.0 - u) * (c - a) + u * (d - b)) / quad.y;
+                            let (gx, gz) = match fanned {
+                                Some((_, slope)) => (slope.x, slope.y),
+                                None => (
+                                    ((1.0 - v) * (b - a) + v * (d - c)) / quad.x,
+                                    -((1.0 - u) * (c - a) + u * (d - b)) / quad.y,
+                                ),
+                            };
                             let meet = gx * seen.dir.x + gz * seen.dir.y + seen.fall;
                             // The run to the drawn quad's plane by its
                             // slope here, within the diagonal; none where
@@ -1183,6 +1317,12 @@ impl<'a> PatchSamples<'a> {
             sides.partition_point(|&l| l <= p).clamp(1, sides.len() - 1) - 1
         };
         let (qj, qi) = (quad(&self.columns, c), quad(&self.rows, r));
+        if let Some((h, _)) = self
+            .stitched_block(diagonal, qi, qj)
+            .and_then(|f| self.fan_at(f, r, c))
+        {
+            return Some(h);
+        }
         let (x0, x1) = (self.columns[qj], self.columns[qj + 1]);
         let (z0, z1) = (self.rows[qi], self.rows[qi + 1]);
         let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
@@ -1194,6 +1334,69 @@ impl<'a> PatchSamples<'a> {
             Diagonal::Reference => bc,
             Diagonal::Either if lower => bc.min(split_other(corners, u, v)),
             Diagonal::Either => bc.max(split_other(corners, u, v)),
+        })
+    }
+
+    /// The stitched block (`stitched`) of the last measured level that quad
+    /// (row `qi`, column `qj`) lies in: its upper-left corner (patch-local
+    /// row, column) and the stitched sides it touches. None where the quad
+    /// keeps the reference's split.
+    fn stitched_block(&self, diagonal: Diagonal, qi: usize, qj: usize) -> Option<Fan> {
+        let Layout::Template(n) = self.layout else {
+            return None;
+        };
+        let segments = n / self.step.max(1);
+        if diagonal != Diagonal::Reference || self.stitched == 0 || segments < 2 {
+            return None;
+        }
+        let (bi, bj) = (qi / 2, qj / 2);
+        let sides = geomip::block_sides(bi, bj, segments / 2) & self.stitched;
+        (sides != 0).then_some(Fan {
+            corner: (2 * bi * self.step, 2 * bj * self.step),
+            sides,
+        })
+    }
+
+    /// A stitched block's drawn surface at patch-local (r, c), as the fan
+    /// `geomip::patch_indices` draws (its vertices clamped to the patch's
+    /// far sides, like the template's): the height and its slope along
+    /// local x and z. None off the block.
+    fn fan_at(&self, fan: Fan, r: f64, c: f64) -> Option<(f64, DVec2)> {
+        let (cx, cz) = self.cells;
+        let (i0, j0) = fan.corner;
+        // (column, row, height) of the block vertex at offset (di, dj).
+        let vertex = |(di, dj): (usize, usize)| {
+            let (i, j) = ((i0 + di).min(cz), (j0 + dj).min(cx));
+            let h = self.map.get(self.rect.row0 + i, self.rect.col0 + j);
+            DVec3::new(j as f64, i as f64, f64::from(h))
+        };
+        let centre = vertex((self.step, self.step));
+        let ring: Vec<DVec3> = geomip::fan_ring(self.step, fan.sides)
+            .into_iter()
+            .map(vertex)
+            .collect();
+        let p = DVec2::new(c, r) - centre.truncate();
+        const SLACK: f64 = 1e-9;
+        (0..ring.len()).find_map(|t| {
+            let (e0, e1) = (ring[t] - centre, ring[(t + 1) % ring.len()] - centre);
+            let det = e0.x * e1.y - e1.x * e0.y;
+            if det.abs() < SLACK {
+                // Collapsed by the clamp to the far sides.
+                return None;
+            }
+            let a = (p.x * e1.y - e1.x * p.y) / det;
+            let b = (e0.x * p.y - p.x * e0.y) / det;
+            if a < -SLACK || b < -SLACK || a + b > 1.0 + SLACK {
+                return None;
+            }
+            // The plane's slope per sample (column, row), then per unit of
+            // local x and z (local z falls as rows rise).
+            let per_column = (e0.z * e1.y - e1.z * e0.y) / det;
+            let per_row = (e0.x * e1.z - e1.x * e0.z) / det;
+            Some((
+                centre.z + a * e0.z + b * e1.z,
+                DVec2::new(per_column / self.spacing.x, -per_row / self.spacing.y),
+            ))
         })
     }
 
@@ -1308,6 +1511,11 @@ mod tests {
             layout,
             columns: layout.vertices(k, cells.0),
             rows: layout.vertices(k, cells.1),
+            step: match layout {
+                Layout::Template(n) => (n >> k).max(1),
+                Layout::Tessellated => 0,
+            },
+            stitched: 0,
             seen: Vec::new(),
             spacing: DVec2::ONE,
             scratch: Vec::new(),
@@ -1316,6 +1524,63 @@ mod tests {
             field: Vec::new(),
             pixels_per_radian: 1000.0,
             band: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn stitched_sides_are_measured_on_the_fans_the_geomip_path_draws() {
+        // Rough heights, so that every triangulation differs.
+        let map = Heightmap::from_fn(33, 33, |r, c| ((r * 7 + c * 13) % 11) as f32 * 3.0)
+            .expect("valid size");
+        let n = 16;
+        for cells in [(16, 16), (13, 10)] {
+            for k in 1..=4 {
+                for sides in 1..16u8 {
+                    let mut patch = patch(&map, Layout::Template(n), k);
+                    patch.cells = cells;
+                    patch.rect.col1 = cells.0;
+                    patch.rect.row1 = cells.1;
+                    patch.columns = patch.layout.vertices(k, cells.0);
+                    patch.rows = patch.layout.vertices(k, cells.1);
+                    patch.stitched = sides;
+                    // The index list's triangles, the template clamped to
+                    // the patch as the vertex shader clamps it.
+                    let level = geomip::level_count(n) - 1 - k;
+                    let corner = |v: u32| {
+                        let (i, j) = (v as usize / (n + 1), v as usize % (n + 1));
+                        let (i, j) = (i.min(cells.1), j.min(cells.0));
+                        DVec3::new(j as f64, i as f64, f64::from(map.get(i, j)))
+                    };
+                    let triangles: Vec<[DVec3; 3]> = geomip::patch_indices(n, level, sides)
+                        .chunks(3)
+                        .map(|t| [corner(t[0]), corner(t[1]), corner(t[2])])
+                        .collect();
+                    let drawn = |r: f64, c: f64| {
+                        triangles.iter().find_map(|[a, b, t]| {
+                            let (e0, e1) = (*b - *a, *t - *a);
+                            let det = e0.x * e1.y - e1.x * e0.y;
+                            let p = DVec2::new(c - a.x, r - a.y);
+                            let u = (p.x * e1.y - e1.x * p.y) / det;
+                            let v = (e0.x * p.y - p.x * e0.y) / det;
+                            (det.abs() > 1e-9 && u >= -1e-9 && v >= -1e-9 && u + v <= 1.0 + 1e-9)
+                                .then_some(a.z + u * e0.z + v * e1.z)
+                        })
+                    };
+                    for r in 0..=2 * cells.1 {
+                        for c in 0..=2 * cells.0 {
+                            let (r, c) = (0.5 * r as f64, 0.5 * c as f64);
+                            let want = drawn(r, c).expect("the triangles cover the patch");
+                            let got = patch
+                                .drawn_at(Diagonal::Reference, false, r, c)
+                                .expect("on the patch");
+                            assert!(
+                                (got - want).abs() < 1e-9,
+                                "cells {cells:?} level {k} sides {sides}: at ({r}, {c}) {got} != {want}"
+                            );
+                        }
+                    }
+                }
+            }
         }
     }
 
