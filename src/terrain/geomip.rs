@@ -222,30 +222,17 @@ pub fn morph_factor(distance: f32, d0: f32, level: usize) -> f32 {
 /// Balances levels so neighbours differ by at most one, only ever lowering
 /// (refining) a level.
 pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
-    let (rows, cols) = (grid.patch_rows(), grid.patch_cols());
     loop {
         let mut changed = false;
-        for r in 0..rows {
-            for c in 0..cols {
-                let p = r * cols + c;
-                let mut limit = levels[p];
-                let mut consider = |q: usize| limit = limit.min(levels[q] + 1);
-                if c > 0 {
-                    consider(p - 1);
-                }
-                if c + 1 < cols {
-                    consider(p + 1);
-                }
-                if r > 0 {
-                    consider(p - cols);
-                }
-                if r + 1 < rows {
-                    consider(p + cols);
-                }
-                if limit < levels[p] {
-                    levels[p] = limit;
-                    changed = true;
-                }
+        for p in 0..grid.patch_count() {
+            let limit = grid
+                .neighbours(p)
+                .into_iter()
+                .flatten()
+                .fold(levels[p], |limit, q| limit.min(levels[q] + 1));
+            if limit < levels[p] {
+                levels[p] = limit;
+                changed = true;
             }
         }
         if !changed {
@@ -257,27 +244,17 @@ pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
 /// Sides of `id` whose neighbour is coarser (`.0`) and finer (`.1`), for
 /// balanced levels.
 pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8) {
-    let here = levels[grid.patch_index(id)];
+    let p = grid.patch_index(id);
+    let here = levels[p];
     let (mut coarser, mut finer) = (0u8, 0u8);
-    let mut side = |bit: u8, r: usize, c: usize| {
-        let there = levels[grid.patch_index(PatchId { row: r, col: c })];
-        if there > here {
+    let sides = [LEFT, TOP, RIGHT, BOTTOM];
+    for (bit, q) in sides.into_iter().zip(grid.neighbours(p)) {
+        let Some(q) = q else { continue };
+        if levels[q] > here {
             coarser |= bit;
-        } else if there < here {
+        } else if levels[q] < here {
             finer |= bit;
         }
-    };
-    if id.col > 0 {
-        side(LEFT, id.row, id.col - 1);
-    }
-    if id.row > 0 {
-        side(TOP, id.row - 1, id.col);
-    }
-    if id.col + 1 < grid.patch_cols() {
-        side(RIGHT, id.row, id.col + 1);
-    }
-    if id.row + 1 < grid.patch_rows() {
-        side(BOTTOM, id.row + 1, id.col);
     }
     (coarser, finer)
 }
@@ -411,16 +388,9 @@ pub fn limit_morph(
             _ => 1.0,
         })
         .collect();
-    let (rows, cols) = (grid.patch_rows(), grid.patch_cols());
     for p in 0..grid.patch_count() {
-        let (r, c) = (p / cols, p % cols);
-        let neighbours = [
-            (c > 0).then(|| p - 1),
-            (r > 0).then(|| p - cols),
-            (c + 1 < cols).then(|| p + 1),
-            (r + 1 < rows).then(|| p + cols),
-        ];
-        let cap = neighbours
+        let cap = grid
+            .neighbours(p)
             .into_iter()
             .flatten()
             .filter(|&q| drawn[q] && chosen.levels[q] == chosen.levels[p])
@@ -434,10 +404,9 @@ pub fn limit_morph(
 pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32, [f32; 4]) {
     let p = grid.patch_index(id);
     let own = chosen.morph[p];
-    let side = |neighbour: Option<(usize, usize)>| match neighbour {
+    let side = |neighbour: Option<usize>| match neighbour {
         None => own,
-        Some((r, c)) => {
-            let q = grid.patch_index(PatchId { row: r, col: c });
+        Some(q) => {
             if chosen.levels[q] == chosen.levels[p] {
                 // Whichever of the two switches first has morph 1 then.
                 own.max(chosen.morph[q])
@@ -447,14 +416,7 @@ pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32,
             }
         }
     };
-    let (r, c) = (id.row, id.col);
-    let sides = [
-        side((c > 0).then(|| (r, c - 1))),
-        side((r > 0).then(|| (r - 1, c))),
-        side((c + 1 < grid.patch_cols()).then(|| (r, c + 1))),
-        side((r + 1 < grid.patch_rows()).then(|| (r + 1, c))),
-    ];
-    (own, sides)
+    (own, grid.neighbours(p).map(side))
 }
 
 /// The error each patch's level choice expects on screen, in pixels: its

@@ -114,6 +114,20 @@ impl PatchGrid {
         }
     }
 
+    /// The patches beside patch `index` (row-major), as indices: left, top,
+    /// right and bottom, in the order of the geomip side bits; None past
+    /// the grid's edge.
+    pub fn neighbours(&self, index: usize) -> [Option<usize>; 4] {
+        let PatchId { row, col } = self.patch_id(index);
+        let cols = self.patch_cols;
+        [
+            (col > 0).then(|| index - 1),
+            (row > 0).then(|| index - cols),
+            (col + 1 < cols).then(|| index + 1),
+            (row + 1 < self.patch_rows).then(|| index + cols),
+        ]
+    }
+
     /// Sample column of patch column boundary `j` (0..=patch_cols).
     pub fn boundary_col(&self, j: usize) -> usize {
         (j * self.cells_per_patch).min(self.sample_cols - 1)

@@ -178,14 +178,23 @@ impl Layout {
                     .map(|i| (i * cells) as f64 / segments as f64)
                     .collect()
             }
-            Layout::Template(n) => {
-                let step = (n >> k).max(1);
+            Layout::Template(_) => {
+                let step = self.step(k);
                 (0..cells)
                     .step_by(step)
                     .chain(std::iter::once(cells))
                     .map(|v| v as f64)
                     .collect()
             }
+        }
+    }
+
+    /// The geomip template's step at level `k`, in samples (0 for the
+    /// tessellator's layout, whose vertices need not fall on samples).
+    fn step(self, k: usize) -> usize {
+        match self {
+            Layout::Tessellated => 0,
+            Layout::Template(n) => (n >> k).max(1),
         }
     }
 
@@ -1055,10 +1064,7 @@ impl<'a> PatchSamples<'a> {
         let (cx, cz) = self.cells;
         self.columns = self.layout.vertices(k, cx);
         self.rows = self.layout.vertices(k, cz);
-        self.step = match self.layout {
-            Layout::Template(n) => (n >> k).max(1),
-            Layout::Tessellated => 0,
-        };
+        self.step = self.layout.step(k);
         let stride = cx + 1;
         let (row0, col0) = (self.rect.row0 as f64, self.rect.col0 as f64);
         let at = |r: f64, c: f64| self.map.interpolate(col0 + c, row0 + r);
@@ -1511,10 +1517,7 @@ mod tests {
             layout,
             columns: layout.vertices(k, cells.0),
             rows: layout.vertices(k, cells.1),
-            step: match layout {
-                Layout::Template(n) => (n >> k).max(1),
-                Layout::Tessellated => 0,
-            },
+            step: layout.step(k),
             stitched: 0,
             seen: Vec::new(),
             spacing: DVec2::ONE,
