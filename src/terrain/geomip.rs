@@ -94,7 +94,7 @@ pub fn patch_indices(n: usize, level: usize, coarser: u8) -> Vec<u32> {
                 continue;
             }
             let v = |(di, dj): (usize, usize)| vertex(n, i0 + di, j0 + dj);
-            let ring: Vec<u32> = fan_ring(s, stitched).into_iter().map(v).collect();
+            let ring: Vec<u32> = fan_ring(s, stitched).map(v).collect();
             let centre = v((s, s));
             for t in 0..ring.len() {
                 out.extend_from_slice(&[centre, ring[t], ring[(t + 1) % ring.len()]]);
@@ -127,7 +127,7 @@ pub fn block_sides(bi: usize, bj: usize, blocks: usize) -> u8 {
 /// from its centre (`step`, `step`), as (row, column) offsets from its
 /// upper-left corner, clockwise from that corner: corners and side
 /// midpoints, less the midpoints of the `stitched` sides.
-pub fn fan_ring(step: usize, stitched: u8) -> Vec<(usize, usize)> {
+pub fn fan_ring(step: usize, stitched: u8) -> impl Iterator<Item = (usize, usize)> {
     let (m, e) = (step, 2 * step);
     [
         ((0, 0), 0),
@@ -140,9 +140,8 @@ pub fn fan_ring(step: usize, stitched: u8) -> Vec<(usize, usize)> {
         ((m, 0), LEFT),
     ]
     .into_iter()
-    .filter(|&(_, side)| stitched & side == 0)
+    .filter(move |&(_, side)| stitched & side == 0)
     .map(|(offset, _)| offset)
-    .collect()
 }
 
 /// The reference's own triangles over the first `cells` (columns, rows) of

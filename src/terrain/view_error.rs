@@ -1377,10 +1377,15 @@ impl<'a> PatchSamples<'a> {
             DVec3::new(j as f64, i as f64, f64::from(h))
         };
         let centre = vertex((self.step, self.step));
-        let ring: Vec<DVec3> = geomip::fan_ring(self.step, fan.sides)
-            .into_iter()
-            .map(vertex)
-            .collect();
+        // At most the eight corners and midpoints; this runs per sample and
+        // per march step, so the ring stays off the heap.
+        let mut ring = [DVec3::ZERO; 8];
+        let mut len = 0;
+        for (slot, offset) in ring.iter_mut().zip(geomip::fan_ring(self.step, fan.sides)) {
+            *slot = vertex(offset);
+            len += 1;
+        }
+        let ring = &ring[..len];
         let p = DVec2::new(c, r) - centre.truncate();
         const SLACK: f64 = 1e-9;
         (0..ring.len()).find_map(|t| {
