@@ -203,6 +203,19 @@ fn a_crest_knows_how_far_its_line_of_sight_falls_behind_it() {
         (crest.rise - (sine(-1.0 / 15.0) - sine(-2.0 / 14.0))).abs() < 1e-3,
         "{crest:?}"
     );
+    // Swept only to ring 20, past the wall but short of where the ground
+    // shows again (ring 30), the crest follows its line of sight there.
+    let mut short = Viewshed::default();
+    short.sweep(
+        terrain(low.clone()).info(),
+        &low,
+        local(5, 32, 2.0),
+        0.0,
+        20,
+        None,
+    );
+    let crest = short.crest(20, 32).expect("the wall's top is a crest");
+    assert!((crest.fall - 1.0).abs() < 1e-6, "{crest:?}");
     // Over a wall above the eye the line of sight rises into the sky.
     let high = wall_map(10.0);
     let shed = viewshed(&high, local(5, 32, 2.0), 0.0, None);

@@ -27,9 +27,13 @@
 //! behind it is a crest; it records how far its line of sight falls to the
 //! first sample that shows again behind the hidden run (the sample whose
 //! elevation set the hidden run's horizon is followed along the sweep), or
-//! that none does.
+//! that none does. Where the run goes on under another sample's horizon
+//! (a neighbour on the same ridge), or past the last ring swept, the
+//! crest's own line of sight is followed over the surface to where it
+//! meets the ground, or leaves the map (sky).
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
+use rayon::prelude::*;
 
 use super::camera::Frustum;
 use super::heightmap::Heightmap;
@@ -106,6 +110,65 @@ fn ring_slot(dc: i64, dr: i64, k: i64) -> usize {
         "({dc}, {dr}) is not on ring {k}"
     );
     slot as usize
+}
+
+/// How far the line of sight from `eye` (local) over sample (row, col)
+/// falls (or rises) from it to where it meets the terrain behind it,
+/// marched in half-cell steps over the interpolated surface; None where it
+/// leaves the heightmap or climbs above `highest` first (sky).
+fn line_of_sight_fall(
+    info: &TerrainInfo,
+    map: &Heightmap,
+    eye: DVec3,
+    (row, col): (usize, usize),
+    highest: f32,
+) -> Option<f32> {
+    let height = f64::from(map.get(row, col));
+    let (dx, dz) = (info.local_x(col) - eye.x, info.local_z(row) - eye.z);
+    let reach = dx.hypot(dz);
+    if reach <= 0.0 {
+        return None;
+    }
+    // Per unit of horizontal travel: the line's rise, and the grid's
+    // columns and rows (local z falls as rows rise).
+    let rise = (height - eye.y) / reach;
+    let spacing = info.spacing();
+    let (dc, dr) = (dx / reach / spacing.x, -dz / reach / spacing.y);
+    let step = 0.5 * spacing.min_element();
+    let (last_col, last_row) = ((map.width() - 1) as f64, (map.depth() - 1) as f64);
+    let mut travel = step;
+    // The line's height over the ground at the last step (the crest
+    // itself: 0).
+    let mut clear = (0.0, height);
+    loop {
+        let mut line = height + rise * travel;
+        if line > f64::from(highest) {
+            if rise >= 0.0 {
+                return None;
+            }
+            // Nothing to meet until the line falls to the highest sample.
+            travel = (f64::from(highest) - height) / rise;
+            line = f64::from(highest);
+        }
+        let (c, r) = (col as f64 + dc * travel, row as f64 + dr * travel);
+        if !(0.0..=last_col).contains(&c) || !(0.0..=last_row).contains(&r) {
+            return None;
+        }
+        let over = line - map.interpolate(c, r);
+        if over <= 0.0 {
+            // Where the line meets the ground between the two steps.
+            let (last_over, last_line) = clear;
+            let t = if last_over > over {
+                last_over / (last_over - over)
+            } else {
+                1.0
+            };
+            let meets = last_line + (line - last_line) * t;
+            return Some((height - meets).abs() as f32);
+        }
+        clear = (over, line);
+        travel += step;
+    }
 }
 
 impl Viewshed {
@@ -312,12 +375,24 @@ impl Viewshed {
                 }
             }
         }
-        for ([crest, _], &s) in self.crest.iter_mut().zip(&source) {
-            if !crest.is_nan() {
+        // A crest whose source's hidden run did not end within the sweep
+        // (the run went on under another source's horizon, or past the
+        // last ring) is followed along its line of sight instead.
+        let highest = map.min_max().1;
+        self.crest
+            .par_iter_mut()
+            .zip(source.par_iter())
+            .enumerate()
+            .filter(|(_, ([crest, _], _))| !crest.is_nan())
+            .for_each(|(i, ([crest, _], &s))| {
                 let fall = landing[s as usize];
-                *crest = if fall.is_nan() { f32::INFINITY } else { fall };
-            }
-        }
+                *crest = if fall.is_nan() {
+                    line_of_sight_fall(info, map, eye, (i / cols, i % cols), highest)
+                        .unwrap_or(f32::INFINITY)
+                } else {
+                    fall
+                };
+            });
     }
 
     /// Whether sample (row, col) is seen with ground right behind it
