@@ -113,6 +113,28 @@ fn the_top_of_a_wall_that_hides_ground_is_a_crest_and_open_ground_is_not() {
 }
 
 #[test]
+fn behind_a_crest_ground_within_the_margin_leaves_the_silhouette_on_the_crest() {
+    // The wall's top (row 20, 8 above the eye 15 away: 0.533) sets the
+    // horizon; row 21 behind it (7.5 above the eye 16 away: 0.469) lies
+    // below that horizon but within a 0.1 margin, so it counts as seen;
+    // the ground from row 22 on is hidden. The outline is the wall's top,
+    // which the hidden run is charged to, not the sample tucked behind it.
+    let map = Heightmap::from_fn(65, 65, |r, _| match r {
+        20 => 10.0,
+        21 => 9.5,
+        _ => 0.0,
+    })
+    .expect("valid size");
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.1, None);
+    assert!(!shed.hidden(21, 32) && shed.hidden(22, 32));
+    assert!(shed.crest(20, 32).is_some(), "the wall's top is the crest");
+    assert!(
+        shed.crest(21, 32).is_none(),
+        "below its horizon, no outline"
+    );
+}
+
+#[test]
 fn a_lone_peak_hides_only_its_own_line_and_the_margin_uncovers_the_horizon() {
     let spike = Heightmap::from_fn(65, 65, |r, c| if (r, c) == (20, 32) { 50.0 } else { 0.0 })
         .expect("valid size");

@@ -70,10 +70,15 @@
 //! **The frame's share.** The benchmark's target is the frame's 99th
 //! percentile, so 1 % of the frame's terrain pixels may exceed tau; the
 //! choice spends half of it on the errors it models (`EXCEED_FRACTION`, of
-//! the seen pixels the samples add up to, at most the viewport). Starting
-//! from every patch at its coarsest level, that share is handed out
-//! greedily: the patch and finer level that remove the most pixels over
-//! tau per triangle added go first, until what remains over tau fits. Each
+//! the seen pixels the samples add up to, at most the viewport), keeping
+//! the other half for what the model misses. A patch drawn at full
+//! resolution is the reference itself, where the model misses nothing, so
+//! its pixels count at the whole 1 % (`Budget`). Starting from every patch
+//! at its coarsest level, that share is handed out greedily: the patch and
+//! finer level that remove the most pixels over tau per triangle added go
+//! first, until what remains over tau fits. A step is all or nothing, so
+//! the last may overshoot; the few largest are each held back in turn and
+//! the cheapest choice that fits is kept (`greedy_levels`). Each
 //! patch then has its own share `q` of its pixels, and each of its levels
 //! the error that all but `q` of its pixels stay within (a pixel-weighted
 //! percentile). Geomip draws refine patches to within one level of their
@@ -622,7 +627,12 @@ fn allocate(
     stitched: Option<Stitching>,
 ) -> Vec<(f64, usize, u8)> {
     let total: f64 = estimates.iter().map(|e| e.pixels).sum();
-    let budget = EXCEED_FRACTION * total.min(viewport_pixels);
+    // Past a full viewport of seen pixels, each counts for less.
+    let scale = (viewport_pixels / total).min(1.0);
+    let budget = Budget {
+        modelled: EXCEED_FRACTION * scale,
+        exact: P99_FRACTION * scale,
+    };
     let mut levels = greedy_levels(estimates, budget);
     let mut drawn = levels.clone();
     let mut sides = vec![0u8; estimates.len()];
@@ -675,9 +685,9 @@ fn allocate(
                 .sum()
         };
         let try_factor = |factor: f64| {
-            let greedy = greedy_levels(estimates, factor * budget);
+            let greedy = greedy_levels(estimates, budget.scaled(factor));
             let (refined, refined_sides) = balanced(&greedy);
-            let fits = over(&refined, &refined_sides) <= budget;
+            let fits = over(&refined, &refined_sides) <= budget.of(estimates, &refined);
             (fits, greedy, refined, refined_sides)
         };
         let (fits, greedy, refined, refined_sides) = try_factor(1.0);
@@ -718,10 +728,98 @@ fn allocate(
         .collect()
 }
 
+/// The frame's share of pixels over tau, per seen pixel. A patch drawn at
+/// full resolution is the reference, exact: nothing on it goes unmodelled,
+/// so its pixels need no headroom and count at the whole `P99_FRACTION`.
+#[derive(Clone, Copy)]
+struct Budget {
+    /// Per pixel of a patch drawn coarser than full resolution.
+    modelled: f64,
+    /// Per pixel of a patch drawn at full resolution.
+    exact: f64,
+}
+
+impl Budget {
+    fn scaled(self, factor: f64) -> Self {
+        Budget {
+            modelled: self.modelled * factor,
+            exact: self.exact * factor,
+        }
+    }
+
+    /// The pixels over tau allowed with each estimate at the level given.
+    fn of(self, estimates: &[Estimate], levels: &[usize]) -> f64 {
+        estimates
+            .iter()
+            .zip(levels)
+            .map(|(e, &k)| self.per_pixel(e, k) * e.pixels)
+            .sum()
+    }
+
+    fn per_pixel(self, e: &Estimate, k: usize) -> f64 {
+        if k >= e.full {
+            self.exact
+        } else {
+            self.modelled
+        }
+    }
+}
+
+/// How many of the greedy choice's largest steps are each held back in
+/// turn (`greedy_levels`).
+const HOLD_BACK: usize = 4;
+
 /// Each estimate's level: from every patch at its coarsest, each step
 /// takes the patch and finer level that removes the most pixels over tau
-/// per triangle added, until what remains over tau fits `budget`.
-fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
+/// per triangle added (counting what a step to full resolution adds to
+/// the share), until what remains over tau fits the share. A step is
+/// all or nothing, so the last ones may overshoot: a patch refined to full
+/// resolution for a few pixels more than the rest could give. So the
+/// `HOLD_BACK` patches whose last step added the most triangles are each
+/// kept one step back in turn, the others refined in their place, and the
+/// fewest triangles that fit win.
+fn greedy_levels(estimates: &[Estimate], budget: Budget) -> Vec<usize> {
+    let first = greedy_run(estimates, budget, None);
+    if !first.fits {
+        return first.level;
+    }
+    // Each refined patch's last step.
+    let mut stepped = vec![false; estimates.len()];
+    let mut lumps: Vec<&(usize, usize, f64)> = first
+        .steps
+        .iter()
+        .rev()
+        .filter(|&&(i, _, _)| !std::mem::replace(&mut stepped[i], true))
+        .collect();
+    lumps.sort_unstable_by(|a, b| b.2.total_cmp(&a.2));
+    let held = lumps
+        .into_par_iter()
+        .take(HOLD_BACK)
+        .map(|&(i, from, _)| greedy_run(estimates, budget, Some((i, from))))
+        .filter(|run| run.fits)
+        .min_by(|a, b| a.triangles.total_cmp(&b.triangles));
+    match held {
+        Some(run) if run.triangles < first.triangles => run.level,
+        _ => first.level,
+    }
+}
+
+/// One greedy choice (`greedy_levels`).
+struct Greedy {
+    /// Per estimate, its level.
+    level: Vec<usize>,
+    /// Whether what remains over tau fits the share.
+    fits: bool,
+    /// The steps taken, in order: (estimate, level it left, triangles
+    /// added).
+    steps: Vec<(usize, usize, f64)>,
+    /// Triangles in all.
+    triangles: f64,
+}
+
+/// The greedy choice, with estimate `cap.0` held to levels no finer than
+/// `cap.1` where given.
+fn greedy_run(estimates: &[Estimate], budget: Budget, cap: Option<(usize, usize)>) -> Greedy {
     use std::cmp::Ordering;
     use std::collections::BinaryHeap;
     let triangles = |e: &Estimate, k: usize| {
@@ -733,14 +831,26 @@ fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
     };
     let mut level = vec![0; estimates.len()];
     let mut over: f64 = estimates.iter().zip(&level).map(|(e, &k)| e.over[k]).sum();
-    // The best finer level from `from`: (pixels removed per triangle, level).
-    let best = |e: &Estimate, from: usize| -> Option<(f64, usize)> {
-        (from + 1..=e.full)
-            .filter(|&k| e.over[k] < e.over[from])
-            .map(|k| {
+    let mut share = budget.of(estimates, &level);
+    // What a step from `from` to `k` takes off the pixels over tau, net of
+    // what it adds to the share.
+    let relief = |e: &Estimate, from: usize, k: usize| {
+        e.over[from] - e.over[k] + (budget.per_pixel(e, k) - budget.per_pixel(e, from)) * e.pixels
+    };
+    // The best finer level from `from`: (pixels relieved per triangle,
+    // level).
+    let best = |i: usize, from: usize| -> Option<(f64, usize)> {
+        let e = &estimates[i];
+        let finest = match cap {
+            Some((held, k)) if held == i => k,
+            _ => e.full,
+        };
+        (from + 1..=finest)
+            .map(|k| (relief(e, from, k), k))
+            .filter(|&(r, _)| r > 0.0)
+            .map(|(r, k)| {
                 let added = (triangles(e, k) - triangles(e, from)).max(1.0);
-                let gain = (e.over[from] - e.over[k]) / added;
-                (gain, k)
+                (r / added, k)
             })
             .max_by(|a, b| a.0.total_cmp(&b.0))
     };
@@ -757,24 +867,34 @@ fn greedy_levels(estimates: &[Estimate], budget: f64) -> Vec<usize> {
             self.0.total_cmp(&other.0).then(other.1.cmp(&self.1))
         }
     }
-    let mut heap: BinaryHeap<Step> = estimates
-        .iter()
-        .zip(&level)
-        .enumerate()
-        .filter_map(|(i, (e, &k))| best(e, k).map(|(g, next)| Step(g, i, next)))
+    let mut heap: BinaryHeap<Step> = (0..estimates.len())
+        .filter_map(|i| best(i, level[i]).map(|(g, next)| Step(g, i, next)))
         .collect();
-    while over > budget {
+    let mut steps = Vec::new();
+    while over > share {
         let Some(Step(_, i, k)) = heap.pop() else {
             break;
         };
         let e = &estimates[i];
         over -= e.over[level[i]] - e.over[k];
+        share += (budget.per_pixel(e, k) - budget.per_pixel(e, level[i])) * e.pixels;
+        steps.push((i, level[i], triangles(e, k) - triangles(e, level[i])));
         level[i] = k;
-        if let Some((g, next)) = best(e, k) {
+        if let Some((g, next)) = best(i, k) {
             heap.push(Step(g, i, next));
         }
     }
-    level
+    let total = estimates
+        .iter()
+        .zip(&level)
+        .map(|(e, &k)| triangles(e, k))
+        .sum();
+    Greedy {
+        level,
+        fits: over <= share,
+        steps,
+        triangles: total,
+    }
 }
 
 /// The smallest error that at most `fraction` of the pixels of `items`
@@ -1457,6 +1577,68 @@ impl<'a> PatchSamples<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An estimate of `pixels` seen pixels and the given pixels over tau
+    /// per level, the last full resolution (32 triangles).
+    fn estimate(patch: usize, pixels: f64, over: [f64; 3]) -> Estimate {
+        let mut all = [0.0; LEVEL_COUNT];
+        all[..3].copy_from_slice(&over);
+        Estimate {
+            patch,
+            distance: 1.0,
+            pixels,
+            over: all,
+            from: 2,
+            full: 2,
+            full_triangles: 32.0,
+        }
+    }
+
+    #[test]
+    fn a_patch_at_full_resolution_frees_its_headroom_for_the_rest() {
+        // The share starts at 1 % of the 2000 pixels (20). Refining the
+        // first patch to full resolution leaves 25 over tau: within its
+        // pixels' whole 2 % (20 + 10 = 30), the second patch stays coarse;
+        // counted at 1 % like the rest, it must be refined too.
+        let estimates = [
+            estimate(0, 1000.0, [100.0, 100.0, 0.0]),
+            estimate(1, 1000.0, [25.0, 0.0, 0.0]),
+        ];
+        let exact = Budget {
+            modelled: 0.01,
+            exact: 0.02,
+        };
+        assert_eq!(greedy_levels(&estimates, exact), [2, 0]);
+        let uniform = Budget {
+            modelled: 0.01,
+            exact: 0.01,
+        };
+        assert_eq!(greedy_levels(&estimates, uniform), [2, 1]);
+    }
+
+    #[test]
+    fn a_last_step_that_overshoots_is_held_back_for_a_cheaper_one() {
+        // 59 over tau against a share of 55. The first patch's step to
+        // full resolution (50 pixels for 30 triangles) removes the most
+        // per triangle and is taken first, though the second's (9 for 6)
+        // is enough on its own: held back, the choice draws 10 triangles
+        // instead of 34.
+        let estimates = [
+            estimate(0, 1000.0, [50.0, 50.0, 0.0]),
+            estimate(1, 100.0, [9.0, 0.0, 0.0]),
+        ];
+        let budget = Budget {
+            modelled: 0.05,
+            exact: 0.05,
+        };
+        let first = greedy_run(&estimates, budget, None);
+        assert!(first.fits);
+        assert_eq!(
+            (first.level.as_slice(), first.triangles),
+            ([2, 0].as_slice(), 34.0)
+        );
+        assert_eq!(greedy_levels(&estimates, budget), [0, 1]);
+    }
 
     #[test]
     fn the_tessellator_cuts_any_side_evenly_and_the_template_clamps_to_it() {

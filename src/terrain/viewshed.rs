@@ -24,7 +24,9 @@
 //! within the frustum's lower and upper planes when one is given. Along a
 //! line of sight the rises add up to the ground seen, so partly hidden
 //! ground counts only what shows. A seen sample that hides the next one
-//! behind it is a crest; it records how far its line of sight falls to the
+//! behind it is a crest (or, where that sample lies below its own horizon,
+//! seen only within the margin, the sample that set the horizon: the
+//! outline is there); it records how far its line of sight falls to the
 //! first sample that shows again behind the hidden run (the sample whose
 //! elevation set the hidden run's horizon is followed along the sweep), or
 //! that none does. Where the run goes on under another sample's horizon
@@ -363,10 +365,20 @@ impl Viewshed {
                         self.exposure[i] = (wedge * rise) as f32;
                         self.crest[i][1] = crest_rise as f32;
                         if hidden {
-                            // What hides it and is itself seen is a crest.
+                            // What hides it and is itself seen is a crest:
+                            // the sample in front, or, where that one lies
+                            // below its own horizon (seen only within the
+                            // margin), the sample that set the horizon,
+                            // which is where the outline shows.
                             for ((pc, pr), p) in [(a, sa), (b, sb)] {
                                 if inside(pc, pr) && !p.hidden {
-                                    self.crest[pr as usize * cols + pc as usize][0] = 0.0;
+                                    let j = pr as usize * cols + pc as usize;
+                                    let j = if self.crest[j][1] > 0.0 {
+                                        j
+                                    } else {
+                                        source[j] as usize
+                                    };
+                                    self.crest[j][0] = 0.0;
                                 }
                             }
                         }
