@@ -832,11 +832,14 @@ fn greedy_run(estimates: &[Estimate], budget: Budget, cap: Option<(usize, usize)
     let mut level = vec![0; estimates.len()];
     let mut over: f64 = estimates.iter().zip(&level).map(|(e, &k)| e.over[k]).sum();
     let mut share = budget.of(estimates, &level);
-    // What a step from `from` to `k` takes off the pixels over tau, net of
-    // what it adds to the share.
-    let relief = |e: &Estimate, from: usize, k: usize| {
-        e.over[from] - e.over[k] + (budget.per_pixel(e, k) - budget.per_pixel(e, from)) * e.pixels
+    // What a step from `from` to `k` adds to the share (a step to full
+    // resolution lifts the patch's pixels to the exact rate).
+    let share_added = |e: &Estimate, from: usize, k: usize| {
+        (budget.per_pixel(e, k) - budget.per_pixel(e, from)) * e.pixels
     };
+    // What it takes off the pixels over tau, net of that.
+    let relief =
+        |e: &Estimate, from: usize, k: usize| e.over[from] - e.over[k] + share_added(e, from, k);
     // The best finer level from `from`: (pixels relieved per triangle,
     // level).
     let best = |i: usize, from: usize| -> Option<(f64, usize)> {
@@ -877,7 +880,7 @@ fn greedy_run(estimates: &[Estimate], budget: Budget, cap: Option<(usize, usize)
         };
         let e = &estimates[i];
         over -= e.over[level[i]] - e.over[k];
-        share += (budget.per_pixel(e, k) - budget.per_pixel(e, level[i])) * e.pixels;
+        share += share_added(e, level[i], k);
         steps.push((i, level[i], triangles(e, k) - triangles(e, level[i])));
         level[i] = k;
         if let Some((g, next)) = best(i, k) {
