@@ -20,6 +20,10 @@ pub const BINDING_VISIBILITY: u32 = 12;
 pub const BINDING_HIZ_DEPTH: u32 = 13;
 /// Storage buffer of the occlusion pyramid, every level one after another.
 pub const BINDING_HIZ_PYRAMID: u32 = 14;
+/// Levels of the occlusion pyramid one dispatch of glsl/hiz.comp writes:
+/// each invocation reduces a block of 2^(levels - 1) texels a side of the
+/// dispatch's first level down to one texel.
+pub const HIZ_LEVELS_PER_DISPATCH: u32 = 5;
 /// The control points (x, z, Y bounds), read by the occlusion test.
 pub const BINDING_CONTROL_POINTS: u32 = 15;
 /// Storage buffer counting the patches the occlusion test culled.
@@ -132,6 +136,10 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("BINDING_VISIBILITY", BINDING_VISIBILITY.to_string()),
         ("BINDING_HIZ_DEPTH", BINDING_HIZ_DEPTH.to_string()),
         ("BINDING_HIZ_PYRAMID", BINDING_HIZ_PYRAMID.to_string()),
+        (
+            "HIZ_LEVELS_PER_DISPATCH",
+            HIZ_LEVELS_PER_DISPATCH.to_string(),
+        ),
         ("BINDING_DRAW_PATCHES", BINDING_DRAW_PATCHES.to_string()),
         ("BINDING_DRAW_COMMANDS", BINDING_DRAW_COMMANDS.to_string()),
         ("BINDING_CONTROL_POINTS", BINDING_CONTROL_POINTS.to_string()),

@@ -10,6 +10,7 @@ use common::*;
 use glam::DVec2;
 use vkterrain::bench::cameras::flythrough;
 use vkterrain::bench::error::differing_pixels;
+use vkterrain::render::occlusion::pyramid_levels;
 use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
@@ -176,4 +177,72 @@ fn a_patch_behind_a_ridge_is_culled_and_one_peeking_over_it_is_not() {
         pillar_pixels > 20,
         "the pillar covers only {pillar_pixels} pixels"
     );
+}
+
+/// The pyramid reduced on the CPU from `depth` (`width` x `height`,
+/// row-major): every texel the farthest (smallest, reversed Z) depth of
+/// the 2x2 under it, the last row or column read again past an odd edge.
+fn cpu_pyramid(depth: &[f32], width: u32, height: u32) -> Vec<f32> {
+    let mut pyramid = Vec::new();
+    let (mut below, mut w, mut h) = (depth.to_vec(), width, height);
+    for [lw, lh] in pyramid_levels(width, height) {
+        let at = |x: u32, y: u32| below[(y.min(h - 1) * w + x.min(w - 1)) as usize];
+        let level: Vec<f32> = (0..lh)
+            .flat_map(|y| (0..lw).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let (x, y) = (2 * x, 2 * y);
+                at(x, y)
+                    .min(at(x + 1, y))
+                    .min(at(x, y + 1))
+                    .min(at(x + 1, y + 1))
+            })
+            .collect();
+        pyramid.extend_from_slice(&level);
+        (below, w, h) = (level, lw, lh);
+    }
+    pyramid
+}
+
+/// The pyramid the occlusion test reads equals the first pass's depth
+/// reduced on the CPU, texel for texel, at a target odd in both sizes (so
+/// every level has an odd edge somewhere, and the levels take two
+/// dispatches). A first frame draws every patch in its first pass, so the
+/// depth read back at the end is the depth the pyramid was built from.
+#[test]
+fn the_depth_pyramid_is_the_first_pass_depth_reduced_exactly() {
+    if skip_gpu() {
+        return;
+    }
+    let (width, height) = (333, 191);
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let camera = flythrough(terrain.info(), 96)[0];
+    let mut scene = GpuScene::new(terrain, width, height, false);
+    let frame = scene.render(&camera, &settings(RenderPath::Tess, true));
+    let gpu = scene
+        .renderer()
+        .occlusion_pyramid(0)
+        .expect("reading the pyramid back")
+        .expect("the frame was culled");
+    let depth = &frame.readback.depth;
+    let sky = depth.iter().filter(|&&d| d == 0.0).count();
+    assert!(
+        sky > 0 && sky < depth.len() / 2,
+        "{sky} of {} pixels are sky: the view should show both",
+        depth.len()
+    );
+    let cpu = cpu_pyramid(depth, width, height);
+    assert_eq!(pyramid_levels(width, height).len(), 9);
+    assert_eq!(gpu.len(), cpu.len(), "pyramid texels");
+    let differing: Vec<_> = gpu
+        .iter()
+        .zip(&cpu)
+        .enumerate()
+        .filter(|(_, (g, c))| g != c)
+        .take(5)
+        .collect();
+    assert!(
+        differing.is_empty(),
+        "texels (index, (gpu, cpu)): {differing:?}"
+    );
+    scene.finish();
 }

@@ -29,7 +29,7 @@ use super::uniforms::FrameUniforms;
 use crate::shader_constants::{
     BINDING_CONTROL_POINTS, BINDING_DRAW_COMMANDS, BINDING_DRAW_PATCHES, BINDING_FRAME,
     BINDING_HIZ_DEPTH, BINDING_HIZ_PYRAMID, BINDING_OCCLUSION_COUNT, BINDING_VISIBILITY,
-    OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND, OCCLUSION_VISIBLE_BIT,
+    HIZ_LEVELS_PER_DISPATCH, OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND, OCCLUSION_VISIBLE_BIT,
 };
 use crate::shader_variants::{HizSource, Shader};
 use crate::terrain::Terrain;
@@ -40,8 +40,12 @@ use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::target::TargetViews;
 use crate::vk::{Device, Result, VkError};
 
-/// Workgroup sizes of glsl/hiz.comp (8x8) and glsl/occlusion.comp (64).
-const REDUCE_GROUP: u32 = 8;
+/// Levels one glsl/hiz.comp dispatch writes, texels a side of its first
+/// level that one workgroup of 8x8 invocations covers (each reduces a
+/// block halved down to one texel), and the workgroup size of
+/// glsl/occlusion.comp.
+const REDUCE_LEVELS: usize = HIZ_LEVELS_PER_DISPATCH as usize;
+const REDUCE_TILE: u32 = 8 << (HIZ_LEVELS_PER_DISPATCH - 1);
 const TEST_GROUP: u32 = 64;
 
 /// Push constants of glsl/hiz.comp.
@@ -49,12 +53,12 @@ const TEST_GROUP: u32 = 64;
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 struct ReduceConstants {
     src_size: [i32; 2],
-    dst_size: [i32; 2],
     src_offset: u32,
     dst_offset: u32,
     samples: u32,
+    levels: u32,
 }
-const _: () = assert!(size_of::<ReduceConstants>() == 28);
+const _: () = assert!(size_of::<ReduceConstants>() == 24);
 
 /// Push constants of glsl/occlusion.comp.
 #[repr(C)]
@@ -245,7 +249,9 @@ impl Occlusion {
             let pyramid = device.create_buffer(
                 BufferDesc {
                     size: u64::from(texels) * 4,
-                    usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                    // Copied out by `read_pyramid`.
+                    usage: vk::BufferUsageFlags::STORAGE_BUFFER
+                        | vk::BufferUsageFlags::TRANSFER_SRC,
                     location: MemoryLocation::GpuOnly,
                 },
                 &format!("terrain.occlusion.pyramid[{slot}]"),
@@ -402,13 +408,13 @@ impl Occlusion {
         let mut src_size = [extent.width as i32, extent.height as i32];
         let mut src_offset = 0u32;
         let mut dst_offset = 0u32;
-        for (l, &[w, h]) in levels.iter().enumerate() {
-            let pipeline = match (l, samples) {
+        for (first, chunk) in levels.chunks(REDUCE_LEVELS).enumerate() {
+            let pipeline = match (first, samples) {
                 (0, 1) => &culling.from_depth,
                 (0, _) => &culling.from_multisampled_depth,
                 _ => &culling.reduce,
             };
-            if l > 0 {
+            if first > 0 {
                 rec.memory_barrier(
                     (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
                     (S::COMPUTE_SHADER, A::SHADER_STORAGE_READ),
@@ -417,20 +423,24 @@ impl Occlusion {
             rec.bind_compute(pipeline, &culling.layout, s.set);
             let constants = ReduceConstants {
                 src_size,
-                dst_size: [w as i32, h as i32],
                 src_offset,
                 dst_offset,
                 samples,
+                levels: chunk.len() as u32,
             };
             rec.push_constants(
                 &culling.layout,
                 vk::ShaderStageFlags::COMPUTE,
                 bytemuck::bytes_of(&constants),
             );
-            rec.dispatch([w.div_ceil(REDUCE_GROUP), h.div_ceil(REDUCE_GROUP), 1]);
-            src_size = [w as i32, h as i32];
-            src_offset = dst_offset;
-            dst_offset += w * h;
+            let [w, h] = chunk[0];
+            rec.dispatch([w.div_ceil(REDUCE_TILE), h.div_ceil(REDUCE_TILE), 1]);
+            // The next dispatch reads this one's last level.
+            for &[w, h] in chunk {
+                src_offset = dst_offset;
+                dst_offset += w * h;
+                src_size = [w as i32, h as i32];
+            }
         }
         rec.memory_barrier(
             (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
@@ -476,6 +486,38 @@ impl Occlusion {
                 A::COLOR_ATTACHMENT_READ | A::COLOR_ATTACHMENT_WRITE,
             ),
         );
+    }
+
+    /// The pyramid slot `slot`'s last culled frame built, every level one
+    /// after another (`pyramid_levels`), copied out through a host-visible
+    /// buffer; `None` before any. Call after the slot's fence.
+    pub(super) fn read_pyramid(&self, device: &Device, slot: usize) -> Result<Option<Vec<f32>>> {
+        use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+        let culling = self.culling.as_ref().ok_or_else(not_built)?;
+        let Some((pyramid, _)) = &culling.slots[slot].pyramid else {
+            return Ok(None);
+        };
+        let size = pyramid.desc.size;
+        let host = device.create_buffer(
+            BufferDesc {
+                size,
+                usage: vk::BufferUsageFlags::TRANSFER_DST,
+                location: MemoryLocation::GpuToCpu,
+            },
+            "terrain.occlusion.pyramid_readback",
+        )?;
+        device.one_shot("terrain.occlusion.read_pyramid", |rec| {
+            rec.memory_barrier(
+                (S::COMPUTE_SHADER, A::SHADER_STORAGE_WRITE),
+                (S::COPY, A::TRANSFER_READ),
+            );
+            rec.copy_buffer(pyramid, &host, size);
+            rec.memory_barrier((S::COPY, A::TRANSFER_WRITE), (S::HOST, A::HOST_READ));
+        })?;
+        let bytes = host.mapped().ok_or_else(|| {
+            VkError::Unsupported("the pyramid readback is not host-mapped".into())
+        })?;
+        Ok(Some(bytemuck::pod_collect_to_vec(&bytes[..size as usize])))
     }
 
     /// The patches slot `slot`'s last frame culled; call after its fence.

@@ -977,6 +977,14 @@ impl TerrainRenderer {
         })
     }
 
+    /// The occlusion pyramid slot `slot`'s last culled frame built from its
+    /// first pass's depth, every level one after another
+    /// (`occlusion::pyramid_levels`); `None` before any. Call after the
+    /// slot's fence.
+    pub fn occlusion_pyramid(&self, slot: usize) -> Result<Option<Vec<f32>>> {
+        self.occlusion.read_pyramid(&self.device, slot)
+    }
+
     /// Whether this renderer can cull hidden patches (the device reads its
     /// depth attachments at the renderer's sample count).
     pub fn can_cull_occluded(&self) -> bool {

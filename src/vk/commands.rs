@@ -522,6 +522,19 @@ impl<'a> Recorder<'a> {
         };
     }
 
+    /// Copies the first `bytes` of `src` to the start of `dst` (outside
+    /// rendering); a transfer read and write.
+    pub fn copy_buffer(&self, src: &Buffer, dst: &Buffer, bytes: u64) {
+        let region = [vk::BufferCopy::default().size(bytes)];
+        // SAFETY: buffers of this device with TRANSFER_SRC and TRANSFER_DST
+        // usage, each at least `bytes` long.
+        unsafe {
+            self.device
+                .ash()
+                .cmd_copy_buffer(self.cmd, src.raw(), dst.raw(), &region)
+        };
+    }
+
     /// Fills `buffer` with the 32-bit `value` (outside rendering); a
     /// transfer write.
     pub fn fill_buffer(&self, buffer: &Buffer, value: u32) {
