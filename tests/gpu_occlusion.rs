@@ -217,6 +217,11 @@ fn the_depth_pyramid_is_the_first_pass_depth_reduced_exactly() {
     let terrain = dem_terrain(16, DVec2::ZERO);
     let camera = flythrough(terrain.info(), 96)[0];
     let mut scene = GpuScene::new(terrain, width, height, false);
+    let before = scene.renderer().occlusion_pyramid(0);
+    assert!(
+        matches!(before, Ok(None)),
+        "a pyramid before any culled frame"
+    );
     let frame = scene.render(&camera, &settings(RenderPath::Tess, true));
     let gpu = scene
         .renderer()

@@ -490,11 +490,15 @@ impl Occlusion {
 
     /// The pyramid slot `slot`'s last culled frame built, every level one
     /// after another (`pyramid_levels`), copied out through a host-visible
-    /// buffer; `None` before any. Call after the slot's fence.
+    /// buffer; `None` where frames are not culled, or before any was. Call
+    /// after the slot's fence.
     pub(super) fn read_pyramid(&self, device: &Device, slot: usize) -> Result<Option<Vec<f32>>> {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
-        let culling = self.culling.as_ref().ok_or_else(not_built)?;
-        let Some((pyramid, _)) = &culling.slots[slot].pyramid else {
+        let Some((pyramid, _)) = self
+            .culling
+            .as_ref()
+            .and_then(|c| c.slots[slot].pyramid.as_ref())
+        else {
             return Ok(None);
         };
         let size = pyramid.desc.size;

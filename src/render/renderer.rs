@@ -979,8 +979,8 @@ impl TerrainRenderer {
 
     /// The occlusion pyramid slot `slot`'s last culled frame built from its
     /// first pass's depth, every level one after another
-    /// (`occlusion::pyramid_levels`); `None` before any. Call after the
-    /// slot's fence.
+    /// (`occlusion::pyramid_levels`); `None` where this renderer does not
+    /// cull, or before any culled frame. Call after the slot's fence.
     pub fn occlusion_pyramid(&self, slot: usize) -> Result<Option<Vec<f32>>> {
         self.occlusion.read_pyramid(&self.device, slot)
     }
