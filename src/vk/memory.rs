@@ -240,12 +240,7 @@ impl Device {
             name,
         )?;
         self.one_shot(&format!("{name}.upload"), |rec| {
-            let region = vk::BufferCopy::default().size(bytes.len() as u64);
-            // SAFETY: both buffers are large enough and not in use elsewhere.
-            unsafe {
-                self.ash()
-                    .cmd_copy_buffer(rec.cmd, staging.raw(), buffer.raw(), &[region])
-            };
+            rec.copy_buffer(&staging, &buffer, bytes.len() as u64)
         })?;
         Ok(buffer)
     }
