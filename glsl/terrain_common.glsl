@@ -65,10 +65,12 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
 // sample and the last, in each direction.
 layout(set = 0, binding = BINDING_HEIGHTMAP) uniform sampler2D heightmap;
 
-// Whether heights are streamed (see render::streaming): tiles resident at
-// full resolution are layers of `pages`, found through `page_table`, and
-// every other tile reads the base level. The streamed terrain's shape is
-// constant for a pipeline.
+// Whether heights are streamed (see render::streaming): pages resident
+// in `pages` (a tile at full resolution, or a block of 2^L x 2^L tiles at
+// level L) are found through `page_table`, which gives each tile the
+// finest resident page over it (its level above PAGE_LEVEL_SHIFT, its
+// layer below), or PAGE_NOT_RESIDENT for the base level. The streamed
+// terrain's shape is constant for a pipeline.
 layout(constant_id = SPEC_STREAMED) const bool STREAMED = false;
 layout(constant_id = SPEC_STREAMED + 1) const int STREAM_TILE_CELLS = 1;
 layout(constant_id = SPEC_STREAMED + 2) const int STREAM_BASE_LEVEL = 0;
@@ -95,32 +97,59 @@ float blend_cell(vec2 st, float a, float b, float c, float d) {
     return (1.0 - uv.x - uv.y) * h.x + uv.x * h.y + uv.y * h.z;
 }
 
-// A streamed terrain's base-level surface at sample s: the base's samples
-// joined into cells split like the reference's, the last cell of a row or
-// column narrower where the grid is not a multiple of 2^level. A sample
-// the base keeps reads it exactly. Mirror: tiled::level_surface.
-float base_height(ivec2 s, int level) {
-    ivec2 last = ivec2(frame.spacing_size.zw) - 1;
+// The cell of a level lattice (every 2^level-th sample of a grid whose
+// last sample is `last`, and that last one) that sample s lies in: the
+// lattice index of its first corner, and s's fraction across it. The last
+// cell of a row or column is narrower where the grid is not a multiple of
+// 2^level. Mirror: tiled::level_surface.
+void lattice_cell(ivec2 s, ivec2 last, int level, out ivec2 i, out vec2 st) {
     int step = 1 << level;
     ivec2 side = (last + step - 1) / step + 1;
-    ivec2 i = min(s / step, side - 2);
+    i = min(s / step, side - 2);
     ivec2 lo = i * step;
-    ivec2 hi = min(lo + step, last);
+    st = vec2(s - lo) / vec2(min(lo + step, last) - lo);
+}
+
+// A streamed terrain's base-level surface at sample s: the base's samples
+// joined into cells split like the reference's. A sample the base keeps
+// reads it exactly.
+float base_height(ivec2 s, int level) {
+    ivec2 i;
+    vec2 st;
+    lattice_cell(s, ivec2(frame.spacing_size.zw) - 1, level, i, st);
     float a = texelFetch(heightmap, i, 0).r;
-    if (all(equal(s, lo))) {
+    if (st == vec2(0.0)) {
         return a;
     }
-    vec2 st = vec2(s - lo) / vec2(hi - lo);
     float b = texelFetch(heightmap, i + ivec2(1, 0), 0).r;
     float c = texelFetch(heightmap, i + ivec2(0, 1), 0).r;
     float d = texelFetch(heightmap, i + ivec2(1, 1), 0).r;
     return blend_cell(st, a, b, c, d);
 }
 
-// The height drawn at sample (column, row) s. Streamed: a sample on a
-// border between tiles belongs to the tile before it (left, above), so
-// every sample has one value whichever tile asks, and the surface stays
-// watertight between a resident tile and one drawn from the base level.
+// The surface at sample s of the level-`level` page in layer `layer`,
+// whose first sample is `origin`: the same lattice surface as the whole
+// level's, its cells read from the page.
+float page_height(ivec2 s, ivec2 origin, int level, int layer) {
+    ivec2 last = min(ivec2(STREAM_TILE_CELLS << level), ivec2(frame.spacing_size.zw) - 1 - origin);
+    ivec2 i;
+    vec2 st;
+    lattice_cell(s - origin, last, level, i, st);
+    float a = texelFetch(pages, ivec3(i, layer), 0).r;
+    if (st == vec2(0.0)) {
+        return a;
+    }
+    float b = texelFetch(pages, ivec3(i + ivec2(1, 0), layer), 0).r;
+    float c = texelFetch(pages, ivec3(i + ivec2(0, 1), layer), 0).r;
+    float d = texelFetch(pages, ivec3(i + ivec2(1, 1), layer), 0).r;
+    return blend_cell(st, a, b, c, d);
+}
+
+// The height drawn at sample (column, row) s. Streamed: a sample belongs
+// to one tile (on a border between tiles, the one before it: left,
+// above), and takes the page its tile's entry names, else the base
+// level. Every sample so has one value whichever patch asks, and the
+// surface stays watertight between tiles drawn at different levels.
 // Mirror: render::residency::streamed_sample.
 float fetch_sample(ivec2 s) {
     if (!STREAMED) {
@@ -128,9 +157,15 @@ float fetch_sample(ivec2 s) {
     }
     ivec2 tiles = ivec2(STREAM_TILES_X, STREAM_TILES_Z);
     ivec2 tile = min(max(s - 1, ivec2(0)) / STREAM_TILE_CELLS, tiles - 1);
-    uint layer = page_table[tile.y * tiles.x + tile.x];
-    if (layer != PAGE_NOT_RESIDENT) {
-        return texelFetch(pages, ivec3(s - tile * STREAM_TILE_CELLS, int(layer)), 0).r;
+    uint entry = page_table[tile.y * tiles.x + tile.x];
+    if (entry != PAGE_NOT_RESIDENT) {
+        int level = int(entry >> PAGE_LEVEL_SHIFT);
+        int layer = int(entry & ((1u << PAGE_LEVEL_SHIFT) - 1u));
+        ivec2 origin = (tile >> level) * (STREAM_TILE_CELLS << level);
+        if (level == 0) {
+            return texelFetch(pages, ivec3(s - origin, layer), 0).r;
+        }
+        return page_height(s, origin, level, layer);
     }
     return base_height(s, STREAM_BASE_LEVEL);
 }

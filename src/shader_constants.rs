@@ -88,13 +88,16 @@ pub const SPEC_BLEND_MAP_COUNT: u32 = 1;
 /// down follow it as ids SPEC_STREAMED + 1 to + 4.
 pub const SPEC_STREAMED: u32 = 2;
 
-/// 2D array of streamed full-resolution tiles, one a layer.
+/// 2D array of streamed pages (`render::residency`), one a layer.
 pub const BINDING_PAGES: u32 = 19;
-/// Storage buffer of the page table: one word a tile, its layer in the
-/// page pool or `PAGE_NOT_RESIDENT`.
+/// Storage buffer of the page table: one word a tile, the page it is
+/// drawn from (its level above `PAGE_LEVEL_SHIFT`, its layer in the page
+/// pool below) or `PAGE_NOT_RESIDENT`.
 pub const BINDING_PAGE_TABLE: u32 = 20;
 /// Page table entry of a tile drawn from the base level.
 pub const PAGE_NOT_RESIDENT: u32 = 0xFFFF_FFFF;
+/// Where a page table entry's level starts; the layer is the bits below.
+pub const PAGE_LEVEL_SHIFT: u32 = 24;
 
 /// Storage buffer of inputs of the GLSL mirror check (compute, tests only).
 pub const BINDING_MIRROR_CASES: u32 = 2;
@@ -176,6 +179,7 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("BINDING_PAGES", BINDING_PAGES.to_string()),
         ("BINDING_PAGE_TABLE", BINDING_PAGE_TABLE.to_string()),
         ("PAGE_NOT_RESIDENT", uint(PAGE_NOT_RESIDENT)),
+        ("PAGE_LEVEL_SHIFT", PAGE_LEVEL_SHIFT.to_string()),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),
         ("MIN_TESS_FACTOR", float(MIN_TESS_FACTOR)),

@@ -2,8 +2,9 @@
 //! tiny tiles and a tiny pool, so eviction and re-streaming happen here.
 //! With room for every tile the image is the whole-terrain renderer's,
 //! pixel for pixel; under a tight pool a flythrough has no holes or cracks
-//! in any frame; the base level drawn matches its CPU mirror. Validation
-//! is on and counted after the device is destroyed.
+//! in any frame; a mix of full-resolution tiles, coarser pages and the base
+//! level draws what its CPU mirror says. Validation is on and counted
+//! after the device is destroyed.
 
 mod common;
 
@@ -16,7 +17,6 @@ use vkterrain::render::residency::StreamShape;
 use vkterrain::render::{
     ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading, StreamConfig,
 };
-use vkterrain::shader_constants::PAGE_NOT_RESIDENT;
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::generate::{generate, GeneratorParams};
 use vkterrain::terrain::tiled::{self, MemoryRows};
@@ -24,10 +24,12 @@ use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
 const TILE: u32 = 16;
 const CELLS_PER_PATCH: u32 = 16;
-/// Base sides of at most 17 samples: every 16th sample of the 257x201 map.
+/// Base sides of at most 17 samples: every 16th sample of the 257x203 map.
 const BASE_MAX_SIDE: u32 = 17;
 
-/// Eroded hills, 257x201 samples (a remainder tile down), 0 to 60 m.
+/// Eroded hills, 257x203 samples, 0 to 60 m: a remainder tile down, whose
+/// 10 cells are a multiple of no level's step but the first, so every
+/// coarser level's last row of cells is narrower.
 fn hills() -> Heightmap {
     let square = generate(&GeneratorParams {
         size: 257,
@@ -35,7 +37,7 @@ fn hills() -> Heightmap {
         droplets: 4000,
     })
     .unwrap();
-    Heightmap::from_fn(257, 201, |r, c| 60.0 * square.get(r, c)).unwrap()
+    Heightmap::from_fn(257, 203, |r, c| 60.0 * square.get(r, c)).unwrap()
 }
 
 fn info(map: Heightmap) -> TerrainInfo {
@@ -66,7 +68,7 @@ fn streamed_terrain(map: &Heightmap) -> Terrain {
 }
 
 fn shape() -> StreamShape {
-    StreamShape::new(257, 201, TILE, BASE_MAX_SIDE)
+    StreamShape::new(257, 203, TILE, BASE_MAX_SIDE)
 }
 
 fn cameras() -> Vec<(&'static str, Camera)> {
@@ -118,7 +120,7 @@ fn with_room_for_every_tile_the_image_is_the_resident_renderers() {
                 stats.missing_px, 0.0,
                 "{view}/{path:?}: every tile in view is resident"
             );
-            assert!(stats.resident_tiles > 0, "{view}/{path:?}: {stats:?}");
+            assert!(stats.resident_pages > 0, "{view}/{path:?}: {stats:?}");
             let differing = frame
                 .readback
                 .rgba
@@ -168,8 +170,8 @@ fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
     for (i, cam) in path.iter().enumerate() {
         let frame = scene.render(cam, &flat);
         let stats = scene.renderer().stream_stats().unwrap();
-        uploads += stats.uploaded_tiles;
-        most_resident = most_resident.max(stats.resident_tiles);
+        uploads += stats.uploaded_pages;
+        most_resident = most_resident.max(stats.resident_pages);
         let rgba = &frame.readback.rgba;
         let covered = rgba.chunks_exact(4).filter(|p| p[0] > 128).count();
         assert!(
@@ -192,7 +194,7 @@ fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
     }
     let evictions = scene.renderer().stream_evictions().unwrap();
     assert_eq!(most_resident, layers, "the pool fills");
-    assert!(evictions >= 4, "only {evictions} tiles were evicted");
+    assert!(evictions >= 4, "only {evictions} pages were evicted");
     assert!(
         u64::from(uploads) >= u64::from(layers) + evictions,
         "{uploads} uploads for {evictions} evictions"
@@ -201,37 +203,55 @@ fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
 }
 
 #[test]
-fn the_base_level_drawn_matches_its_cpu_mirror() {
+fn every_resident_level_and_the_base_draw_what_the_cpu_mirror_says() {
     if skip_gpu() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
     let map = hills();
     let path = imported(&map, dir.path());
+    // Coarse pages come first: with two layers, two of level 3's four
+    // pages and the base level draw the view; with thirty, pages of every
+    // level from full resolution to level 3 do.
+    for (layers, levels_drawn) in [(2, vec![3, 4]), (30, vec![0, 1, 2, 3])] {
+        mirror_case(&map, &path, layers, &levels_drawn);
+    }
+}
+
+/// Streams `map` (imported at `path`) through a pool of `layers` layers
+/// and checks that the image is the one drawn whole from the heights the
+/// CPU mirror (`StreamShape::streamed_sample`) gives for the page table
+/// the frame drew with, and that tiles were drawn at `levels_drawn`.
+fn mirror_case(map: &Heightmap, path: &Path, layers: u32, levels_drawn: &[u32]) {
     let (w, h) = (320, 200);
-    let mut streamed = GpuScene::streamed(streamed_terrain(&map), config(path, Some(2)), w, h);
-    let brute = settings(RenderPath::Brute, Shading::Flat);
+    let mut streamed = GpuScene::streamed(
+        streamed_terrain(map),
+        config(path.to_path_buf(), Some(layers)),
+        w,
+        h,
+    );
     let (_, cam) = cameras().remove(1);
     // Lit by the normals the heights give, in one colour (height colours
     // would follow each terrain's own height range).
-    let lit = RenderSettings {
-        shading: Shading::LodColors,
-        ..brute
-    };
+    let lit = settings(RenderPath::Brute, Shading::LodColors);
     let frame = streamed.render(&cam, &lit);
     let table = streamed.renderer().stream_page_table().unwrap().to_vec();
-    assert_eq!(
-        table.iter().filter(|&&l| l != PAGE_NOT_RESIDENT).count(),
-        2,
-        "two tiles resident, the rest drawn from the base level"
-    );
+    let stats = streamed.renderer().stream_stats().unwrap();
     streamed.finish();
+    assert_eq!(stats.resident_pages, layers, "the pool fills");
+    let shape = shape();
+    let mut drawn: Vec<u32> = table.iter().map(|&e| shape.entry_level(e)).collect();
+    drawn.sort_unstable();
+    drawn.dedup();
+    assert_eq!(
+        drawn, levels_drawn,
+        "{layers} layers: the levels tiles are drawn at"
+    );
     // The heights the GPU should have drawn, by the Rust mirror, drawn
     // whole.
-    let shape = shape();
-    let mirror = Heightmap::from_fn(257, 201, |r, c| {
+    let mirror = Heightmap::from_fn(257, 203, |r, c| {
         shape.streamed_sample(
-            |t| table[t] != PAGE_NOT_RESIDENT,
+            &table,
             |row, col| map.get(row as usize, col as usize),
             (c as u32, r as u32),
         )
@@ -239,7 +259,7 @@ fn the_base_level_drawn_matches_its_cpu_mirror() {
     .unwrap();
     let mut whole = GpuScene::new(Terrain::new(info(mirror), 0.0).unwrap(), w, h, false);
     let expected = whole.render(&cam, &lit);
-    let full = whole_render(&map, &cam, &lit);
+    let full = whole_render(map, &cam, &lit);
     whole.finish();
     let differing = |a: &[u8], b: &[u8]| {
         a.chunks_exact(4)
@@ -251,21 +271,25 @@ fn the_base_level_drawn_matches_its_cpu_mirror() {
     let against_full = differing(&frame.readback.rgba, &full);
     assert!(
         against_full > 1000,
-        "the base level should show: only {against_full} pixels differ from full resolution"
+        "{layers} layers: the coarser levels should show, but only {against_full} pixels \
+         differ from full resolution"
     );
     let allowed = (w * h / 10_000) as usize;
     if against_mirror > allowed {
-        frame.rgba_image().save("stream-mirror-gpu.png").unwrap();
+        frame
+            .rgba_image()
+            .save(format!("stream-mirror-{layers}-gpu.png"))
+            .unwrap();
         image::RgbaImage::from_raw(w, h, expected.readback.rgba.clone())
             .unwrap()
-            .save("stream-mirror-cpu.png")
+            .save(format!("stream-mirror-{layers}-cpu.png"))
             .unwrap();
     }
     // The heights are what is checked: Mesa 22.3.6's lavapipe shades one
     // of this view's 64,000 pixels differently between the two draws.
     assert!(
         against_mirror <= allowed,
-        "{against_mirror} pixels differ from the mirror's image"
+        "{layers} layers: {against_mirror} pixels differ from the mirror's image"
     );
 }
 

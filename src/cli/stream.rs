@@ -88,8 +88,8 @@ pub struct StreamReport {
     pub max_cpu_ms: f64,
     pub max_upload_bytes: u64,
     pub upload_bytes: u64,
-    pub uploaded_tiles: u64,
-    pub evicted_tiles: u64,
+    pub uploaded_pages: u64,
+    pub evicted_pages: u64,
     pub max_pop_px: f32,
     pub max_missing_px: f32,
     pub error_max_px: Option<f64>,
@@ -234,13 +234,13 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
                 .max()
                 .unwrap_or(0),
             upload_bytes: frames.iter().map(|f| f.stream.upload_bytes).sum(),
-            uploaded_tiles: frames
+            uploaded_pages: frames
                 .iter()
-                .map(|f| u64::from(f.stream.uploaded_tiles))
+                .map(|f| u64::from(f.stream.uploaded_pages))
                 .sum(),
-            evicted_tiles: frames
+            evicted_pages: frames
                 .iter()
-                .map(|f| u64::from(f.stream.evicted_tiles))
+                .map(|f| u64::from(f.stream.evicted_pages))
                 .sum(),
             max_pop_px: frames.iter().map(|f| f.stream.pop_px).fold(0.0, f32::max),
             max_missing_px: frames
@@ -282,15 +282,15 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
     };
     writeln!(
         out,
-        "{} frames on {}: {} holes, {} tiles uploaded ({} bytes, at most {} a frame), {} evicted, \
+        "{} frames on {}: {} holes, {} pages uploaded ({} bytes, at most {} a frame), {} evicted, \
          CPU at most {:.1} ms a frame, largest pop {:.2} px{error}, {} validation messages{}",
         report.frames,
         report.device,
         report.holes,
-        report.uploaded_tiles,
+        report.uploaded_pages,
         report.upload_bytes,
         report.max_upload_bytes,
-        report.evicted_tiles,
+        report.evicted_pages,
         report.max_cpu_ms,
         report.max_pop_px,
         report.validation_messages,

@@ -397,20 +397,19 @@ impl TerrainRenderer {
         self.streamer.as_ref().map(Streamer::stats)
     }
 
-    /// How a streamed terrain streams: its tiles and base level.
+    /// How a streamed terrain streams: its tiles, pages and base level.
     pub fn stream_shape(&self) -> Option<StreamShape> {
         self.streamer.as_ref().map(Streamer::shape)
     }
 
     /// A streamed terrain's page table as the next frame will draw with
-    /// it: per tile (row-major), its layer in the pool or
-    /// `PAGE_NOT_RESIDENT`.
+    /// it: per tile, the page it is drawn from (`residency::page_entry`)
+    /// or `PAGE_NOT_RESIDENT` for the base level.
     pub fn stream_page_table(&self) -> Option<&[u32]> {
         self.streamer.as_ref().map(Streamer::page_table)
     }
 
-    /// Tiles sent back to the base level since the start (streamed
-    /// terrains).
+    /// Pages evicted from the pool since the start (streamed terrains).
     pub fn stream_evictions(&self) -> Option<u64> {
         self.streamer.as_ref().map(Streamer::evictions)
     }

@@ -1,26 +1,34 @@
-//! Which tiles of a streamed terrain are resident on the GPU: the policy
+//! Which pages of a streamed terrain are resident on the GPU: the policy
 //! behind `streaming`, in plain Rust so it can be tested without a device.
 //!
 //! A streamed terrain is drawn from two sources. The **base level** keeps
 //! every `2^base_level`-th sample of the whole terrain and is always
-//! resident. A **page pool** of a fixed number of layers holds tiles at
-//! full resolution, one tile a layer. Each frame, every tile in the view
-//! gets a priority: the error, in pixels, of drawing it from the base level
-//! seen from its nearest point (the tile file's per-level error over the
-//! distance). Tiles are loaded in priority order into free layers, or into
-//! the layer of the least useful resident tile when that one's priority is
-//! clearly lower, so the pool converges on the tiles whose absence shows
-//! most. A tile that is evicted keeps drawing from its layer until the tile
-//! replacing it has arrived: the swap happens in one frame.
+//! resident. A **page pool** of a fixed number of equal layers holds
+//! **pages**: a level-L page is the level-L samples (every `2^L`-th) of a
+//! block of `2^L x 2^L` tiles, so every page, from a full-resolution tile
+//! (level 0) to the level just finer than the base, is `tile_cells + 1`
+//! samples a side. A sample is drawn from the finest resident page over
+//! it, else from the base level.
+//!
+//! Each frame, every page in the view gets a priority: the error, in
+//! pixels, of drawing its area one level coarser, seen from its nearest
+//! point (the tile file's per-level errors over the distance). A coarser
+//! page covers a finer one's area with a larger error, so pages tend to
+//! arrive coarse to fine. Pages are loaded in priority order into free
+//! layers, or into the layer of the least useful resident page when that
+//! one's priority is clearly lower, so the pool converges on the pages
+//! whose absence shows most. A page that is evicted keeps drawing from its
+//! layer until the page replacing it has arrived: the swap happens in one
+//! frame.
 //!
 //! Nothing here waits: `plan` says what to load, and `arrived` says where
-//! a loaded tile goes and which tile it displaces.
+//! a loaded page goes and which page it displaces.
 
-use crate::shader_constants::PAGE_NOT_RESIDENT;
+use crate::shader_constants::{PAGE_LEVEL_SHIFT, PAGE_NOT_RESIDENT};
 use crate::terrain::tiled::{level_side, level_surface, tile_count};
 
-/// A loaded tile takes the layer of a resident one only when its priority
-/// is this many times the resident's, so two tiles of nearly equal need do
+/// A loaded page takes the layer of a resident one only when its priority
+/// is this many times the resident's, so two pages of nearly equal need do
 /// not swap back and forth as the camera moves.
 pub const EVICTION_MARGIN: f32 = 1.5;
 
@@ -90,15 +98,7 @@ impl StreamShape {
 
     /// Tile (tx, tz)'s first sample and its cells across and down.
     pub fn tile_rect(&self, tx: u32, tz: u32) -> ((u32, u32), (u32, u32)) {
-        let t = self.tile_cells;
-        let (c0, r0) = (tx * t, tz * t);
-        (
-            (c0, r0),
-            (
-                (c0 + t).min(self.cols - 1) - c0,
-                (r0 + t).min(self.rows - 1) - r0,
-            ),
-        )
+        self.page_rect(0, tx, tz)
     }
 
     pub fn tile_index(&self, tx: u32, tz: u32) -> usize {
@@ -111,158 +111,283 @@ impl StreamShape {
         ((index % across) as u32, (index / across) as u32)
     }
 
-    /// The height a streamed terrain draws at sample (col, row): the
-    /// full-resolution sample `full(row, col)` where the sample's owner
-    /// tile is resident, else the base level's surface there.
-    /// Mirror: glsl/terrain_common.glsl `fetch_sample`.
+    /// Levels the page pool holds: full resolution up to the one before
+    /// the base level (full resolution alone where the base is that).
+    pub fn page_levels(&self) -> u32 {
+        self.base_level.max(1)
+    }
+
+    /// Pages across and down at `level`: one for each `2^level x 2^level`
+    /// tiles, the last row and column of them partial.
+    pub fn pages_across(&self, level: u32) -> (u32, u32) {
+        (
+            self.tiles_x.div_ceil(1 << level),
+            self.tiles_z.div_ceil(1 << level),
+        )
+    }
+
+    /// Where `level`'s pages start in the page table: the levels follow one
+    /// another finest first, each row-major, so level 0's page indices are
+    /// the tile indices.
+    fn level_offset(&self, level: u32) -> usize {
+        (0..level)
+            .map(|l| {
+                let (x, z) = self.pages_across(l);
+                x as usize * z as usize
+            })
+            .sum()
+    }
+
+    /// Pages of every level: the page table's length.
+    pub fn page_total(&self) -> usize {
+        self.level_offset(self.page_levels())
+    }
+
+    /// The index of page (px, pz) at `level`.
+    pub fn page_index(&self, level: u32, px: u32, pz: u32) -> usize {
+        let (across, _) = self.pages_across(level);
+        self.level_offset(level) + pz as usize * across as usize + px as usize
+    }
+
+    /// The level and (px, pz) of page `index` (`page_index`'s inverse).
+    pub fn page_coords(&self, index: usize) -> (u32, u32, u32) {
+        let mut first = 0;
+        for level in 0..self.page_levels() {
+            let (x, z) = self.pages_across(level);
+            let count = x as usize * z as usize;
+            if index < first + count {
+                let i = index - first;
+                return (level, (i % x as usize) as u32, (i / x as usize) as u32);
+            }
+            first += count;
+        }
+        panic!("page {index} of {first}");
+    }
+
+    /// The page over tile (tx, tz) at `level`.
+    pub fn page_of_tile(&self, level: u32, tx: u32, tz: u32) -> usize {
+        self.page_index(level, tx >> level, tz >> level)
+    }
+
+    /// The tiles page (px, pz) at `level` covers: columns and rows of
+    /// tiles.
+    pub fn page_tiles(
+        &self,
+        level: u32,
+        px: u32,
+        pz: u32,
+    ) -> (std::ops::Range<u32>, std::ops::Range<u32>) {
+        let n = 1 << level;
+        (
+            px * n..((px + 1) * n).min(self.tiles_x),
+            pz * n..((pz + 1) * n).min(self.tiles_z),
+        )
+    }
+
+    /// Page (px, pz) at `level`: its first sample and the full-resolution
+    /// cells it spans across and down.
+    pub fn page_rect(&self, level: u32, px: u32, pz: u32) -> ((u32, u32), (u32, u32)) {
+        let span = self.tile_cells << level;
+        let (c0, r0) = (px * span, pz * span);
+        (
+            (c0, r0),
+            (
+                (c0 + span).min(self.cols - 1) - c0,
+                (r0 + span).min(self.rows - 1) - r0,
+            ),
+        )
+    }
+
+    /// Samples page (px, pz) at `level` holds across and down: every
+    /// `2^level`-th of its span and its last, at most `page_side` each.
+    pub fn page_size(&self, level: u32, px: u32, pz: u32) -> (u32, u32) {
+        let (_, (w, d)) = self.page_rect(level, px, pz);
+        (level_side(w, level), level_side(d, level))
+    }
+
+    /// The level tile (tx, tz) is drawn at where `resident` says which
+    /// pages are resident: the finest resident page over it, else the base
+    /// level.
+    pub fn drawn_level(&self, resident: impl Fn(usize) -> bool, (tx, tz): (u32, u32)) -> u32 {
+        (0..self.page_levels())
+            .find(|&level| resident(self.page_of_tile(level, tx, tz)))
+            .unwrap_or(self.base_level)
+    }
+
+    /// The page table the shaders read, from each page's layer
+    /// (`Residency::page_layers`): per tile, the finest resident page over
+    /// it (`page_entry`), or `PAGE_NOT_RESIDENT` for the base level.
+    pub fn page_table(&self, page_layers: &[u32], table: &mut [u32]) {
+        for (tile, entry) in table.iter_mut().enumerate() {
+            let (tx, tz) = self.tile_coords(tile);
+            *entry = (0..self.page_levels())
+                .find_map(|level| {
+                    let layer = page_layers[self.page_of_tile(level, tx, tz)];
+                    (layer != PAGE_NOT_RESIDENT).then(|| page_entry(level, layer))
+                })
+                .unwrap_or(PAGE_NOT_RESIDENT);
+        }
+    }
+
+    /// The level a page table entry draws its tile at.
+    pub fn entry_level(&self, entry: u32) -> u32 {
+        match entry {
+            PAGE_NOT_RESIDENT => self.base_level,
+            e => e >> PAGE_LEVEL_SHIFT,
+        }
+    }
+
+    /// The height a streamed terrain draws at sample (col, row) with page
+    /// table `table` (`page_table`): the level surface
+    /// (`tiled::level_surface`) of the level the sample's owner tile is
+    /// drawn at, where `full(row, col)` gives the full-resolution samples.
+    /// Every level's samples are the whole terrain's lattice, so a page's
+    /// surface is the whole level's over the page. Mirror:
+    /// glsl/terrain_common.glsl `fetch_sample`.
     pub fn streamed_sample(
         &self,
-        resident: impl Fn(usize) -> bool,
+        table: &[u32],
         full: impl Fn(u32, u32) -> f32,
         (col, row): (u32, u32),
     ) -> f32 {
         let (tx, tz) = self.owner(col, row);
-        if resident(self.tile_index(tx, tz)) {
-            return full(row, col);
+        match self.entry_level(table[self.tile_index(tx, tz)]) {
+            0 => full(row, col),
+            level => level_surface((self.cols - 1, self.rows - 1), level, (col, row), full) as f32,
         }
-        level_surface(
-            (self.cols - 1, self.rows - 1),
-            self.base_level,
-            (col, row),
-            full,
-        ) as f32
     }
 }
 
-/// A tile to read from disk, and the layer it will go into.
+/// The page table entry of a page at `level` in layer `layer`. Mirror:
+/// the decoding in glsl/terrain_common.glsl `fetch_sample`.
+pub fn page_entry(level: u32, layer: u32) -> u32 {
+    debug_assert!(layer < 1 << PAGE_LEVEL_SHIFT);
+    level << PAGE_LEVEL_SHIFT | layer
+}
+
+/// A page to read from disk, and the layer it will go into.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Load {
-    pub tile: usize,
+    pub page: usize,
     pub layer: u32,
 }
 
 /// The page pool's occupancy and the loads in flight.
 #[derive(Clone, Debug)]
 pub struct Residency {
-    /// Per tile: its layer, or `PAGE_NOT_RESIDENT`. This is the page table.
-    layer_of_tile: Vec<u32>,
-    /// Per layer: the tile drawn from it.
-    tile_of_layer: Vec<Option<usize>>,
-    /// Per layer: the tile being loaded into it.
+    /// Per page: its layer, or `PAGE_NOT_RESIDENT`.
+    layer_of_page: Vec<u32>,
+    /// Per layer: the page drawn from it.
+    page_of_layer: Vec<Option<usize>>,
+    /// Per layer: the page being loaded into it.
     incoming: Vec<Option<usize>>,
-    /// Per tile: whether a load for it is in flight.
+    /// Per page: whether a load for it is in flight.
     loading: Vec<bool>,
-    /// Per tile: the priority `plan` last gave it.
-    priority: Vec<f32>,
     evictions: u64,
 }
 
 impl Residency {
-    /// Nothing resident, for `tiles` tiles and a pool of `layers` layers.
-    pub fn new(tiles: usize, layers: u32) -> Self {
+    /// Nothing resident, for `pages` pages and a pool of `layers` layers.
+    pub fn new(pages: usize, layers: u32) -> Self {
         Residency {
-            layer_of_tile: vec![PAGE_NOT_RESIDENT; tiles],
-            tile_of_layer: vec![None; layers as usize],
+            layer_of_page: vec![PAGE_NOT_RESIDENT; pages],
+            page_of_layer: vec![None; layers as usize],
             incoming: vec![None; layers as usize],
-            loading: vec![false; tiles],
-            priority: vec![0.0; tiles],
+            loading: vec![false; pages],
             evictions: 0,
         }
     }
 
-    /// The page table's entries: one per tile, its layer or
-    /// `PAGE_NOT_RESIDENT`.
-    pub fn page_table(&self) -> &[u32] {
-        &self.layer_of_tile
+    /// Per page, its layer or `PAGE_NOT_RESIDENT`.
+    pub fn page_layers(&self) -> &[u32] {
+        &self.layer_of_page
     }
 
     pub fn layers(&self) -> u32 {
-        self.tile_of_layer.len() as u32
+        self.page_of_layer.len() as u32
     }
 
-    pub fn resident_tiles(&self) -> usize {
-        self.tile_of_layer.iter().flatten().count()
+    pub fn resident_pages(&self) -> usize {
+        self.page_of_layer.iter().flatten().count()
     }
 
-    pub fn is_resident(&self, tile: usize) -> bool {
-        self.layer_of_tile[tile] != PAGE_NOT_RESIDENT
+    /// The page drawn from layer `layer`, if any.
+    pub fn page_in_layer(&self, layer: u32) -> Option<usize> {
+        self.page_of_layer[layer as usize]
+    }
+
+    pub fn is_resident(&self, page: usize) -> bool {
+        self.layer_of_page[page] != PAGE_NOT_RESIDENT
     }
 
     pub fn loads_in_flight(&self) -> usize {
         self.loading.iter().filter(|&&l| l).count()
     }
 
-    /// Tiles sent back to the base level since the start.
+    /// Pages evicted since the start.
     pub fn evictions(&self) -> u64 {
         self.evictions
     }
 
-    /// Takes this frame's priorities (one per tile; 0 for a tile the view
+    /// Takes this frame's priorities (one per page; 0 for a page the view
     /// does not need) and returns the loads to start, at most `max_new`,
     /// most needed first. Each load has a layer reserved: a free one, or
-    /// that of the resident tile with the lowest priority when the load's
+    /// that of the resident page with the lowest priority when the load's
     /// priority is `EVICTION_MARGIN` times that.
     pub fn plan(&mut self, priorities: &[f32], max_new: usize) -> Vec<Load> {
-        assert_eq!(priorities.len(), self.priority.len(), "one priority a tile");
-        self.priority.copy_from_slice(priorities);
+        assert_eq!(
+            priorities.len(),
+            self.layer_of_page.len(),
+            "one priority a page"
+        );
         let mut wanted: Vec<usize> = (0..priorities.len())
-            .filter(|&t| priorities[t] > 0.0 && !self.is_resident(t) && !self.loading[t])
+            .filter(|&p| priorities[p] > 0.0 && !self.is_resident(p) && !self.loading[p])
             .collect();
         wanted.sort_by(|&a, &b| priorities[b].total_cmp(&priorities[a]).then(a.cmp(&b)));
         // Layers that could take a load, least useful first: free ones,
-        // then resident tiles by priority.
+        // then resident pages by priority.
         let mut open: Vec<(f32, u32)> = (0..self.layers())
             .filter(|&l| self.incoming[l as usize].is_none())
             .map(|l| {
-                let useful = self.tile_of_layer[l as usize].map_or(-1.0, |t| priorities[t]);
+                let useful = self.page_of_layer[l as usize].map_or(-1.0, |p| priorities[p]);
                 (useful, l)
             })
             .collect();
         open.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let mut loads = Vec::new();
-        for (tile, (useful, layer)) in wanted.into_iter().zip(open) {
+        for (page, (useful, layer)) in wanted.into_iter().zip(open) {
             if loads.len() == max_new
-                || (useful >= 0.0 && priorities[tile] <= EVICTION_MARGIN * useful)
+                || (useful >= 0.0 && priorities[page] <= EVICTION_MARGIN * useful)
             {
                 break;
             }
-            self.incoming[layer as usize] = Some(tile);
-            self.loading[tile] = true;
-            loads.push(Load { tile, layer });
+            self.incoming[layer as usize] = Some(page);
+            self.loading[page] = true;
+            loads.push(Load { page, layer });
         }
         loads
     }
 
-    /// A load finished: its tile now draws from its layer, and the tile
-    /// that drew from there (if any, returned) goes back to the base level.
+    /// A load finished: its page now draws from its layer, and the page
+    /// that drew from there (if any, returned) is no longer resident.
     pub fn arrived(&mut self, load: Load) -> Option<usize> {
         let layer = load.layer as usize;
-        assert_eq!(self.incoming[layer], Some(load.tile), "a load `plan` made");
+        assert_eq!(self.incoming[layer], Some(load.page), "a load `plan` made");
         self.incoming[layer] = None;
-        self.loading[load.tile] = false;
-        let evicted = self.tile_of_layer[layer].replace(load.tile);
+        self.loading[load.page] = false;
+        let evicted = self.page_of_layer[layer].replace(load.page);
         if let Some(old) = evicted {
-            self.layer_of_tile[old] = PAGE_NOT_RESIDENT;
+            self.layer_of_page[old] = PAGE_NOT_RESIDENT;
             self.evictions += 1;
         }
-        self.layer_of_tile[load.tile] = load.layer;
+        self.layer_of_page[load.page] = load.layer;
         evicted
     }
 
     /// A load that failed or was dropped: its layer is free to plan again.
     pub fn cancelled(&mut self, load: Load) {
         self.incoming[load.layer as usize] = None;
-        self.loading[load.tile] = false;
-    }
-
-    /// The largest priority of a tile the view needs that is not resident:
-    /// the worst error, in pixels, the base level adds to this frame (0
-    /// when every needed tile is resident).
-    pub fn missing_px(&self) -> f32 {
-        (0..self.priority.len())
-            .filter(|&t| !self.is_resident(t))
-            .map(|t| self.priority[t])
-            .fold(0.0, f32::max)
+        self.loading[load.page] = false;
     }
 }
 
@@ -287,12 +412,89 @@ mod tests {
     }
 
     #[test]
-    fn loads_go_by_priority_and_evict_only_clearly_less_needed_tiles() {
+    fn every_level_pages_the_tiles_and_indices_round_trip() {
+        // 7 x 5 tiles of 16 cells, base level 4: pages at levels 0 to 3.
+        let s = StreamShape::new(100, 70, 16, 8);
+        assert_eq!(s.page_levels(), 4);
+        let across: Vec<_> = (0..4).map(|l| s.pages_across(l)).collect();
+        assert_eq!(across, vec![(7, 5), (4, 3), (2, 2), (1, 1)]);
+        assert_eq!(s.page_total(), 35 + 12 + 4 + 1);
+        for i in 0..s.page_total() {
+            let (level, px, pz) = s.page_coords(i);
+            assert_eq!(s.page_index(level, px, pz), i);
+            let (w, h) = s.page_size(level, px, pz);
+            assert!(w <= s.page_side() && h <= s.page_side(), "page {i}");
+        }
+        // Level 0's pages are the tiles.
+        assert_eq!(s.page_of_tile(0, 4, 3), s.tile_index(4, 3));
+        assert_eq!(s.tile_rect(6, 4), s.page_rect(0, 6, 4));
+        // Every tile lies in one page a level, and that page covers it.
+        for level in 0..4 {
+            for tz in 0..5 {
+                for tx in 0..7 {
+                    let (_, px, pz) = s.page_coords(s.page_of_tile(level, tx, tz));
+                    let (xs, zs) = s.page_tiles(level, px, pz);
+                    assert!(xs.contains(&tx) && zs.contains(&tz));
+                }
+            }
+        }
+        // The last page of level 1: tile (6, 4) alone, 3 x 5 cells, every
+        // other sample and the last.
+        assert_eq!(s.page_tiles(1, 3, 2), (6..7, 4..5));
+        assert_eq!(s.page_rect(1, 3, 2), ((96, 64), (3, 5)));
+        assert_eq!(s.page_size(1, 3, 2), (3, 4));
+        // Level 3's one page is the whole terrain at every 8th sample.
+        assert_eq!(s.page_rect(3, 0, 0), ((0, 0), (99, 69)));
+        assert_eq!(s.page_size(3, 0, 0), (14, 10));
+    }
+
+    #[test]
+    fn a_sample_takes_the_finest_resident_level_over_its_owner_tile() {
+        let s = StreamShape::new(100, 70, 16, 8);
+        let full = |r: u32, c: u32| ((r * 7 + c * 13) % 11) as f32 + 0.25 * (c % 3) as f32;
+        let cells = (99, 69);
+        // Tile (1, 0) at full resolution in layer 5, the level-2 page over
+        // tiles (0..4, 0..4) in layer 2, nothing else: the rest is the
+        // base level's.
+        let mut layers = vec![PAGE_NOT_RESIDENT; s.page_total()];
+        layers[s.tile_index(1, 0)] = 5;
+        layers[s.page_index(2, 0, 0)] = 2;
+        let is_resident = |p: usize| layers[p] != PAGE_NOT_RESIDENT;
+        assert_eq!(s.drawn_level(is_resident, (1, 0)), 0);
+        assert_eq!(s.drawn_level(is_resident, (3, 3)), 2);
+        assert_eq!(s.drawn_level(is_resident, (5, 4)), 4);
+        let mut table = vec![0; s.tile_total()];
+        s.page_table(&layers, &mut table);
+        assert_eq!(table[s.tile_index(1, 0)], 5);
+        assert_eq!(table[s.tile_index(3, 3)], 2 << PAGE_LEVEL_SHIFT | 2);
+        assert_eq!(table[s.tile_index(5, 4)], PAGE_NOT_RESIDENT);
+        for t in 0..s.tile_total() {
+            let level = s.entry_level(table[t]);
+            assert_eq!(level, s.drawn_level(is_resident, s.tile_coords(t)));
+        }
+        let level = |l: u32, c: u32, r: u32| level_surface(cells, l, (c, r), full) as f32;
+        let drawn = |c: u32, r: u32| s.streamed_sample(&table, full, (c, r));
+        assert_eq!(drawn(20, 3), full(3, 20));
+        assert_eq!(drawn(5, 5), level(2, 5, 5));
+        assert_ne!(drawn(5, 5), full(5, 5), "the test's surface is rough");
+        assert_eq!(drawn(90, 67), level(4, 90, 67));
+        // Column 16 is the border of tiles 0 and 1: it belongs to tile 0,
+        // drawn at level 2 whichever tile's cell reads it.
+        assert_eq!(drawn(16, 3), level(2, 16, 3));
+        assert_ne!(drawn(16, 3), full(3, 16));
+        // Column 17 is tile 1's: full resolution.
+        assert_eq!(drawn(17, 3), full(3, 17));
+        // The terrain's last row and column are a lattice's last samples.
+        assert_eq!(drawn(99, 69), full(69, 99));
+    }
+
+    #[test]
+    fn loads_go_by_priority_and_evict_only_clearly_less_needed_pages() {
         let mut r = Residency::new(5, 2);
         let loads = r.plan(&[1.0, 5.0, 0.0, 3.0, 2.0], 8);
         assert_eq!(
             loads,
-            vec![Load { tile: 1, layer: 0 }, Load { tile: 3, layer: 1 }]
+            vec![Load { page: 1, layer: 0 }, Load { page: 3, layer: 1 }]
         );
         // Nothing changes until they arrive; nothing else is planned
         // while every layer has a load coming.
@@ -301,7 +503,7 @@ mod tests {
             assert_eq!(r.arrived(l), None);
         }
         assert_eq!(
-            r.page_table(),
+            r.page_layers(),
             &[
                 PAGE_NOT_RESIDENT,
                 0,
@@ -310,22 +512,21 @@ mod tests {
                 PAGE_NOT_RESIDENT
             ]
         );
-        assert_eq!(r.missing_px(), 2.0);
-        // Tile 4 at 4 px is not 1.5x tile 3's 3 px: no swap.
+        // Page 4 at 4 px is not 1.5x page 3's 3 px: no swap.
         assert!(r.plan(&[1.0, 5.0, 0.0, 3.0, 4.0], 8).is_empty());
         // At 5 px it is, and it takes tile 3's layer when it arrives.
         let loads = r.plan(&[1.0, 6.0, 0.0, 3.0, 5.0], 8);
-        assert_eq!(loads, vec![Load { tile: 4, layer: 1 }]);
+        assert_eq!(loads, vec![Load { page: 4, layer: 1 }]);
         assert!(
             r.is_resident(3),
-            "an evicted tile draws until its successor arrives"
+            "an evicted page draws until its successor arrives"
         );
         assert_eq!(r.arrived(loads[0]), Some(3));
         assert!(!r.is_resident(3) && r.is_resident(4));
         assert_eq!(r.evictions(), 1);
         // A cancelled load frees its layer for the next plan.
         let loads = r.plan(&[0.0, 0.0, 9.0, 0.0, 0.0], 1);
-        assert_eq!(loads, vec![Load { tile: 2, layer: 0 }]);
+        assert_eq!(loads, vec![Load { page: 2, layer: 0 }]);
         r.cancelled(loads[0]);
         assert_eq!(r.plan(&[0.0, 0.0, 9.0, 0.0, 0.0], 1), loads);
     }

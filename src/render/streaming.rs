@@ -4,12 +4,16 @@
 //!
 //! - the **base level** (every `2^base_level`-th sample), one image, always
 //!   resident, uploaded whole at the start;
-//! - a **page pool**: an array image of `tile_cells + 1` square layers, one
-//!   full-resolution tile each;
-//! - a **page table** per frame in flight: per tile, its layer or none.
+//! - a **page pool**: an array image of `tile_cells + 1` square layers,
+//!   one page each: a tile at full resolution, or a block of `2^L x 2^L`
+//!   tiles at level L (every `2^L`-th sample), for each level finer than
+//!   the base;
+//! - a **page table** per frame in flight: per tile, the finest resident
+//!   page over it (its level and layer), or none for the base level.
 //!
-//! Which tiles are resident is `residency`'s policy. Tiles are read and
-//! decoded on background threads; each frame takes what has arrived (up to
+//! Which pages are resident is `residency`'s policy. Pages are read (a
+//! level-L page from its tiles' stored level L) and put together on
+//! background threads; each frame takes what has arrived (up to
 //! `upload_bytes_per_frame`), copies it into a staging buffer of its own,
 //! and records the copies into the pool before its draws. A swap happens
 //! within one frame: the new table and the new layer contents arrive
@@ -28,7 +32,9 @@ use glam::Vec3;
 
 use super::residency::{Load, Residency, StreamShape};
 use super::view::FrameView;
-use crate::shader_constants::{BINDING_PAGES, BINDING_PAGE_TABLE};
+use crate::shader_constants::{
+    BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT, PAGE_NOT_RESIDENT,
+};
 use crate::terrain::tiled::{level_sample, TiledError, TiledHeightmap};
 use crate::terrain::TerrainInfo;
 use crate::vk::commands::Recorder;
@@ -40,9 +46,9 @@ use crate::vk::{Device, Result, VkError};
 /// Samples a side of the base level may have at most, by default: 2049^2
 /// f32 is 16 MiB.
 pub const DEFAULT_BASE_MAX_SIDE: u32 = 2049;
-/// Bytes of tiles one frame uploads at most, by default.
+/// Bytes of pages one frame uploads at most, by default.
 pub const DEFAULT_UPLOAD_BYTES_PER_FRAME: u64 = 8 << 20;
-/// Threads reading tiles, by default.
+/// Threads reading pages, by default.
 pub const DEFAULT_LOADER_THREADS: usize = 2;
 /// Under a memory budget, what the pool leaves free for what is allocated
 /// after it (the occlusion pyramid, pipelines built later, a resized
@@ -59,10 +65,10 @@ pub struct StreamConfig {
     pub path: PathBuf,
     /// Largest side of the always-resident base level, in samples.
     pub base_max_side: u32,
-    /// Bytes of tiles one frame uploads at most.
+    /// Bytes of pages one frame uploads at most.
     pub upload_bytes_per_frame: u64,
     pub loader_threads: usize,
-    /// Layers of the page pool; by default as many as there are tiles (or
+    /// Layers of the page pool; by default as many as there are pages (or
     /// the device allows), fewer where the memory budget says so.
     pub layers: Option<u32>,
 }
@@ -92,29 +98,31 @@ impl StreamConfig {
 /// What streaming did in one frame, and where it stands.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct StreamStats {
-    /// Tiles uploaded by this frame and their bytes.
-    pub uploaded_tiles: u32,
+    /// Pages uploaded by this frame and their bytes.
+    pub uploaded_pages: u32,
     pub upload_bytes: u64,
-    /// Tiles this frame sent back to the base level.
-    pub evicted_tiles: u32,
-    /// The largest change an upload made on screen, at most: the uploaded
-    /// tiles' base-level errors seen from the view, in pixels.
+    /// Pages this frame's uploads evicted.
+    pub evicted_pages: u32,
+    /// The largest change this frame's uploads and evictions made on
+    /// screen, at most, in pixels: over each tile whose drawn level
+    /// changed, the two levels' errors added, seen from the view.
     pub pop_px: f32,
-    /// Tiles resident after this frame, and the pool's layers.
-    pub resident_tiles: u32,
+    /// Pages resident after this frame, and the pool's layers.
+    pub resident_pages: u32,
     pub layers: u32,
-    /// Reads in flight and tiles read but not uploaded yet.
+    /// Reads in flight and pages read but not uploaded yet.
     pub loads_in_flight: u32,
     pub waiting_uploads: u32,
-    /// The largest error, in pixels, of a tile the view needs that the
-    /// frame drew from the base level (0: everything needed is resident).
+    /// The largest error, in pixels, of a tile in view drawn coarser than
+    /// full resolution: its drawn level's error seen from the view (0:
+    /// everything in view is drawn exactly).
     pub missing_px: f32,
 }
 
-/// A tile read from disk: its full-resolution samples, row-major.
+/// A page read from disk: its samples, row-major.
 type Loaded = (Load, std::result::Result<Vec<f32>, TiledError>);
 
-/// Background threads reading tiles in the order asked.
+/// Background threads reading pages in the order asked.
 struct Loader {
     requests: Option<Sender<Load>>,
     results: Receiver<Loaded>,
@@ -129,22 +137,21 @@ impl Loader {
         let mut handles = Vec::new();
         for i in 0..threads.max(1) {
             // The threads share one reader: only its seek and read are
-            // locked, checking and decoding are not. Tiles go to the GPU,
-            // so none is kept in the reader's cache.
+            // locked, checking and decoding are not. Pages go to the GPU,
+            // so no tile is kept in the reader's cache.
             let reader = Arc::clone(reader);
             let (jobs, done) = (Arc::clone(&jobs), done.clone());
             let handle = std::thread::Builder::new()
-                .name(format!("tile-loader-{i}"))
+                .name(format!("page-loader-{i}"))
                 .spawn(move || loop {
                     let next = jobs.lock().map(|j| j.recv());
                     let Ok(Ok(load)) = next else { break };
-                    let (tx, tz) = shape.tile_coords(load.tile);
-                    let tile = reader.read_uncached(tx, tz, 0).map(|t| t.heights);
-                    if done.send((load, tile)).is_err() {
+                    let page = read_page(&reader, &shape, load.page);
+                    if done.send((load, page)).is_err() {
                         break;
                     }
                 })
-                .map_err(|e| VkError::Stream(format!("starting a tile loader: {e}")))?;
+                .map_err(|e| VkError::Stream(format!("starting a page loader: {e}")))?;
             handles.push(handle);
         }
         Ok(Loader {
@@ -158,7 +165,7 @@ impl Loader {
         self.requests
             .as_ref()
             .and_then(|r| r.send(load).ok())
-            .ok_or_else(|| VkError::Stream("the tile loaders stopped".into()))
+            .ok_or_else(|| VkError::Stream("the page loaders stopped".into()))
     }
 }
 
@@ -176,9 +183,13 @@ impl Drop for Loader {
 pub struct Streamer {
     shape: StreamShape,
     residency: Residency,
-    /// Per tile: the base level's error against full resolution, and its
-    /// box in terrain-local coordinates (centre, half extents).
-    base_errors: Vec<f32>,
+    /// Per tile, per level from full resolution to the base: the level's
+    /// error against full resolution (`tiled::Entry::error`).
+    tile_errors: Vec<f32>,
+    /// Per page: the error of drawing its area one level coarser (the
+    /// largest over its tiles), and its box in terrain-local coordinates
+    /// (centre, half extents).
+    coarser_errors: Vec<f32>,
     boxes: Vec<(Vec3, Vec3)>,
     base: Image,
     pool: Image,
@@ -188,8 +199,11 @@ pub struct Streamer {
     staging: Vec<Buffer>,
     copies: Vec<Vec<LayerCopy>>,
     loader: Loader,
-    /// Tiles read and waiting for a frame to upload them.
+    /// Pages read and waiting for a frame to upload them.
     arrived: VecDeque<(Load, Vec<f32>)>,
+    /// The page table the last prepared frame draws with: per tile, the
+    /// page it is drawn from (`StreamShape::page_table`).
+    table: Vec<u32>,
     stats: StreamStats,
     device: Device,
 }
@@ -218,11 +232,12 @@ impl Streamer {
         }
         let shape = config.shape(&tiled);
         let base = upload_base(device, &tiled, &shape)?;
-        let mut base_errors = Vec::with_capacity(shape.tile_total());
-        let mut boxes = Vec::with_capacity(shape.tile_total());
+        let levels = shape.base_level + 1;
+        let mut tile_errors = Vec::with_capacity(shape.tile_total() * levels as usize);
+        let mut tile_boxes = Vec::with_capacity(shape.tile_total());
         for tz in 0..shape.tiles_z {
             for tx in 0..shape.tiles_x {
-                base_errors.push(tiled.entry(tx, tz, shape.base_level).error);
+                tile_errors.extend((0..levels).map(|l| tiled.entry(tx, tz, l).error));
                 let full = tiled.entry(tx, tz, 0);
                 let ((c0, r0), (w, d)) = shape.tile_rect(tx, tz);
                 let lo = Vec3::new(
@@ -235,15 +250,34 @@ impl Streamer {
                     full.max,
                     info.local_z(r0 as usize) as f32,
                 );
-                boxes.push((0.5 * (lo + hi), 0.5 * (hi - lo)));
+                tile_boxes.push((lo, hi));
             }
+        }
+        // A page's box holds its tiles' boxes: every level's surface lies
+        // within its full-resolution samples' range.
+        let (mut coarser_errors, mut boxes) = (Vec::new(), Vec::new());
+        for page in 0..shape.page_total() {
+            let (level, px, pz) = shape.page_coords(page);
+            let coarser = (level + 1).min(shape.base_level);
+            let (xs, zs) = shape.page_tiles(level, px, pz);
+            let (mut error, mut lo, mut hi) = (0f32, Vec3::MAX, Vec3::MIN);
+            for tz in zs {
+                for tx in xs.clone() {
+                    let t = shape.tile_index(tx, tz);
+                    error = error.max(tile_errors[t * levels as usize + coarser as usize]);
+                    lo = lo.min(tile_boxes[t].0);
+                    hi = hi.max(tile_boxes[t].1);
+                }
+            }
+            coarser_errors.push(error);
+            boxes.push((0.5 * (lo + hi), 0.5 * (hi - lo)));
         }
         let side = shape.page_side();
         let layer_bytes = 4 * u64::from(side) * u64::from(side);
         let staging_bytes = config.upload_bytes_per_frame.max(layer_bytes);
         let mut staging = Vec::new();
         let mut tables = Vec::new();
-        let table_words = shape.tile_total();
+        let pages = shape.page_total();
         for i in 0..frames {
             staging.push(device.create_host_buffer(
                 &format!("terrain.stream.staging[{i}]"),
@@ -253,14 +287,15 @@ impl Streamer {
             tables.push(device.create_host_buffer(
                 &format!("terrain.stream.page_table[{i}]"),
                 vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(&vec![0u32; table_words]),
+                bytemuck::cast_slice(&vec![PAGE_NOT_RESIDENT; shape.tile_total()]),
             )?);
         }
         let mut layers = config
             .layers
-            .unwrap_or(shape.tile_total() as u32)
-            .min(shape.tile_total() as u32)
-            .min(device.caps.max_image_array_layers);
+            .unwrap_or(pages as u32)
+            .min(pages as u32)
+            .min(device.caps.max_image_array_layers)
+            .min(1 << PAGE_LEVEL_SHIFT);
         if let Some(budget) = device.memory_budget() {
             let headroom = (budget / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES);
             let free = budget.saturating_sub(device.memory_in_use() + headroom);
@@ -268,7 +303,7 @@ impl Streamer {
         }
         if layers == 0 {
             return Err(VkError::Stream(format!(
-                "no room for one {side}x{side} tile of {} under the GPU memory budget \
+                "no room for one {side}x{side} page of {} under the GPU memory budget \
                  (--gpu-memory-budget) once the base level and {} MiB of headroom are held",
                 config.path.display(),
                 device
@@ -279,8 +314,9 @@ impl Streamer {
         let pool = device.create_layer_pool("terrain.stream.pages", side, layers)?;
         Ok(Streamer {
             shape,
-            residency: Residency::new(shape.tile_total(), layers),
-            base_errors,
+            residency: Residency::new(pages, layers),
+            tile_errors,
+            coarser_errors,
             boxes,
             base,
             pool,
@@ -289,12 +325,13 @@ impl Streamer {
             copies: vec![Vec::new(); frames],
             loader: Loader::new(&tiled, shape, config.loader_threads)?,
             arrived: VecDeque::new(),
+            table: vec![PAGE_NOT_RESIDENT; shape.tile_total()],
             stats: StreamStats::default(),
             device: device.clone(),
         })
     }
 
-    /// How the terrain streams: its tiles and base level.
+    /// How the terrain streams: its tiles, pages and base level.
     pub fn shape(&self) -> StreamShape {
         self.shape
     }
@@ -323,24 +360,54 @@ impl Streamer {
         self.stats
     }
 
-    /// Each tile's priority from `view`: its base-level error over its
-    /// box's distance (at least the near plane's), in pixels; 0 outside the
-    /// frustum.
-    fn priorities(&self, view: &FrameView) -> Vec<f32> {
+    /// Per page, what a metre of height error is seen as from `view`, in
+    /// pixels: over its box's distance (at least the near plane's); 0
+    /// outside the frustum. Level 0's entries are the tiles'.
+    fn scales(&self, view: &FrameView) -> Vec<f32> {
         self.boxes
             .iter()
-            .zip(&self.base_errors)
-            .map(|(&(centre, extents), &error)| {
+            .map(|&(centre, extents)| {
                 let rel = centre - view.eye_local;
-                if error <= 0.0 || view.frustum.aabb_outside(rel, extents) {
+                if view.frustum.aabb_outside(rel, extents) {
                     return 0.0;
                 }
                 // Nothing nearer than the near plane is drawn: from inside
-                // a tile's box the error is seen from there at the nearest.
+                // a page's box the error is seen from there at the nearest.
                 let d = (rel.abs() - extents).max(Vec3::ZERO).length();
-                error * view.pixels_per_radian / d.max(view.near)
+                view.pixels_per_radian / d.max(view.near)
             })
             .collect()
+    }
+
+    /// Each page's priority at `scales`: the error, in pixels, of drawing
+    /// its area one level coarser.
+    fn priorities(&self, scales: &[f32]) -> Vec<f32> {
+        scales
+            .iter()
+            .zip(&self.coarser_errors)
+            .map(|(&scale, &error)| scale * error)
+            .collect()
+    }
+
+    /// Tile `tile`'s error at `level` against full resolution, in metres.
+    fn tile_error(&self, tile: usize, level: u32) -> f32 {
+        self.tile_errors[tile * (self.shape.base_level as usize + 1) + level as usize]
+    }
+
+    /// The level tile `tile` is drawn at now.
+    fn drawn_level(&self, tile: usize) -> u32 {
+        self.shape.drawn_level(
+            |p| self.residency.is_resident(p),
+            self.shape.tile_coords(tile),
+        )
+    }
+
+    /// The largest error, in pixels, a tile in view is drawn with.
+    fn missing_px(&self, scales: &[f32]) -> f32 {
+        (0..self.shape.tile_total())
+            .filter(|&t| scales[t] > 0.0)
+            .map(|t| self.tile_error(t, self.drawn_level(t)) * scales[t])
+            .fold(0.0, f32::max)
     }
 
     /// Takes what the loaders finished, without waiting (with `wait`,
@@ -351,13 +418,13 @@ impl Streamer {
                 Ok(r) => Some(r),
                 Err(RecvTimeoutError::Timeout) => None,
                 Err(RecvTimeoutError::Disconnected) => {
-                    return Err(VkError::Stream("the tile loaders stopped".into()))
+                    return Err(VkError::Stream("the page loaders stopped".into()))
                 }
             },
             None => self.loader.results.try_recv().ok(),
         };
-        while let Some((load, tile)) = next {
-            match tile {
+        while let Some((load, page)) = next {
+            match page {
                 Ok(heights) => self.arrived.push_back((load, heights)),
                 Err(e) => {
                     self.residency.cancelled(load);
@@ -369,54 +436,81 @@ impl Streamer {
         Ok(())
     }
 
-    /// Places arrived tiles into slot `slot`'s staging buffer while they
+    /// Makes `load` resident, and returns the largest change it makes on
+    /// screen at `scales`, at most, in pixels: over the tiles of the page
+    /// it brings and of the page it evicts, where a tile's drawn level
+    /// changes, the two levels' errors added.
+    fn make_resident(&mut self, load: Load, scales: &[f32]) -> (Option<usize>, f32) {
+        let mut tiles = Vec::new();
+        let evicting = self.residency.page_in_layer(load.layer);
+        for page in std::iter::once(load.page).chain(evicting) {
+            let (level, px, pz) = self.shape.page_coords(page);
+            let (xs, zs) = self.shape.page_tiles(level, px, pz);
+            for tz in zs {
+                tiles.extend(xs.clone().map(|tx| self.shape.tile_index(tx, tz)));
+            }
+        }
+        let before: Vec<u32> = tiles.iter().map(|&t| self.drawn_level(t)).collect();
+        let evicted = self.residency.arrived(load);
+        let pop = tiles
+            .iter()
+            .zip(before)
+            .filter(|&(&t, was)| self.drawn_level(t) != was)
+            .map(|(&t, was)| {
+                (self.tile_error(t, was) + self.tile_error(t, self.drawn_level(t))) * scales[t]
+            })
+            .fold(0.0, f32::max);
+        (evicted, pop)
+    }
+
+    /// Places arrived pages into slot `slot`'s staging buffer while they
     /// fit, updating the residency, and returns the copies to record.
-    fn stage(&mut self, slot: usize, priorities: &[f32]) -> Result<Vec<LayerCopy>> {
+    fn stage(&mut self, slot: usize, scales: &[f32]) -> Result<Vec<LayerCopy>> {
         let mut copies = Vec::new();
         let capacity = self.staging[slot].desc.size;
         let mut offset = 0u64;
-        let staging = self.staging[slot]
-            .mapped_mut()
-            .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
-        while let Some((load, heights)) = self.arrived.front() {
+        while let Some((load, heights)) = self.arrived.pop_front() {
             let bytes = 4 * heights.len() as u64;
             if offset + bytes > capacity {
+                self.arrived.push_front((load, heights));
                 break;
             }
-            let (tx, tz) = self.shape.tile_coords(load.tile);
-            let (_, (w, d)) = self.shape.tile_rect(tx, tz);
+            let staging = self.staging[slot]
+                .mapped_mut()
+                .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
             staging[offset as usize..(offset + bytes) as usize]
-                .copy_from_slice(bytemuck::cast_slice(heights));
+                .copy_from_slice(bytemuck::cast_slice(&heights));
+            let (level, px, pz) = self.shape.page_coords(load.page);
+            let (width, height) = self.shape.page_size(level, px, pz);
             copies.push(LayerCopy {
                 offset,
                 layer: load.layer,
-                width: w + 1,
-                height: d + 1,
+                width,
+                height,
             });
-            let evicted = self.residency.arrived(*load);
-            self.stats.uploaded_tiles += 1;
+            let (evicted, pop) = self.make_resident(load, scales);
+            self.stats.uploaded_pages += 1;
             self.stats.upload_bytes += bytes;
-            self.stats.evicted_tiles += u32::from(evicted.is_some());
-            self.stats.pop_px = self.stats.pop_px.max(priorities[load.tile]);
+            self.stats.evicted_pages += u32::from(evicted.is_some());
+            self.stats.pop_px = self.stats.pop_px.max(pop);
             offset += bytes;
-            self.arrived.pop_front();
         }
         Ok(copies)
     }
 
     /// Starts the loads this view needs most, keeping at most two frames'
     /// uploads read or in flight.
-    fn request(&mut self, priorities: &[f32], frame_tiles: usize) -> Result<()> {
+    fn request(&mut self, priorities: &[f32], frame_pages: usize) -> Result<()> {
         let busy = self.residency.loads_in_flight();
-        let room = (2 * frame_tiles).saturating_sub(busy);
+        let room = (2 * frame_pages).saturating_sub(busy);
         for load in self.residency.plan(priorities, room) {
             self.loader.request(load)?;
         }
         Ok(())
     }
 
-    /// Tiles one frame's staging buffer holds.
-    fn frame_tiles(&self, slot: usize) -> usize {
+    /// Pages one frame's staging buffer holds.
+    fn frame_pages(&self, slot: usize) -> usize {
         let side = u64::from(self.shape.page_side());
         (self.staging[slot].desc.size / (4 * side * side)).max(1) as usize
     }
@@ -427,27 +521,28 @@ impl Streamer {
     pub fn prepare(&mut self, slot: usize, view: &FrameView) -> Result<()> {
         self.stats = StreamStats::default();
         self.collect(None)?;
-        let priorities = self.priorities(view);
-        self.copies[slot] = self.stage(slot, &priorities)?;
-        self.request(&priorities, self.frame_tiles(slot))?;
-        self.finish_frame(slot)
+        let scales = self.scales(view);
+        self.copies[slot] = self.stage(slot, &scales)?;
+        self.request(&self.priorities(&scales), self.frame_pages(slot))?;
+        self.finish_frame(slot, &scales)
     }
 
     /// Loads and uploads (with its own submissions) until everything
     /// `view` needs is resident, or the pool holds what helps it most:
     /// what a one-shot render does before its frame. Slot `slot` must be
-    /// idle. Returns the tiles uploaded.
+    /// idle. Returns the pages uploaded.
     pub fn settle(&mut self, slot: usize, view: &FrameView) -> Result<u32> {
-        let priorities = self.priorities(view);
-        let frame_tiles = self.frame_tiles(slot);
+        let scales = self.scales(view);
+        let priorities = self.priorities(&scales);
+        let frame_pages = self.frame_pages(slot);
         let mut uploaded = 0;
         loop {
-            self.request(&priorities, frame_tiles)?;
+            self.request(&priorities, frame_pages)?;
             if self.residency.loads_in_flight() == 0 && self.arrived.is_empty() {
                 return Ok(uploaded);
             }
             self.collect(Some(Duration::from_millis(100)))?;
-            let copies = self.stage(slot, &priorities)?;
+            let copies = self.stage(slot, &scales)?;
             if copies.is_empty() {
                 continue;
             }
@@ -459,16 +554,18 @@ impl Streamer {
         }
     }
 
-    fn finish_frame(&mut self, slot: usize) -> Result<()> {
+    fn finish_frame(&mut self, slot: usize, scales: &[f32]) -> Result<()> {
+        self.stats.missing_px = self.missing_px(scales);
+        self.shape
+            .page_table(self.residency.page_layers(), &mut self.table);
         let table = self.tables[slot]
             .mapped_mut()
             .ok_or_else(|| VkError::Unsupported("page table memory is not host-mapped".into()))?;
-        table.copy_from_slice(bytemuck::cast_slice(self.residency.page_table()));
-        self.stats.resident_tiles = self.residency.resident_tiles() as u32;
+        table.copy_from_slice(bytemuck::cast_slice(&self.table));
+        self.stats.resident_pages = self.residency.resident_pages() as u32;
         self.stats.layers = self.residency.layers();
         self.stats.loads_in_flight = self.residency.loads_in_flight() as u32;
         self.stats.waiting_uploads = self.arrived.len() as u32;
-        self.stats.missing_px = self.residency.missing_px();
         Ok(())
     }
 
@@ -477,10 +574,11 @@ impl Streamer {
         rec.copy_to_layers(&self.staging[slot], &self.pool, &self.copies[slot]);
     }
 
-    /// The page table's entries: per tile, its layer or
+    /// The page table the last prepared frame draws with: per tile, the
+    /// page it is drawn from (`residency::page_entry`) or
     /// `PAGE_NOT_RESIDENT`.
     pub fn page_table(&self) -> &[u32] {
-        self.residency.page_table()
+        &self.table
     }
 
     /// Evictions since the start.
@@ -523,29 +621,67 @@ impl NoStream {
     }
 }
 
+/// Page `page` of `tiled`, row-major: its level's samples of its tiles.
+fn read_page(
+    tiled: &TiledHeightmap,
+    shape: &StreamShape,
+    page: usize,
+) -> std::result::Result<Vec<f32>, TiledError> {
+    let (level, px, pz) = shape.page_coords(page);
+    if level == 0 {
+        return tiled.read_uncached(px, pz, 0).map(|t| t.heights);
+    }
+    let (xs, zs) = shape.page_tiles(level, px, pz);
+    let (w, h) = shape.page_size(level, px, pz);
+    let mut samples = vec![0f32; w as usize * h as usize];
+    put_tiles(tiled, shape, level, (xs, zs), w, &mut samples)?;
+    Ok(samples)
+}
+
+/// Puts the tiles `xs` x `zs` of `tiled` at `level` into `samples`, a
+/// row-major block `width` samples across whose first sample is the first
+/// tile's. Every tile's level samples are the whole terrain's lattice:
+/// tiles start on multiples of `2^level`, and a tile's last sample is a
+/// multiple too or the terrain's last. Neighbours share their border
+/// samples, which are equal.
+fn put_tiles(
+    tiled: &TiledHeightmap,
+    shape: &StreamShape,
+    level: u32,
+    (xs, zs): (std::ops::Range<u32>, std::ops::Range<u32>),
+    width: u32,
+    samples: &mut [f32],
+) -> std::result::Result<(), TiledError> {
+    let step = shape.tile_cells >> level;
+    for tz in zs.clone() {
+        for tx in xs.clone() {
+            let tile = tiled.read_uncached(tx, tz, level)?;
+            let (x0, z0) = ((tx - xs.start) * step, (tz - zs.start) * step);
+            for r in 0..tile.rows {
+                let start = (z0 + r) as usize * width as usize + x0 as usize;
+                samples[start..start + tile.cols as usize].copy_from_slice(
+                    &tile.heights[(r * tile.cols) as usize..][..tile.cols as usize],
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The base level of `tiled` as one image: each tile's level
 /// `shape.base_level`, placed where its samples fall in the whole.
 fn upload_base(device: &Device, tiled: &TiledHeightmap, shape: &StreamShape) -> Result<Image> {
     let (w, h) = shape.base_size();
     let mut texels = vec![0f32; w as usize * h as usize];
-    let step = shape.tile_cells >> shape.base_level;
-    for tz in 0..shape.tiles_z {
-        for tx in 0..shape.tiles_x {
-            let level = tiled
-                .read_uncached(tx, tz, shape.base_level)
-                .map_err(|e| VkError::Stream(e.to_string()))?;
-            for r in 0..level.rows {
-                let row = (tz * step + r) as usize;
-                let start = row * w as usize + (tx * step) as usize;
-                texels[start..start + level.cols as usize].copy_from_slice(
-                    &level.heights[(r * level.cols) as usize..][..level.cols as usize],
-                );
-            }
-        }
-    }
-    // Every tile's level samples are the whole's: tiles start on multiples
-    // of 2^base_level, and a tile's last sample is a multiple too or the
-    // terrain's last.
+    put_tiles(
+        tiled,
+        shape,
+        shape.base_level,
+        (0..shape.tiles_x, 0..shape.tiles_z),
+        w,
+        &mut texels,
+    )
+    .map_err(|e| VkError::Stream(e.to_string()))?;
     debug_assert_eq!(
         level_sample(w - 1, shape.cols - 1, shape.base_level),
         shape.cols - 1
