@@ -468,8 +468,8 @@ mod tests {
         assert_eq!(table[s.tile_index(1, 0)], 5);
         assert_eq!(table[s.tile_index(3, 3)], 2 << PAGE_LEVEL_SHIFT | 2);
         assert_eq!(table[s.tile_index(5, 4)], PAGE_NOT_RESIDENT);
-        for t in 0..s.tile_total() {
-            let level = s.entry_level(table[t]);
+        for (t, &entry) in table.iter().enumerate() {
+            let level = s.entry_level(entry);
             assert_eq!(level, s.drawn_level(is_resident, s.tile_coords(t)));
         }
         let level = |l: u32, c: u32, r: u32| level_surface(cells, l, (c, r), full) as f32;
