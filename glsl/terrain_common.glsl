@@ -60,17 +60,16 @@ layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
 
 // Heights, one texel per sample, row 0 first: R32_SFLOAT read with
 // texelFetch (linear filtering of R32_SFLOAT is optional in Vulkan, and
-// the surface between samples is triangles, not bilinear). A streamed
-// terrain binds its base level here instead: every 2^base_level-th
-// sample and the last, in each direction.
+// the surface between samples is triangles, not bilinear). Unread where
+// heights are streamed.
 layout(set = 0, binding = BINDING_HEIGHTMAP) uniform sampler2D heightmap;
 
-// Whether heights are streamed (see render::streaming): pages resident
-// in `pages` (a tile at full resolution, or a block of 2^L x 2^L tiles at
-// level L) are found through `page_table`, which gives each tile the
-// finest resident page over it (its level above PAGE_LEVEL_SHIFT, its
-// layer below), or PAGE_NOT_RESIDENT for the base level. The streamed
-// terrain's shape is constant for a pipeline.
+// Whether heights are streamed (see render::streaming): every height is
+// then in a page of `pages` (a block of 2^L x 2^L tiles at level L, every
+// 2^L-th sample; the base level's pages always resident), and
+// `page_table` gives each tile the finest resident page over it: its level
+// above PAGE_LEVEL_SHIFT, its layer below. The streamed terrain's shape is
+// constant for a pipeline.
 layout(constant_id = SPEC_STREAMED) const bool STREAMED = false;
 layout(constant_id = SPEC_STREAMED + 1) const int STREAM_TILE_CELLS = 1;
 layout(constant_id = SPEC_STREAMED + 2) const int STREAM_BASE_LEVEL = 0;
@@ -110,23 +109,6 @@ void lattice_cell(ivec2 s, ivec2 last, int level, out ivec2 i, out vec2 st) {
     st = vec2(s - lo) / vec2(min(lo + step, last) - lo);
 }
 
-// A streamed terrain's base-level surface at sample s: the base's samples
-// joined into cells split like the reference's. A sample the base keeps
-// reads it exactly.
-float base_height(ivec2 s, int level) {
-    ivec2 i;
-    vec2 st;
-    lattice_cell(s, ivec2(frame.spacing_size.zw) - 1, level, i, st);
-    float a = texelFetch(heightmap, i, 0).r;
-    if (st == vec2(0.0)) {
-        return a;
-    }
-    float b = texelFetch(heightmap, i + ivec2(1, 0), 0).r;
-    float c = texelFetch(heightmap, i + ivec2(0, 1), 0).r;
-    float d = texelFetch(heightmap, i + ivec2(1, 1), 0).r;
-    return blend_cell(st, a, b, c, d);
-}
-
 // The surface at sample s of the level-`level` page in layer `layer`,
 // whose first sample is `origin`: the same lattice surface as the whole
 // level's, its cells read from the page.
@@ -147,9 +129,9 @@ float page_height(ivec2 s, ivec2 origin, int level, int layer) {
 
 // The height drawn at sample (column, row) s. Streamed: a sample belongs
 // to one tile (on a border between tiles, the one before it: left,
-// above), and takes the page its tile's entry names, else the base
-// level. Every sample so has one value whichever patch asks, and the
-// surface stays watertight between tiles drawn at different levels.
+// above), and takes the page its tile's entry names. Every sample so has
+// one value whichever patch asks, and the surface stays watertight
+// between tiles drawn at different levels.
 // Mirror: render::residency::streamed_sample.
 float fetch_sample(ivec2 s) {
     if (!STREAMED) {
@@ -158,16 +140,9 @@ float fetch_sample(ivec2 s) {
     ivec2 tiles = ivec2(STREAM_TILES_X, STREAM_TILES_Z);
     ivec2 tile = min(max(s - 1, ivec2(0)) / STREAM_TILE_CELLS, tiles - 1);
     uint entry = page_table[tile.y * tiles.x + tile.x];
-    if (entry != PAGE_NOT_RESIDENT) {
-        int level = int(entry >> PAGE_LEVEL_SHIFT);
-        int layer = int(entry & ((1u << PAGE_LEVEL_SHIFT) - 1u));
-        ivec2 origin = (tile >> level) * (STREAM_TILE_CELLS << level);
-        if (level == 0) {
-            return texelFetch(pages, ivec3(s - origin, layer), 0).r;
-        }
-        return page_height(s, origin, level, layer);
-    }
-    return base_height(s, STREAM_BASE_LEVEL);
+    int level = int(entry >> PAGE_LEVEL_SHIFT);
+    int layer = int(entry & ((1u << PAGE_LEVEL_SHIFT) - 1u));
+    return page_height(s, (tile >> level) * (STREAM_TILE_CELLS << level), level, layer);
 }
 
 // Height on the triangulated surface at continuous sample coordinates,

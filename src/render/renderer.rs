@@ -22,8 +22,8 @@
 //! depth attachments and the frame's settings ask for it.
 //!
 //! A tiled terrain can be streamed instead of uploaded whole (see
-//! `streaming`): the heightmap binding then holds its base level, and every
-//! path reads heights through the page table.
+//! `streaming`): the heightmap binding then holds a one-texel stand-in, and
+//! every path reads heights from the page pool through the page table.
 
 use std::mem::size_of;
 use std::sync::Arc;
@@ -214,8 +214,8 @@ pub struct TerrainRenderer {
     _sets: DescriptorSets,
     pipeline_layout: PipelineLayout,
     set_layout: DescriptorSetLayout,
-    /// Read through the frames' sets: the heightmap, or a streamed
-    /// terrain's base level.
+    /// Read through the frames' sets: the heightmap (a one-texel stand-in
+    /// for a streamed terrain, whose heights are in its page pool).
     _heightmap: Image,
     /// Heights streamed from a tiled terrain; with none, a one-layer pool
     /// and an empty page table stand in its bindings.
@@ -294,8 +294,8 @@ impl TerrainRenderer {
         check_device(device, terrain, options)?;
         let samples = sample_count_flag(options.samples);
         let info = terrain.info();
-        // A streamed terrain's base level takes the heightmap's binding
-        // once the pool is made (after the paths, which count against the
+        // A streamed terrain's heights, its base level included, are in
+        // the page pool, made after the paths (which count against the
         // memory budget first).
         let heightmap = match options.stream {
             None => upload_heightmap(device, info, "terrain.heightmap")?,
@@ -377,12 +377,6 @@ impl TerrainRenderer {
         if let (Some(config), Some(tiled)) = (&options.stream, tiled) {
             let streamer = Streamer::new(device, info, config, tiled, renderer.frames.len())?;
             for (slot, frame) in renderer.frames.iter().enumerate() {
-                device.write_sampled_image(
-                    frame.set,
-                    BINDING_HEIGHTMAP,
-                    streamer.base(),
-                    &renderer.sampler,
-                );
                 streamer.write_bindings(frame.set, slot, &renderer.sampler);
             }
             renderer.streamer = Some(streamer);
@@ -1109,8 +1103,7 @@ pub(super) fn write_frame_bindings(
 }
 
 /// The bindings of glsl/terrain_common.glsl in `stages`: the frame's
-/// uniforms, the heightmap (or base level), the tile pool and the page
-/// table; what every terrain pipeline's layout (and the mirror check's)
+/// uniforms, the heightmap, the page pool and the page table; what every terrain pipeline's layout (and the mirror check's)
 /// starts with, and `write_frame_bindings` and `NoStream` fill.
 pub(super) fn frame_bindings(
     stages: vk::ShaderStageFlags,

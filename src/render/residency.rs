@@ -1,14 +1,14 @@
 //! Which pages of a streamed terrain are resident on the GPU: the policy
 //! behind `streaming`, in plain Rust so it can be tested without a device.
 //!
-//! A streamed terrain is drawn from two sources. The **base level** keeps
-//! every `2^base_level`-th sample of the whole terrain and is always
-//! resident. A **page pool** of a fixed number of equal layers holds
-//! **pages**: a level-L page is the level-L samples (every `2^L`-th) of a
-//! block of `2^L x 2^L` tiles, so every page, from a full-resolution tile
-//! (level 0) to the level just finer than the base, is `tile_cells + 1`
-//! samples a side. A sample is drawn from the finest resident page over
-//! it, else from the base level.
+//! A streamed terrain is drawn from one **page pool**, an array image of
+//! equal layers. A level-L page is the level-L samples (every `2^L`-th) of
+//! a block of `2^L x 2^L` tiles, so every page, from a full-resolution tile
+//! (level 0) to the **base level**, is `tile_cells + 1` samples a side.
+//! The base level's pages, every `2^base_level`-th sample of the whole
+//! terrain, hold the pool's first layers for good; the levels finer than
+//! the base stream into the rest. A sample is drawn from the finest
+//! resident page over its tile, else from the base.
 //!
 //! Each frame, every page in the view gets a priority: the error, in
 //! pixels, of drawing its area one level coarser, seen from its nearest
@@ -111,10 +111,17 @@ impl StreamShape {
         ((index % across) as u32, (index / across) as u32)
     }
 
-    /// Levels the page pool holds: full resolution up to the one before
-    /// the base level (full resolution alone where the base is that).
+    /// Levels whose pages stream: full resolution up to the one before
+    /// the base level. The base level's own pages are always resident.
     pub fn page_levels(&self) -> u32 {
-        self.base_level.max(1)
+        self.base_level
+    }
+
+    /// The base level's pages: `pages_across(base_level)`, row-major, in
+    /// the pool's first layers for good.
+    pub fn base_pages(&self) -> u32 {
+        let (x, z) = self.pages_across(self.base_level);
+        x * z
     }
 
     /// Pages across and down at `level`: one for each `2^level x 2^level`
@@ -138,7 +145,7 @@ impl StreamShape {
             .sum()
     }
 
-    /// Pages of every level: the page table's length.
+    /// Pages of every streamed level.
     pub fn page_total(&self) -> usize {
         self.level_offset(self.page_levels())
     }
@@ -214,26 +221,24 @@ impl StreamShape {
             .unwrap_or(self.base_level)
     }
 
-    /// The page table the shaders read, from each page's layer
-    /// (`Residency::page_layers`): per tile, the finest resident page over
-    /// it (`page_entry`), or `PAGE_NOT_RESIDENT` for the base level.
+    /// The page table the shaders read: per tile, the finest resident
+    /// page over it (`page_entry`), where `page_layers` gives each streamed
+    /// page's layer among those after the base pages
+    /// (`Residency::page_layers`), else its base page.
     pub fn page_table(&self, page_layers: &[u32], table: &mut [u32]) {
+        let (base_across, _) = self.pages_across(self.base_level);
         for (tile, entry) in table.iter_mut().enumerate() {
             let (tx, tz) = self.tile_coords(tile);
             *entry = (0..self.page_levels())
                 .find_map(|level| {
                     let layer = page_layers[self.page_of_tile(level, tx, tz)];
-                    (layer != PAGE_NOT_RESIDENT).then(|| page_entry(level, layer))
+                    (layer != PAGE_NOT_RESIDENT)
+                        .then(|| page_entry(level, self.base_pages() + layer))
                 })
-                .unwrap_or(PAGE_NOT_RESIDENT);
-        }
-    }
-
-    /// The level a page table entry draws its tile at.
-    pub fn entry_level(&self, entry: u32) -> u32 {
-        match entry {
-            PAGE_NOT_RESIDENT => self.base_level,
-            e => e >> PAGE_LEVEL_SHIFT,
+                .unwrap_or_else(|| {
+                    let (bx, bz) = (tx >> self.base_level, tz >> self.base_level);
+                    page_entry(self.base_level, bz * base_across + bx)
+                });
         }
     }
 
@@ -251,18 +256,28 @@ impl StreamShape {
         (col, row): (u32, u32),
     ) -> f32 {
         let (tx, tz) = self.owner(col, row);
-        match self.entry_level(table[self.tile_index(tx, tz)]) {
+        match entry_level(table[self.tile_index(tx, tz)]) {
             0 => full(row, col),
             level => level_surface((self.cols - 1, self.rows - 1), level, (col, row), full) as f32,
         }
     }
 }
 
-/// The page table entry of a page at `level` in layer `layer`. Mirror:
-/// the decoding in glsl/terrain_common.glsl `fetch_sample`.
+/// The page table entry of a page at `level` in pool layer `layer`.
+/// Mirror: the decoding in glsl/terrain_common.glsl `fetch_sample`.
 pub fn page_entry(level: u32, layer: u32) -> u32 {
     debug_assert!(layer < 1 << PAGE_LEVEL_SHIFT);
     level << PAGE_LEVEL_SHIFT | layer
+}
+
+/// The level a page table entry draws its tile at.
+pub fn entry_level(entry: u32) -> u32 {
+    entry >> PAGE_LEVEL_SHIFT
+}
+
+/// The pool layer a page table entry reads.
+pub fn entry_layer(entry: u32) -> u32 {
+    entry & ((1 << PAGE_LEVEL_SHIFT) - 1)
 }
 
 /// A page to read from disk, and the layer it will go into.
@@ -465,11 +480,20 @@ mod tests {
         assert_eq!(s.drawn_level(is_resident, (5, 4)), 4);
         let mut table = vec![0; s.tile_total()];
         s.page_table(&layers, &mut table);
-        assert_eq!(table[s.tile_index(1, 0)], 5);
-        assert_eq!(table[s.tile_index(3, 3)], 2 << PAGE_LEVEL_SHIFT | 2);
-        assert_eq!(table[s.tile_index(5, 4)], PAGE_NOT_RESIDENT);
+        // One base page (level 4 is one page here) in layer 0 first.
+        assert_eq!(s.base_pages(), 1);
+        assert_eq!(table[s.tile_index(1, 0)], 6);
+        assert_eq!(table[s.tile_index(3, 3)], 2 << PAGE_LEVEL_SHIFT | 3);
+        assert_eq!(table[s.tile_index(5, 4)], 4 << PAGE_LEVEL_SHIFT);
+        assert_eq!(
+            (
+                entry_level(table[s.tile_index(3, 3)]),
+                entry_layer(table[s.tile_index(3, 3)])
+            ),
+            (2, 3)
+        );
         for (t, &entry) in table.iter().enumerate() {
-            let level = s.entry_level(entry);
+            let level = entry_level(entry);
             assert_eq!(level, s.drawn_level(is_resident, s.tile_coords(t)));
         }
         let level = |l: u32, c: u32, r: u32| level_surface(cells, l, (c, r), full) as f32;

@@ -2,14 +2,14 @@
 //! GPU, within a memory budget. The shaders read them through an
 //! indirection this module owns (glsl/terrain_common.glsl `fetch_sample`):
 //!
-//! - the **base level** (every `2^base_level`-th sample), one image, always
-//!   resident, uploaded whole at the start;
 //! - a **page pool**: an array image of `tile_cells + 1` square layers,
-//!   one page each: a tile at full resolution, or a block of `2^L x 2^L`
-//!   tiles at level L (every `2^L`-th sample), for each level finer than
-//!   the base;
+//!   one page each (`residency`): a block of `2^L x 2^L` tiles at level L
+//!   (every `2^L`-th sample). The first layers hold the **base level**'s
+//!   pages, uploaded at the start and always resident; the rest take
+//!   streamed pages of the finer levels, down to single tiles at full
+//!   resolution;
 //! - a **page table** per frame in flight: per tile, the finest resident
-//!   page over it (its level and layer), or none for the base level.
+//!   page over it (its level and layer), the base page where none is.
 //!
 //! Which pages are resident is `residency`'s policy. Pages are read (a
 //! level-L page from its tiles' stored level L) and put together on
@@ -35,7 +35,7 @@ use super::view::FrameView;
 use crate::shader_constants::{
     BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT, PAGE_NOT_RESIDENT,
 };
-use crate::terrain::tiled::{level_sample, TiledError, TiledHeightmap};
+use crate::terrain::tiled::{TiledError, TiledHeightmap};
 use crate::terrain::TerrainInfo;
 use crate::vk::commands::Recorder;
 use crate::vk::descriptors::DescriptorSet;
@@ -107,9 +107,11 @@ pub struct StreamStats {
     /// screen, at most, in pixels: over each tile whose drawn level
     /// changed, the two levels' errors added, seen from the view.
     pub pop_px: f32,
-    /// Pages resident after this frame, and the pool's layers.
+    /// Streamed pages resident after this frame, and the pool's layers
+    /// for them; the base level's pages, always resident, besides.
     pub resident_pages: u32,
     pub layers: u32,
+    pub base_pages: u32,
     /// Reads in flight and pages read but not uploaded yet.
     pub loads_in_flight: u32,
     pub waiting_uploads: u32,
@@ -146,7 +148,7 @@ impl Loader {
                 .spawn(move || loop {
                     let next = jobs.lock().map(|j| j.recv());
                     let Ok(Ok(load)) = next else { break };
-                    let page = read_page(&reader, &shape, load.page);
+                    let page = read_page(&reader, &shape, shape.page_coords(load.page));
                     if done.send((load, page)).is_err() {
                         break;
                     }
@@ -191,7 +193,7 @@ pub struct Streamer {
     /// (centre, half extents).
     coarser_errors: Vec<f32>,
     boxes: Vec<(Vec3, Vec3)>,
-    base: Image,
+    /// The pool: the base pages, then the layers `residency` fills.
     pool: Image,
     /// Per frame slot: the page table it draws with, the staging buffer
     /// its uploads come from, and the copies `record` makes.
@@ -210,8 +212,8 @@ pub struct Streamer {
 
 impl Streamer {
     /// Streams `tiled` (`config.path`, opened) for a terrain whose CPU
-    /// model is `info`: uploads its base level and makes a pool as large as
-    /// the configuration and the device's memory budget allow, for
+    /// model is `info`: makes a pool as large as the configuration and the
+    /// device's memory budget allow and uploads the base level into it, for
     /// `frames` frames in flight.
     pub fn new(
         device: &Device,
@@ -231,7 +233,6 @@ impl Streamer {
             )));
         }
         let shape = config.shape(&tiled);
-        let base = upload_base(device, &tiled, &shape)?;
         let levels = shape.base_level + 1;
         let mut tile_errors = Vec::with_capacity(shape.tile_total() * levels as usize);
         let mut tile_boxes = Vec::with_capacity(shape.tile_total());
@@ -290,35 +291,47 @@ impl Streamer {
                 bytemuck::cast_slice(&vec![PAGE_NOT_RESIDENT; shape.tile_total()]),
             )?);
         }
-        let mut layers = config
-            .layers
-            .unwrap_or(pages as u32)
-            .min(pages as u32)
-            .min(device.caps.max_image_array_layers)
+        // The pool's layers: the base pages, and as many streamed ones as
+        // the configuration, the device and the memory budget allow.
+        let base_pages = shape.base_pages();
+        let device_layers = device
+            .caps
+            .max_image_array_layers
             .min(1 << PAGE_LEVEL_SHIFT);
+        if base_pages >= device_layers {
+            return Err(VkError::Stream(format!(
+                "{}: its base level takes {base_pages} pages of {side}x{side} samples, and the \
+                 device allows {device_layers} layers in all; import it with larger tiles (--tile)",
+                config.path.display()
+            )));
+        }
+        let mut room = device_layers;
         if let Some(budget) = device.memory_budget() {
             let headroom = (budget / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES);
             let free = budget.saturating_sub(device.memory_in_use() + headroom);
-            layers = layers.min((free / layer_bytes) as u32);
+            room = room.min((free / layer_bytes).min(u64::from(u32::MAX)) as u32);
         }
-        if layers == 0 {
+        let wanted = config.layers.unwrap_or(pages as u32).min(pages as u32);
+        let layers = wanted.min(room.saturating_sub(base_pages));
+        if layers == 0 && pages > 0 {
             return Err(VkError::Stream(format!(
-                "no room for one {side}x{side} page of {} under the GPU memory budget \
-                 (--gpu-memory-budget) once the base level and {} MiB of headroom are held",
+                "no room for the base level's {base_pages} pages of {} and one more, \
+                 {side}x{side} samples each, under the GPU memory budget \
+                 (--gpu-memory-budget) once {} MiB of headroom are held",
                 config.path.display(),
                 device
                     .memory_budget()
                     .map_or(0, |b| (b / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES) >> 20)
             )));
         }
-        let pool = device.create_layer_pool("terrain.stream.pages", side, layers)?;
+        let pool = device.create_layer_pool("terrain.stream.pages", side, base_pages + layers)?;
+        upload_base(device, &tiled, &shape, &pool, &mut staging[0])?;
         Ok(Streamer {
             shape,
             residency: Residency::new(pages, layers),
             tile_errors,
             coarser_errors,
             boxes,
-            base,
             pool,
             tables,
             staging,
@@ -334,11 +347,6 @@ impl Streamer {
     /// How the terrain streams: its tiles, pages and base level.
     pub fn shape(&self) -> StreamShape {
         self.shape
-    }
-
-    /// The base level, bound where the heightmap is.
-    pub fn base(&self) -> &Image {
-        &self.base
     }
 
     /// Points slot `slot`'s set at the pool and its page table.
@@ -404,6 +412,11 @@ impl Streamer {
 
     /// The largest error, in pixels, a tile in view is drawn with.
     fn missing_px(&self, scales: &[f32]) -> f32 {
+        if self.shape.page_levels() == 0 {
+            // The base level is full resolution: nothing streams, and
+            // `scales` (one a streamed page) is empty.
+            return 0.0;
+        }
         (0..self.shape.tile_total())
             .filter(|&t| scales[t] > 0.0)
             .map(|t| self.tile_error(t, self.drawn_level(t)) * scales[t])
@@ -484,7 +497,7 @@ impl Streamer {
             let (width, height) = self.shape.page_size(level, px, pz);
             copies.push(LayerCopy {
                 offset,
-                layer: load.layer,
+                layer: self.shape.base_pages() + load.layer,
                 width,
                 height,
             });
@@ -564,6 +577,7 @@ impl Streamer {
         table.copy_from_slice(bytemuck::cast_slice(&self.table));
         self.stats.resident_pages = self.residency.resident_pages() as u32;
         self.stats.layers = self.residency.layers();
+        self.stats.base_pages = self.shape.base_pages();
         self.stats.loads_in_flight = self.residency.loads_in_flight() as u32;
         self.stats.waiting_uploads = self.arrived.len() as u32;
         Ok(())
@@ -621,13 +635,13 @@ impl NoStream {
     }
 }
 
-/// Page `page` of `tiled`, row-major: its level's samples of its tiles.
+/// Page (px, pz) at `level` of `tiled`, row-major: its level's samples
+/// of its tiles.
 fn read_page(
     tiled: &TiledHeightmap,
     shape: &StreamShape,
-    page: usize,
+    (level, px, pz): (u32, u32, u32),
 ) -> std::result::Result<Vec<f32>, TiledError> {
-    let (level, px, pz) = shape.page_coords(page);
     if level == 0 {
         return tiled.read_uncached(px, pz, 0).map(|t| t.heights);
     }
@@ -668,23 +682,47 @@ fn put_tiles(
     Ok(())
 }
 
-/// The base level of `tiled` as one image: each tile's level
-/// `shape.base_level`, placed where its samples fall in the whole.
-fn upload_base(device: &Device, tiled: &TiledHeightmap, shape: &StreamShape) -> Result<Image> {
-    let (w, h) = shape.base_size();
-    let mut texels = vec![0f32; w as usize * h as usize];
-    put_tiles(
-        tiled,
-        shape,
-        shape.base_level,
-        (0..shape.tiles_x, 0..shape.tiles_z),
-        w,
-        &mut texels,
-    )
-    .map_err(|e| VkError::Stream(e.to_string()))?;
-    debug_assert_eq!(
-        level_sample(w - 1, shape.cols - 1, shape.base_level),
-        shape.cols - 1
-    );
-    device.upload_r32f_image("terrain.stream.base", w, h, &texels)
+/// Reads the base level's pages of `tiled` and copies them into the
+/// pool's first layers, as many at a time as `staging` holds.
+fn upload_base(
+    device: &Device,
+    tiled: &TiledHeightmap,
+    shape: &StreamShape,
+    pool: &Image,
+    staging: &mut Buffer,
+) -> Result<()> {
+    let (across, _) = shape.pages_across(shape.base_level);
+    let side = u64::from(shape.page_side());
+    let at_once = (staging.desc.size / (4 * side * side)).max(1) as u32;
+    let mut first = 0;
+    while first < shape.base_pages() {
+        let last = (first + at_once).min(shape.base_pages());
+        let mapped = staging
+            .mapped_mut()
+            .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
+        let mut copies = Vec::new();
+        let mut offset = 0u64;
+        for layer in first..last {
+            let (px, pz) = (layer % across, layer / across);
+            let page = read_page(tiled, shape, (shape.base_level, px, pz))
+                .map_err(|e| VkError::Stream(e.to_string()))?;
+            let bytes = 4 * page.len() as u64;
+            mapped[offset as usize..(offset + bytes) as usize]
+                .copy_from_slice(bytemuck::cast_slice(&page));
+            let (width, height) = shape.page_size(shape.base_level, px, pz);
+            copies.push(LayerCopy {
+                offset,
+                layer,
+                width,
+                height,
+            });
+            offset += bytes;
+        }
+        let staging = &*staging;
+        device.one_shot("terrain.stream.base", |rec| {
+            rec.copy_to_layers(staging, pool, &copies)
+        })?;
+        first = last;
+    }
+    Ok(())
 }
