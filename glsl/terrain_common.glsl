@@ -97,15 +97,18 @@ float blend_cell(vec2 st, float a, float b, float c, float d) {
 }
 
 // The cell of a level lattice (every 2^level-th sample of a grid whose
-// last sample is `last`, and that last one) that sample s lies in: the
+// last sample is `last`, and that last one) that sample s (not negative)
+// lies in: the
 // lattice index of its first corner, and s's fraction across it. The last
 // cell of a row or column is narrower where the grid is not a multiple of
 // 2^level. Mirror: tiled::level_surface.
 void lattice_cell(ivec2 s, ivec2 last, int level, out ivec2 i, out vec2 st) {
+    // s and last are not negative: shifts, not divisions (the level varies
+    // per sample, and a vector integer division has no SIMD form).
     int step = 1 << level;
-    ivec2 side = (last + step - 1) / step + 1;
-    i = min(s / step, side - 2);
-    ivec2 lo = i * step;
+    ivec2 side = ((last + step - 1) >> level) + 1;
+    i = min(s >> level, side - 2);
+    ivec2 lo = i << level;
     st = vec2(s - lo) / vec2(min(lo + step, last) - lo);
 }
 
