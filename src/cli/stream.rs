@@ -14,7 +14,8 @@ use crate::bench::cameras::flythrough;
 use crate::bench::error::{enclosed_background, measure, DepthView};
 use crate::material::Appearance;
 use crate::render::{
-    offscreen, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading, StreamStats,
+    offscreen, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
+    StreamStats,
 };
 use crate::terrain::Terrain;
 
@@ -176,8 +177,16 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             let holes = enclosed_background(&frame.readback.rgba, w, h, |p| p[0] < 128).len();
             let error = match &mut resident_parts {
                 Some((whole, (r, target))) => {
+                    // The streamed terrain's CPU does not hold the heights
+                    // the view's error measure needs, so its LOD keeps the
+                    // error bounds: the reference is drawn on them too, and
+                    // the two frames differ only by what streaming does.
+                    let bound = RenderSettings {
+                        error_measure: ErrorMeasure::Bound,
+                        ..settings
+                    };
                     let reference = target
-                        .render(r, whole, camera, &settings)
+                        .render(r, whole, camera, &bound)
                         .with_context(|| format!("frame {i}, resident"))?;
                     Some(measure(
                         &DepthView::of(&frame),
