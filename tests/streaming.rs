@@ -391,3 +391,49 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(!dir.path().join("broken.png").exists());
 }
+
+/// `vkterrain stream --against-resident` on an imported terrain whose base
+/// level is its full resolution (the default base holds 2049 samples a
+/// side): every frame's heights are the whole terrain's, so each frame
+/// matches the whole-terrain renderer's exactly, and the report says so.
+#[test]
+fn the_stream_flythrough_measures_no_error_where_heights_are_exact() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let path = imported(&hills(), dir.path());
+    let out = common::vkterrain_in(
+        dir.path(),
+        &[
+            "stream",
+            "--validate",
+            "--heightmap",
+            path.to_str().unwrap(),
+            "--frames",
+            "6",
+            "--width",
+            "160",
+            "--height",
+            "100",
+            "--against-resident",
+            "--report",
+            "report.json",
+        ],
+    );
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["frames"], 6);
+    assert_eq!(report["holes"], 0);
+    assert_eq!(report["validation_messages"], 0);
+    assert_eq!(report["base_level"], 0);
+    for frame in report["per_frame"].as_array().unwrap() {
+        assert_eq!(frame["error_max_px"], 0.0, "{frame}");
+    }
+}
