@@ -92,10 +92,8 @@ pub const SPEC_STREAMED: u32 = 2;
 pub const BINDING_PAGES: u32 = 19;
 /// Storage buffer of the page table: one word a tile, the page it is
 /// drawn from (its level above `PAGE_LEVEL_SHIFT`, its layer in the page
-/// pool below) or `PAGE_NOT_RESIDENT`.
+/// pool below).
 pub const BINDING_PAGE_TABLE: u32 = 20;
-/// Page table entry of a tile drawn from the base level.
-pub const PAGE_NOT_RESIDENT: u32 = 0xFFFF_FFFF;
 /// Where a page table entry's level starts; the layer is the bits below.
 pub const PAGE_LEVEL_SHIFT: u32 = 24;
 
@@ -178,7 +176,6 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("SPEC_STREAMED", SPEC_STREAMED.to_string()),
         ("BINDING_PAGES", BINDING_PAGES.to_string()),
         ("BINDING_PAGE_TABLE", BINDING_PAGE_TABLE.to_string()),
-        ("PAGE_NOT_RESIDENT", uint(PAGE_NOT_RESIDENT)),
         ("PAGE_LEVEL_SHIFT", PAGE_LEVEL_SHIFT.to_string()),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),

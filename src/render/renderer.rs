@@ -397,8 +397,8 @@ impl TerrainRenderer {
     }
 
     /// A streamed terrain's page table as the next frame will draw with
-    /// it: per tile, the page it is drawn from (`residency::page_entry`)
-    /// or `PAGE_NOT_RESIDENT` for the base level.
+    /// it: per tile, the page it is drawn from (`residency::page_entry`),
+    /// its base page where no finer one is resident.
     pub fn stream_page_table(&self) -> Option<&[u32]> {
         self.streamer.as_ref().map(Streamer::page_table)
     }

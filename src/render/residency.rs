@@ -24,8 +24,12 @@
 //! Nothing here waits: `plan` says what to load, and `arrived` says where
 //! a loaded page goes and which page it displaces.
 
-use crate::shader_constants::{PAGE_LEVEL_SHIFT, PAGE_NOT_RESIDENT};
+use crate::shader_constants::PAGE_LEVEL_SHIFT;
 use crate::terrain::tiled::{level_side, level_surface, tile_count};
+
+/// A streamed page's layer in `Residency::page_layers` where it has none
+/// (never in the shaders' page table, where every tile names a page).
+pub const PAGE_NOT_RESIDENT: u32 = 0xFFFF_FFFF;
 
 /// A loaded page takes the layer of a resident one only when its priority
 /// is this many times the resident's, so two pages of nearly equal need do

@@ -30,11 +30,9 @@ use std::time::Duration;
 use ash::vk;
 use glam::Vec3;
 
-use super::residency::{Load, Residency, StreamShape};
+use super::residency::{entry_level, Load, Residency, StreamShape};
 use super::view::FrameView;
-use crate::shader_constants::{
-    BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT, PAGE_NOT_RESIDENT,
-};
+use crate::shader_constants::{BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT};
 use crate::terrain::tiled::{TiledError, TiledHeightmap};
 use crate::terrain::TerrainInfo;
 use crate::vk::commands::Recorder;
@@ -276,9 +274,9 @@ impl Streamer {
         let side = shape.page_side();
         let layer_bytes = 4 * u64::from(side) * u64::from(side);
         let staging_bytes = config.upload_bytes_per_frame.max(layer_bytes);
+        let pages = shape.page_total();
         let mut staging = Vec::new();
         let mut tables = Vec::new();
-        let pages = shape.page_total();
         for i in 0..frames {
             staging.push(device.create_host_buffer(
                 &format!("terrain.stream.staging[{i}]"),
@@ -288,7 +286,8 @@ impl Streamer {
             tables.push(device.create_host_buffer(
                 &format!("terrain.stream.page_table[{i}]"),
                 vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(&vec![PAGE_NOT_RESIDENT; shape.tile_total()]),
+                // Written by each frame's `prepare` before it draws.
+                bytemuck::cast_slice(&vec![0u32; shape.tile_total()]),
             )?);
         }
         // The pool's layers: the base pages, and as many streamed ones as
@@ -326,9 +325,13 @@ impl Streamer {
         }
         let pool = device.create_layer_pool("terrain.stream.pages", side, base_pages + layers)?;
         upload_base(device, &tiled, &shape, &pool, &mut staging[0])?;
+        let residency = Residency::new(pages, layers);
+        // Nothing streamed is resident yet: every tile draws its base page.
+        let mut table = vec![0; shape.tile_total()];
+        shape.page_table(residency.page_layers(), &mut table);
         Ok(Streamer {
             shape,
-            residency: Residency::new(pages, layers),
+            residency,
             tile_errors,
             coarser_errors,
             boxes,
@@ -338,7 +341,7 @@ impl Streamer {
             copies: vec![Vec::new(); frames],
             loader: Loader::new(&tiled, shape, config.loader_threads)?,
             arrived: VecDeque::new(),
-            table: vec![PAGE_NOT_RESIDENT; shape.tile_total()],
+            table,
             stats: StreamStats::default(),
             device: device.clone(),
         })
@@ -410,16 +413,19 @@ impl Streamer {
         )
     }
 
-    /// The largest error, in pixels, a tile in view is drawn with.
+    /// The largest error, in pixels, a tile in view is drawn with, at the
+    /// level the page table (`self.table`, up to date) draws it.
     fn missing_px(&self, scales: &[f32]) -> f32 {
         if self.shape.page_levels() == 0 {
             // The base level is full resolution: nothing streams, and
             // `scales` (one a streamed page) is empty.
             return 0.0;
         }
-        (0..self.shape.tile_total())
-            .filter(|&t| scales[t] > 0.0)
-            .map(|t| self.tile_error(t, self.drawn_level(t)) * scales[t])
+        self.table
+            .iter()
+            .enumerate()
+            .filter(|&(t, _)| scales[t] > 0.0)
+            .map(|(t, &entry)| self.tile_error(t, entry_level(entry)) * scales[t])
             .fold(0.0, f32::max)
     }
 
@@ -491,16 +497,14 @@ impl Streamer {
             let staging = self.staging[slot]
                 .mapped_mut()
                 .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
-            staging[offset as usize..(offset + bytes) as usize]
-                .copy_from_slice(bytemuck::cast_slice(&heights));
             let (level, px, pz) = self.shape.page_coords(load.page);
-            let (width, height) = self.shape.page_size(level, px, pz);
-            copies.push(LayerCopy {
+            copies.push(stage_page(
+                staging,
                 offset,
-                layer: self.shape.base_pages() + load.layer,
-                width,
-                height,
-            });
+                &heights,
+                self.shape.base_pages() + load.layer,
+                self.shape.page_size(level, px, pz),
+            ));
             let (evicted, pop) = self.make_resident(load, scales);
             self.stats.uploaded_pages += 1;
             self.stats.upload_bytes += bytes;
@@ -524,8 +528,7 @@ impl Streamer {
 
     /// Pages one frame's staging buffer holds.
     fn frame_pages(&self, slot: usize) -> usize {
-        let side = u64::from(self.shape.page_side());
-        (self.staging[slot].desc.size / (4 * side * side)).max(1) as usize
+        pages_fitting(&self.staging[slot], &self.shape)
     }
 
     /// Sets slot `slot` (whose last frame has completed) up for a frame
@@ -568,9 +571,9 @@ impl Streamer {
     }
 
     fn finish_frame(&mut self, slot: usize, scales: &[f32]) -> Result<()> {
-        self.stats.missing_px = self.missing_px(scales);
         self.shape
             .page_table(self.residency.page_layers(), &mut self.table);
+        self.stats.missing_px = self.missing_px(scales);
         let table = self.tables[slot]
             .mapped_mut()
             .ok_or_else(|| VkError::Unsupported("page table memory is not host-mapped".into()))?;
@@ -589,8 +592,7 @@ impl Streamer {
     }
 
     /// The page table the last prepared frame draws with: per tile, the
-    /// page it is drawn from (`residency::page_entry`) or
-    /// `PAGE_NOT_RESIDENT`.
+    /// page it is drawn from (`residency::page_entry`).
     pub fn page_table(&self) -> &[u32] {
         &self.table
     }
@@ -636,7 +638,10 @@ impl NoStream {
 }
 
 /// Page (px, pz) at `level` of `tiled`, row-major: its level's samples
-/// of its tiles.
+/// of its tiles. Every tile's level samples are the whole terrain's
+/// lattice: tiles start on multiples of `2^level`, and a tile's last
+/// sample is a multiple too or the terrain's last. Neighbours share their
+/// border samples, which are equal.
 fn read_page(
     tiled: &TiledHeightmap,
     shape: &StreamShape,
@@ -646,26 +651,8 @@ fn read_page(
         return tiled.read_uncached(px, pz, 0).map(|t| t.heights);
     }
     let (xs, zs) = shape.page_tiles(level, px, pz);
-    let (w, h) = shape.page_size(level, px, pz);
-    let mut samples = vec![0f32; w as usize * h as usize];
-    put_tiles(tiled, shape, level, (xs, zs), w, &mut samples)?;
-    Ok(samples)
-}
-
-/// Puts the tiles `xs` x `zs` of `tiled` at `level` into `samples`, a
-/// row-major block `width` samples across whose first sample is the first
-/// tile's. Every tile's level samples are the whole terrain's lattice:
-/// tiles start on multiples of `2^level`, and a tile's last sample is a
-/// multiple too or the terrain's last. Neighbours share their border
-/// samples, which are equal.
-fn put_tiles(
-    tiled: &TiledHeightmap,
-    shape: &StreamShape,
-    level: u32,
-    (xs, zs): (std::ops::Range<u32>, std::ops::Range<u32>),
-    width: u32,
-    samples: &mut [f32],
-) -> std::result::Result<(), TiledError> {
+    let (width, height) = shape.page_size(level, px, pz);
+    let mut samples = vec![0f32; width as usize * height as usize];
     let step = shape.tile_cells >> level;
     for tz in zs.clone() {
         for tx in xs.clone() {
@@ -679,7 +666,33 @@ fn put_tiles(
             }
         }
     }
-    Ok(())
+    Ok(samples)
+}
+
+/// Full pages `staging` holds (at least one: it is made that large).
+fn pages_fitting(staging: &Buffer, shape: &StreamShape) -> usize {
+    let side = u64::from(shape.page_side());
+    (staging.desc.size / (4 * side * side)).max(1) as usize
+}
+
+/// Writes `heights`, the samples of a page `size` samples across and down,
+/// into `staging` at byte `offset`, and returns the copy that puts them
+/// into pool layer `layer`.
+fn stage_page(
+    staging: &mut [u8],
+    offset: u64,
+    heights: &[f32],
+    layer: u32,
+    (width, height): (u32, u32),
+) -> LayerCopy {
+    let bytes: &[u8] = bytemuck::cast_slice(heights);
+    staging[offset as usize..][..bytes.len()].copy_from_slice(bytes);
+    LayerCopy {
+        offset,
+        layer,
+        width,
+        height,
+    }
 }
 
 /// Reads the base level's pages of `tiled` and copies them into the
@@ -692,8 +705,7 @@ fn upload_base(
     staging: &mut Buffer,
 ) -> Result<()> {
     let (across, _) = shape.pages_across(shape.base_level);
-    let side = u64::from(shape.page_side());
-    let at_once = (staging.desc.size / (4 * side * side)).max(1) as u32;
+    let at_once = pages_fitting(staging, shape) as u32;
     let mut first = 0;
     while first < shape.base_pages() {
         let last = (first + at_once).min(shape.base_pages());
@@ -706,17 +718,9 @@ fn upload_base(
             let (px, pz) = (layer % across, layer / across);
             let page = read_page(tiled, shape, (shape.base_level, px, pz))
                 .map_err(|e| VkError::Stream(e.to_string()))?;
-            let bytes = 4 * page.len() as u64;
-            mapped[offset as usize..(offset + bytes) as usize]
-                .copy_from_slice(bytemuck::cast_slice(&page));
-            let (width, height) = shape.page_size(shape.base_level, px, pz);
-            copies.push(LayerCopy {
-                offset,
-                layer,
-                width,
-                height,
-            });
-            offset += bytes;
+            let size = shape.page_size(shape.base_level, px, pz);
+            copies.push(stage_page(mapped, offset, &page, layer, size));
+            offset += 4 * page.len() as u64;
         }
         let staging = &*staging;
         device.one_shot("terrain.stream.base", |rec| {
