@@ -197,12 +197,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
         vkterrain(dir.path(), &args)
     };
     let out = run(&["--scene", scene]);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = succeeded(&out);
     assert!(
         stdout.contains("rows on jacksboro_fault_dem (64x48"),
         "{stdout}"
@@ -254,11 +249,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
         "--without",
         "tessellation",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let md = std::fs::read_to_string(dir.path().join("out/BENCHMARKS.md")).unwrap();
     assert!(md.contains("### jacksboro_fault_dem, grazing"));
     assert!(md.contains("### second, grazing"));
@@ -282,11 +273,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
             "docs/B.md",
         ],
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    succeeded(&out);
     let published = std::fs::read_to_string(dir.path().join("docs/B.md")).unwrap();
     assert!(published.contains("](../out/pareto.png)"));
 }

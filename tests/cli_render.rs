@@ -4,25 +4,11 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 use common::gpu::skip_gpu;
 use common::vkterrain_in as vkterrain;
 use common::*;
-
-fn ok(out: &Output) -> String {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
-fn stats(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).expect("stats written"))
-        .expect("stats are JSON")
-}
 
 #[test]
 fn render_writes_the_png_and_its_stats() {
@@ -45,11 +31,11 @@ fn render_writes_the_png_and_its_stats() {
             "s.json",
         ],
     );
-    let stdout = ok(&out);
+    let stdout = succeeded(&out);
     assert!(stdout.contains("wrote f.png (320x180)"), "{stdout}");
     let image = image::open(dir.path().join("f.png")).unwrap();
     assert_eq!((image.width(), image.height()), (320, 180));
-    let s = stats(&dir.path().join("s.json"));
+    let s = json_file(&dir.path().join("s.json"));
     assert!(!s["device"].as_str().unwrap().is_empty());
     assert_eq!(s["path"], "tess");
     assert_eq!(s["patches_total"], 1024);
@@ -137,8 +123,8 @@ fn render_takes_heightmap_and_camera_options() {
             "dem.json",
         ],
     );
-    ok(&out);
-    let s = stats(&dir.path().join("dem.json"));
+    succeeded(&out);
+    let s = json_file(&dir.path().join("dem.json"));
     assert_eq!(s["patches_total"], 22 * 26);
     assert_eq!(s["validation_messages"], 0);
     assert_eq!(s["eye"][0], -15000.0);
@@ -159,8 +145,8 @@ fn render_takes_heightmap_and_camera_options() {
             "b.json",
         ],
     );
-    ok(&brute);
-    let b = stats(&dir.path().join("b.json"));
+    succeeded(&brute);
+    let b = json_file(&dir.path().join("b.json"));
     assert_eq!(b["path"], "brute");
     assert_eq!(b["tes_invocations"], 0);
     assert!(
@@ -186,7 +172,7 @@ fn render_takes_heightmap_and_camera_options() {
             "w.png",
         ],
     );
-    ok(&wire);
+    succeeded(&wire);
 }
 
 #[test]
@@ -202,7 +188,7 @@ fn bare_command_without_a_display_renders_headless_and_says_where() {
         .env_remove("WAYLAND_DISPLAY")
         .output()
         .unwrap();
-    let stdout = ok(&out);
+    let stdout = succeeded(&out);
     assert!(stdout.contains("no display (DISPLAY and WAYLAND_DISPLAY are unset): rendering the default scene headless"), "{stdout}");
     assert!(
         stdout.contains("wrote vkterrain-default.png (1280x720)"),
@@ -220,7 +206,7 @@ fn info_names_the_device_and_features() {
     }
     let dir = tempfile::tempdir().unwrap();
     let json: serde_json::Value =
-        serde_json::from_str(&ok(&vkterrain(dir.path(), &["info", "--validate"]))).unwrap();
+        serde_json::from_str(&succeeded(&vkterrain(dir.path(), &["info", "--validate"]))).unwrap();
     assert!(!json["device"]["device_name"].as_str().unwrap().is_empty());
     assert_eq!(json["device"]["tessellation_shader"], true);
     assert!(json["used"]
@@ -320,12 +306,12 @@ fn without_tessellation_render_falls_back_to_geomip_and_says_so() {
             "f.json",
         ],
     );
-    let stdout = ok(&out);
+    let stdout = succeeded(&out);
     assert!(
         stdout.contains("tessellationShader is unavailable, falling back to the geomip path"),
         "{stdout}"
     );
-    let s = stats(&dir.path().join("f.json"));
+    let s = json_file(&dir.path().join("f.json"));
     assert_eq!(s["path"], "geomip");
     assert_eq!(s["tcs_patches"], 0);
     assert_eq!(s["tes_invocations"], 0);
@@ -340,7 +326,7 @@ fn without_tessellation_render_falls_back_to_geomip_and_says_so() {
     );
     assert!(s["gpu_memory"]["terrain.geomip_indices"].as_u64().unwrap() > 0);
     assert!(s["gpu_memory"].get("terrain.control_points").is_none());
-    let info: serde_json::Value = serde_json::from_str(&ok(&vkterrain(
+    let info: serde_json::Value = serde_json::from_str(&succeeded(&vkterrain(
         dir.path(),
         &["info", "--without", "tessellation"],
     )))
@@ -406,13 +392,13 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
             feature,
         ];
         args.extend_from_slice(extra);
-        let stdout = ok(&vkterrain(dir.path(), &args));
+        let stdout = succeeded(&vkterrain(dir.path(), &args));
         assert!(stdout.contains(note), "{feature}: {stdout}");
         assert!(
             stdout.contains("0 validation messages"),
             "{feature}: {stdout}"
         );
-        let s = stats(&dir.path().join("s.json"));
+        let s = json_file(&dir.path().join("s.json"));
         let image = image::open(dir.path().join("f.png")).unwrap().to_rgba8();
         assert!(
             image.pixels().any(|p| p.0 != image.get_pixel(0, 0).0),
@@ -506,7 +492,7 @@ fn a_gpu_memory_budget_refuses_the_resource_that_exceeds_it() {
             "f.png",
         ],
     );
-    ok(&out);
+    succeeded(&out);
     for bad in ["0", "1.5", "x", "99999999999999999"] {
         let out = vkterrain(
             dir.path(),
@@ -541,8 +527,8 @@ fn render_stats_list_the_material_resources_of_the_default_scene() {
             "s.json",
         ],
     );
-    ok(&out);
-    let s = stats(&dir.path().join("s.json"));
+    succeeded(&out);
+    let s = json_file(&dir.path().join("s.json"));
     let memory = s["gpu_memory"].as_object().unwrap();
     for (name, at_least) in [
         // 5 layers of 256x256 RGBA with mip chains.
@@ -658,8 +644,8 @@ fn a_bare_heightmap_renders_with_the_error_lod() {
             &json,
         ];
         args.extend_from_slice(extra);
-        ok(&vkterrain(dir.path(), &args));
-        stats(&dir.path().join(json))
+        succeeded(&vkterrain(dir.path(), &args));
+        json_file(&dir.path().join(json))
     };
     let bare = render("bare", &[]);
     assert_eq!(bare["lod"], serde_json::json!({ "error": 1.0 }));

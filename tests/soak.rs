@@ -41,14 +41,8 @@ fn a_short_soak_is_clean_and_flat() {
             "soak.json",
         ],
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("soak.json")).unwrap())
-            .unwrap();
+    succeeded(&out);
+    let report: serde_json::Value = json_file(&dir.path().join("soak.json"));
     assert_eq!(report["frames"], 630);
     assert_eq!(report["validation_enabled"], true);
     // Counted after the device is destroyed: leaks would show here.

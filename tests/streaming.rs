@@ -11,6 +11,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::gpu::*;
+use common::{json_file, succeeded};
 use glam::DVec2;
 use vkterrain::bench::error::enclosed_background;
 use vkterrain::render::residency::{entry_level, StreamShape};
@@ -340,14 +341,8 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
     };
     // No patch size is given: the file's stored tables bring theirs.
     let streamed = run(&[], "streamed.png");
-    assert!(
-        streamed.status.success(),
-        "{}",
-        String::from_utf8_lossy(&streamed.stderr)
-    );
-    let stats: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("stats.json")).unwrap())
-            .unwrap();
+    succeeded(&streamed);
+    let stats: serde_json::Value = json_file(&dir.path().join("stats.json"));
     assert!(
         stats["stream"]["base_pages"].as_u64().unwrap() > 0,
         "{}",
@@ -365,14 +360,8 @@ fn render_streams_an_imported_terrain_and_names_a_broken_tile() {
     // hold its heights to measure the view), so the whole one is drawn so
     // too.
     let whole = run(&["--no-streaming", "--error-measure", "bound"], "whole.png");
-    assert!(
-        whole.status.success(),
-        "{}",
-        String::from_utf8_lossy(&whole.stderr)
-    );
-    let stats: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("stats.json")).unwrap())
-            .unwrap();
+    succeeded(&whole);
+    let stats: serde_json::Value = json_file(&dir.path().join("stats.json"));
     assert!(stats["stream"].is_null());
     let read = |name: &str| image::open(dir.path().join(name)).unwrap().to_rgba8();
     assert_eq!(read("streamed.png"), read("whole.png"));
@@ -421,14 +410,8 @@ fn the_stream_flythrough_measures_no_error_where_heights_are_exact() {
             "report.json",
         ],
     );
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("report.json")).unwrap())
-            .unwrap();
+    succeeded(&out);
+    let report: serde_json::Value = json_file(&dir.path().join("report.json"));
     assert_eq!(report["frames"], 6);
     assert_eq!(report["holes"], 0);
     assert_eq!(report["validation_messages"], 0);

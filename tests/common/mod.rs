@@ -111,3 +111,20 @@ pub fn vkterrain_in(dir: &std::path::Path, args: &[&str]) -> std::process::Outpu
 }
 
 pub mod gpu;
+
+/// Asserts that a command succeeded, showing its stderr where it did not,
+/// and returns its stdout.
+pub fn succeeded(out: &std::process::Output) -> String {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A JSON file a command wrote (stats, reports).
+pub fn json_file(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).expect("the JSON file is written"))
+        .expect("the file is JSON")
+}
