@@ -62,7 +62,8 @@ vec3 lighting(vec3 n) {
 // TRIPLANAR). A projection's tangent frame follows the layer's texture
 // axes in its plane: u and v run along the rows of the tile matrix,
 // lifted onto the surface along the projection's axis.
-void layered(vec3 n, out vec3 albedo, out vec3 normal) {
+// `height` is the data's surface height under the fragment.
+void layered(vec3 n, float height, out vec3 albedo, out vec3 normal) {
     float w[MAX_LAYERS];
 #ifdef BLEND_MAPS
     vec2 size = vec2(textureSize(blend_maps, 0).xy);
@@ -71,7 +72,7 @@ void layered(vec3 n, out vec3 albedo, out vec3 normal) {
     vec4 b1 = BLEND_MAP_COUNT > 1u ? texture(blend_maps, vec3(uv, 1.0)) : vec4(0.0);
     blend_weights(b0, b1, w);
 #else
-    rule_weights(normalised_height(in_height), n.y, w);
+    rule_weights(normalised_height(height), n.y, w);
 #endif
     vec2 xz = grid_to_local(in_grid);
     vec3 p = vec3(xz.x, in_height, xz.y);
@@ -129,14 +130,19 @@ void main() {
     }
     vec2 gradient = height_gradient(in_grid);
     vec3 n = gradient_normal(gradient);
+    // Colours by height read the data's surface under the pixel, as the
+    // normal does, not the drawn triangle's: a coarse level's vertical
+    // error stays within its pixel bound on screen, but would move every
+    // colour band by its full size.
+    float height = sample_height(in_grid);
     vec3 albedo;
     if (mode == SHADE_LOD_COLORS) {
         albedo = lod_color(in_inside_factor);
     } else {
 #ifdef MATERIAL
-        layered(n, albedo, n);
+        layered(n, height, albedo, n);
 #else
-        albedo = height_color(clamp(normalised_height(in_height), 0.0, 1.0));
+        albedo = height_color(clamp(normalised_height(height), 0.0, 1.0));
 #endif
     }
     vec3 color = albedo * lighting(n);

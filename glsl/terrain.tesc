@@ -16,15 +16,29 @@ layout(std430, set = 0, binding = BINDING_ERROR_TABLE) readonly buffer ErrorTabl
     float patch_errors[];
 };
 
-// This frame's full-resolution patches, one bit each, chosen on the CPU
-// (error LOD only): they are drawn with the reference's triangles instead,
-// and every edge they share gets a vertex on every sample.
-layout(std430, set = 0, binding = BINDING_FULL_RESOLUTION) readonly buffer FullResolution {
-    uint full_resolution[];
+// This frame's choice, made on the CPU (error LOD only): first one bit a
+// patch, set where it is drawn at full resolution (with the reference's
+// triangles instead, every edge it shares getting a vertex on every
+// sample); then one byte a patch, the level of the merged node holding it,
+// 0 where it is drawn on its own (see terrain::patch_merge).
+layout(std430, set = 0, binding = BINDING_FULL_RESOLUTION) readonly buffer PatchChoice {
+    uint patch_choice[];
 };
 
 bool is_full_resolution(int patch_index) {
-    return (full_resolution[patch_index >> 5] & (1u << uint(patch_index & 31))) != 0u;
+    return (patch_choice[patch_index >> 5] & (1u << uint(patch_index & 31))) != 0u;
+}
+
+int merged_level(int patch_index) {
+    int patches = int(frame.error_lod.z * frame.error_lod.w);
+    uint word = patch_choice[((patches + 31) >> 5) + (patch_index >> 2)];
+    return int((word >> (8u * uint(patch_index & 3))) & 0xffu);
+}
+
+void read_errors(int patch_index, out float errors[ERROR_LEVEL_COUNT]) {
+    for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
+        errors[k] = patch_errors[patch_index * int(ERROR_LEVEL_COUNT) + k];
+    }
 }
 
 // Which patches this draw keeps (OCCLUSION_PHASE_*).
@@ -44,6 +58,51 @@ void cull_patch() {
 layout(location = 1) out vec2 out_grid[];
 layout(location = 2) patch out float out_inside_factor;
 
+// Edge ends: left (0-2), top (0-1), right (1-3), bottom (2-3).
+const ivec2 EDGE_ENDS[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
+
+// Factors of the merged node of 2^level x 2^level patches whose first
+// patch is `here`. A side towards a node of the same level takes the
+// larger errors of the two, from the strip on it; towards anything else
+// it has one segment per patch along it, so every vertex there is a patch
+// corner both sides draw. The inside comes from the node's box: its
+// corners' x and z, the terrain's whole height range. The node's errors
+// are in its first patch's row of the table.
+// Mirror: terrain::patch_merge::node_error_factors.
+void merged_node_factors(ivec2 here, int level, ivec2 grid_size) {
+    int span = 1 << level;
+    int cells = int(frame.cells_per_patch) << level;
+    float own[ERROR_LEVEL_COUNT];
+    read_errors(here.y * grid_size.x + here.x, own);
+    ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(span, 0), ivec2(0, span));
+    float y_lo = frame.height_min - frame.eye_local.y;
+    float y_hi = frame.height_max - frame.eye_local.y;
+    for (int e = 0; e < 4; ++e) {
+        ivec2 there = here + across[e];
+        float shared_errors[ERROR_LEVEL_COUNT] = own;
+        if (all(greaterThanEqual(there, ivec2(0))) && all(lessThan(there, grid_size))) {
+            if (merged_level(there.y * grid_size.x + there.x) != level) {
+                gl_TessLevelOuter[e] = float(span);
+                continue;
+            }
+            ivec2 first = (there >> level) << level;
+            float theirs[ERROR_LEVEL_COUNT];
+            read_errors(first.y * grid_size.x + first.x, theirs);
+            for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
+                shared_errors[k] = max(own[k], theirs[k]);
+            }
+        }
+        float d = edge_distance(in_rel[EDGE_ENDS[e].x].xz, in_rel[EDGE_ENDS[e].y].xz, y_lo, y_hi);
+        gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d, cells);
+    }
+    vec3 box_min = vec3(in_rel[2].x, y_lo, in_rel[2].z);
+    vec3 box_max = vec3(in_rel[1].x, y_hi, in_rel[1].z);
+    float inside = error_tess_factor(own, box_distance(box_min, box_max), cells);
+    gl_TessLevelInner[0] = inside;
+    gl_TessLevelInner[1] = inside;
+    out_inside_factor = inside;
+}
+
 void main() {
     out_grid[gl_InvocationID] = in_grid[gl_InvocationID];
     if (gl_InvocationID != 0) {
@@ -59,6 +118,20 @@ void main() {
     ivec2 grid_size = ivec2(frame.error_lod.zw);
     ivec2 here = ivec2(in_grid[0]) / int(frame.cells_per_patch);
     int p = here.y * grid_size.x + here.x;
+    int level = frame.lod_metric == LOD_METRIC_ERROR ? merged_level(p) : 0;
+    if (level > 0) {
+        // A merged node (error LOD): its control points are its block's
+        // corners. The CPU's frustum test on its patches kept it, and it
+        // is drawn in a frame's first pass, untested for occlusion.
+        if (draw.occlusion_phase == OCCLUSION_PHASE_SECOND
+            || draw.occlusion_phase == OCCLUSION_PHASE_CULLED) {
+            cull_patch();
+            out_inside_factor = 0.0;
+            return;
+        }
+        merged_node_factors(here, level, grid_size);
+        return;
+    }
     if ((frame.cull != 0u && aabb_outside_frustum(center, extents))
         || !drawn_in_phase(draw.occlusion_phase, p)) {
         cull_patch();
@@ -76,8 +149,6 @@ void main() {
         0.5 * (in_rel[1] + in_rel[3]),
         0.5 * (in_rel[2] + in_rel[3]));
     vec3 centre = 0.25 * (in_rel[0] + in_rel[1] + in_rel[2] + in_rel[3]);
-    // Edge ends: left (0-2), top (0-1), right (1-3), bottom (2-3).
-    ivec2 ends[4] = ivec2[4](ivec2(0, 2), ivec2(0, 1), ivec2(1, 3), ivec2(2, 3));
     float inside;
     vec2 inner = vec2(-1.0);
     if (frame.lod_metric == LOD_METRIC_ERROR) {
@@ -95,9 +166,7 @@ void main() {
             return;
         }
         float own[ERROR_LEVEL_COUNT];
-        for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
-            own[k] = patch_errors[p * int(ERROR_LEVEL_COUNT) + k];
-        }
+        read_errors(p, own);
         ivec2 across[4] = ivec2[4](ivec2(-1, 0), ivec2(0, -1), ivec2(1, 0), ivec2(0, 1));
         float y_lo = frame.height_min - frame.eye_local.y;
         float y_hi = frame.height_max - frame.eye_local.y;
@@ -106,6 +175,11 @@ void main() {
             float shared_errors[ERROR_LEVEL_COUNT] = own;
             if (all(greaterThanEqual(there, ivec2(0))) && all(lessThan(there, grid_size))) {
                 int q = there.y * grid_size.x + there.x;
+                if (merged_level(q) > 0) {
+                    // One segment, as the node puts one on each patch.
+                    gl_TessLevelOuter[e] = 1.0;
+                    continue;
+                }
                 if (is_full_resolution(q)) {
                     gl_TessLevelOuter[e] = float(edge_cells[e]);
                     continue;
@@ -114,7 +188,7 @@ void main() {
                     shared_errors[k] = max(own[k], patch_errors[q * int(ERROR_LEVEL_COUNT) + k]);
                 }
             }
-            float d = edge_distance(in_rel[ends[e].x].xz, in_rel[ends[e].y].xz, y_lo, y_hi);
+            float d = edge_distance(in_rel[EDGE_ENDS[e].x].xz, in_rel[EDGE_ENDS[e].y].xz, y_lo, y_hi);
             gl_TessLevelOuter[e] = error_tess_factor(shared_errors, d, edge_cells[e]);
         }
         inside = error_tess_factor(own, box_distance(box_min, box_max), min(cells.x, cells.y));
@@ -124,8 +198,8 @@ void main() {
         // along u: the top and bottom edges). Mirror:
         // terrain::lod::patch_peer_factors.
         for (int e = 0; e < 4; ++e) {
-            vec3 a = in_rel[ends[e].x];
-            vec3 b = in_rel[ends[e].y];
+            vec3 a = in_rel[EDGE_ENDS[e].x];
+            vec3 b = in_rel[EDGE_ENDS[e].y];
             gl_TessLevelOuter[e] = frame.lod_metric == LOD_METRIC_SPHERE
                 ? sphere_tess_factor(a, b)
                 : edge_length_tess_factor(a, b);

@@ -672,7 +672,7 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
 
 #[test]
 fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
-    use vkterrain::terrain::lod::patch_error_factors;
+    use vkterrain::terrain::lod::{patch_error_factors, Across};
     let terrain = dem_terrain(32, DVec2::ZERO);
     let table = terrain.error_table();
     let grid = terrain.grid();
@@ -687,7 +687,17 @@ fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
     };
     let cells = [32, 32];
     let inside = |ppr: f32, px: f32| {
-        patch_error_factors(corners, bounds, range, &own, [None; 4], cells, ppr, px).inside[0]
+        patch_error_factors(
+            corners,
+            bounds,
+            range,
+            &own,
+            [Across::Border; 4],
+            cells,
+            ppr,
+            px,
+        )
+        .inside[0]
     };
     // Narrower field of view or more pixels: more pixels per radian. The
     // factors are whole levels, so small changes may keep the level.
@@ -703,19 +713,19 @@ fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
     // drawn at full resolution, never more than the data has.
     assert_eq!(inside(1e9, 1.0), 32.0);
     // A full-resolution neighbour gets a vertex on every sample of the
-    // shared edge whatever this patch's own level.
-    let right = table.patch(grid.patch_index(id) + 1).try_into().unwrap();
-    let with_full = patch_error_factors(
-        corners,
-        bounds,
-        range,
-        &own,
-        [None, None, Some((&right, true)), None],
-        cells,
-        1e-3,
-        1.0,
-    );
-    assert_eq!(with_full.edges, [1.0, 1.0, 32.0, 1.0]);
+    // shared edge whatever this patch's own level, and a merged node one
+    // segment whatever the errors.
+    let left: [f32; 7] = table.patch(grid.patch_index(id) - 1).try_into().unwrap();
+    let across = [
+        Across::Merged,
+        Across::Patch(&left),
+        Across::FullResolution,
+        Across::Border,
+    ];
+    let near = patch_error_factors(corners, bounds, range, &own, across, cells, 1e9, 1.0);
+    assert_eq!(near.edges, [1.0, 32.0, 32.0, 32.0]);
+    let far = patch_error_factors(corners, bounds, range, &own, across, cells, 1e-3, 1.0);
+    assert_eq!(far.edges, [1.0, 1.0, 32.0, 1.0]);
     assert_eq!(inside(1e-3, 1.0), 1.0);
 }
 
@@ -1141,4 +1151,81 @@ fn paths_a_renderer_lacks_are_built_when_a_frame_asks() {
     let report = gpu.shutdown();
     assert_eq!(report.count, 0, "{:#?}", report.messages);
     full.finish();
+}
+
+/// Merged nodes (`terrain::patch_merge`) on the DEM, whose last patch
+/// column and row are remainders, from views where nodes of two or more
+/// levels meet patches drawn on their own: no cracks against brute's
+/// outline, the p99 of the per-pixel error against brute within tau or
+/// within 10 % of the same view unmerged, and fewer patches reaching the
+/// control shader than without merging.
+#[test]
+fn merged_nodes_are_watertight_and_keep_the_error_bound() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let (w, h) = (480, 320);
+    let mut scene = GpuScene::new(terrain, w, h, false);
+    let top = f64::from(scene.terrain.info().min_max().1);
+    let views = [
+        ([-60_000.0, 15_000.0, -60_000.0], 2.0f32),
+        ([-50_000.0, 8_000.0, 10_000.0], 4.0),
+        ([5_000.0, 12_000.0, 40_000.0], 4.0),
+        ([0.0, 60_000.0, 0.0], 4.0),
+    ];
+    for (eye, tau) in views {
+        let cam = camera([eye[0], eye[1] + top, eye[2]], [0.0, 0.0, 0.0], 25.0);
+        let flat = RenderSettings {
+            shading: Shading::Flat,
+            clear_color: [0.0; 3],
+            ..bound_settings(tau)
+        };
+        let reference = scene.render(
+            &cam,
+            &RenderSettings {
+                path: RenderPath::Brute,
+                ..flat
+            },
+        );
+        let unmerged = scene.render(
+            &cam,
+            &RenderSettings {
+                merge_patches: false,
+                ..flat
+            },
+        );
+        let frame = scene.render(&cam, &flat);
+        let nodes = scene.renderer().merged_nodes();
+        let name = format!("{eye:?} at {tau} px ({nodes} nodes)");
+        assert!(nodes >= 2, "{name}");
+        assert_no_holes(&name, &frame, &holes_in(&reference));
+        let k = f64::from(reference.view.pixels_per_radian);
+        let stats = measure(&DepthView::of(&frame), &DepthView::of(&reference), k);
+        let before = measure(&DepthView::of(&unmerged), &DepthView::of(&reference), k);
+        let patches =
+            |f: &vkterrain::render::HeadlessFrame| f.measurements.statistics.unwrap().tcs_patches;
+        eprintln!(
+            "{name}: p99 {:.3} px (unmerged {:.3}), max {:.3} px (unmerged {:.3}), \
+             {} patches shaded against {}",
+            stats.p99_px,
+            before.p99_px,
+            stats.max_px,
+            before.max_px,
+            patches(&frame),
+            patches(&unmerged)
+        );
+        assert!(stats.pixels > 5_000, "{name}: {} pixels", stats.pixels);
+        // The bound is face-on from each patch's nearest point, which
+        // these distant, oblique views can exceed at silhouettes without
+        // merging too: merging must not add to it.
+        assert!(
+            stats.p99_px <= f64::from(tau).max(1.1 * before.p99_px),
+            "{name}: p99 {} px against {} px unmerged",
+            stats.p99_px,
+            before.p99_px
+        );
+        assert!(patches(&frame) < patches(&unmerged), "{name}");
+    }
+    scene.finish();
 }

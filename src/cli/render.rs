@@ -183,6 +183,11 @@ pub struct ViewArgs {
     #[arg(long, value_enum, default_value_t = Switch::On)]
     pub occlusion: Switch,
 
+    /// Tess path, error LOD: draw blocks of patches whose every factor is
+    /// 1 as one larger patch (merged nodes, up to 64x64 patches).
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    pub merge_patches: Switch,
+
     #[command(flatten)]
     pub features: FeatureArgs,
 }
@@ -281,6 +286,7 @@ impl ViewArgs {
             sky: base.sky && !self.no_sky && !self.flat && self.clear_color.is_none(),
             cull: !self.no_cull,
             occlusion: self.occlusion == Switch::On,
+            merge_patches: self.merge_patches == Switch::On,
             geomorph: !self.no_morph,
             error_measure: match self.error_measure {
                 ErrorMeasureArg::View => ErrorMeasure::View,

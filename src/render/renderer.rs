@@ -46,6 +46,7 @@ use crate::shader_constants::{
 };
 use crate::shader_variants::{Placing, Shader};
 use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
+use crate::terrain::patch_merge::{merge_patches, PatchMerge};
 use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
 use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
@@ -64,8 +65,16 @@ struct FrameSlot {
     uniforms: Buffer,
     set: DescriptorSet,
     queries: FrameQueries,
-    /// The tess path's full-resolution patches, one bit each (error LOD).
+    /// The tess path's choice (error LOD): its full-resolution patches,
+    /// one bit each, then the level of each patch's merged node, one byte
+    /// each (see `terrain::patch_merge`).
     full_resolution: Option<Buffer>,
+    /// The tess path's merged nodes this frame (error LOD), four control
+    /// point indices each.
+    merged_indices: Option<Buffer>,
+    /// Draws of `merged_indices`, (first index, index count), split where
+    /// the driver limits patches per draw.
+    merged_batches: Vec<(u32, u32)>,
     /// The tess path's error table as this frame's view sees it (error
     /// LOD), read by the control shader.
     view_errors: Option<Buffer>,
@@ -239,6 +248,8 @@ pub struct TerrainRenderer {
     /// The frame's 99th percentile error the last prepared frame's LOD
     /// choice expects, in pixels (error LOD, where the view measured it).
     predicted_p99_px: Option<f32>,
+    /// Merged nodes the last prepared frame draws (tess path, error LOD).
+    merged_nodes: usize,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -370,6 +381,7 @@ impl TerrainRenderer {
             error_table_ms: 0.0,
             predicted_max_px: None,
             predicted_p99_px: None,
+            merged_nodes: 0,
         };
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
@@ -513,13 +525,21 @@ impl TerrainRenderer {
     /// path's control shader).
     fn add_error_lod_buffers(&mut self, terrain: &Terrain, table: &ErrorTable) -> Result<()> {
         let device = &self.device;
-        let words = terrain.grid().patch_count().div_ceil(32).max(1);
+        let patches = terrain.grid().patch_count();
+        let words = patches.div_ceil(32) + patches.div_ceil(4);
         for (i, frame) in self.frames.iter_mut().enumerate() {
             let bits = device.create_host_buffer(
-                &format!("terrain.full_resolution[{i}]"),
+                &format!("terrain.patch_choice[{i}]"),
                 vk::BufferUsageFlags::STORAGE_BUFFER,
                 bytemuck::cast_slice(&vec![0u32; words]),
             )?;
+            // A node holds at least 2x2 patches: at most a quarter as many
+            // nodes as patches, four indices each.
+            frame.merged_indices = Some(device.create_host_buffer(
+                &format!("terrain.merged_indices[{i}]"),
+                vk::BufferUsageFlags::INDEX_BUFFER,
+                bytemuck::cast_slice(&vec![0u32; patches.max(4)]),
+            )?);
             let errors = device.create_host_buffer(
                 &format!("terrain.view_errors[{i}]"),
                 vk::BufferUsageFlags::STORAGE_BUFFER,
@@ -590,7 +610,9 @@ impl TerrainRenderer {
             .copy_from_slice(bytemuck::bytes_of(&uniforms));
         self.predicted_max_px = None;
         self.predicted_p99_px = None;
+        self.merged_nodes = 0;
         self.frames[slot].tess_batches.clear();
+        self.frames[slot].merged_batches.clear();
         if let Some(tess) = self.tess.as_mut() {
             tess.exact.clear();
         }
@@ -624,24 +646,49 @@ impl TerrainRenderer {
                     &drawn,
                 );
                 let table = seen.as_ref().map_or(&tess.errors, |s| &s.table);
-                let choice = choose_tess_error(
+                let mut choice = choose_tess_error(
                     terrain,
                     table,
                     view.eye_local,
                     view.pixels_per_radian,
                     pixels,
                 );
-                for (buffer, bytes) in [
-                    (view_errors, bytemuck::cast_slice(table.as_slice())),
-                    (bits, bytemuck::cast_slice(&choice.full_resolution)),
-                ] {
-                    buffer
-                        .mapped_mut()
-                        .ok_or_else(|| {
-                            VkError::Unsupported("error LOD memory is not host-mapped".into())
-                        })?
-                        .copy_from_slice(bytes);
+                let merge = match settings.merge_patches {
+                    true => merge_patches(
+                        terrain,
+                        table,
+                        &choice,
+                        view.eye_local,
+                        view.pixels_per_radian,
+                        pixels,
+                    ),
+                    false => PatchMerge::none(terrain.grid().patch_count()),
+                };
+                // The table, with each merged node's errors in its first
+                // patch's row, which only the node and its same-level
+                // neighbours read.
+                let errors: &mut [f32] = bytemuck::cast_slice_mut(host(view_errors)?);
+                errors.copy_from_slice(table.as_slice());
+                let grid = terrain.grid();
+                for node in &merge.nodes {
+                    let first = node.row as usize * grid.patch_cols() + node.col as usize;
+                    errors[first * ErrorTable::LEVELS..(first + 1) * ErrorTable::LEVELS]
+                        .copy_from_slice(&node.errors);
                 }
+                let words: &mut [u32] = bytemuck::cast_slice_mut(host(bits)?);
+                let (full, levels) = words.split_at_mut(choice.full_resolution.len());
+                full.copy_from_slice(&choice.full_resolution);
+                levels.copy_from_slice(&merge.level_words());
+                let drawn_nodes = merged_node_draws(terrain, &merge, &drawn, &mut choice);
+                let indices: &mut [u32] =
+                    bytemuck::cast_slice_mut(host(frame.merged_indices.as_mut().ok_or_else(
+                        || VkError::Unsupported("the merged nodes' indices were not built".into()),
+                    )?)?);
+                indices[..drawn_nodes.len()].copy_from_slice(&drawn_nodes);
+                frame.merged_batches = patch_batches(
+                    (0..drawn_nodes.len() / 4).map(|_| true),
+                    self.max_patches_per_draw,
+                );
                 let geomip = self.geomip.as_ref().ok_or_else(|| {
                     VkError::Unsupported("the tess path's exact draws need geomip".into())
                 })?;
@@ -652,9 +699,10 @@ impl TerrainRenderer {
                 let tessellated = drawn
                     .iter()
                     .enumerate()
-                    .map(|(p, &d)| d && !choice.is_full_resolution(p));
+                    .map(|(p, &d)| d && !choice.is_full_resolution(p) && merge.levels[p] == 0);
                 self.frames[slot].tess_batches =
                     patch_batches(tessellated, self.max_patches_per_draw);
+                self.merged_nodes = drawn_nodes.len() / 4;
             }
             (RenderPath::Tess, _) => {
                 let drawn = view.patches_drawn(terrain, settings.cull);
@@ -680,6 +728,13 @@ impl TerrainRenderer {
     /// and streamed terrains.
     pub fn predicted_p99_px(&self) -> Option<f32> {
         self.predicted_p99_px
+    }
+
+    /// How many merged nodes (`terrain::patch_merge`) the last prepared
+    /// frame of the tess path's error LOD draws, each instead of its block
+    /// of patches (0 on other paths).
+    pub fn merged_nodes(&self) -> usize {
+        self.merged_nodes
     }
 
     /// How many patches in view the last prepared frame of the tess
@@ -858,13 +913,19 @@ impl TerrainRenderer {
                     _ => &tess.pipelines,
                 };
                 let indirect = self.indirect_draws(slot, phase)?;
-                self.draw_patches(
-                    rec,
-                    frame,
-                    (tess, pipelines.select(settings.wireframe)?),
-                    phase,
-                    indirect,
-                );
+                let pipeline = pipelines.select(settings.wireframe)?;
+                self.draw_patches(rec, frame, (tess, pipeline), phase, indirect);
+                // Merged nodes go in the first pass, untested for occlusion.
+                if let (Some(indices), OCCLUSION_PHASE_ALL | OCCLUSION_PHASE_FIRST) =
+                    (&frame.merged_indices, phase)
+                {
+                    if !frame.merged_batches.is_empty() {
+                        rec.bind_geometry(&tess.control_points, indices);
+                        for &(first, count) in &frame.merged_batches {
+                            rec.draw_indexed(first, count);
+                        }
+                    }
+                }
                 if matches!(settings.lod_metric, LodMetric::Error(_)) && !tess.exact.is_empty() {
                     let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
                     // Listed after the batches.
@@ -1017,6 +1078,8 @@ fn build_frames(
             set,
             queries,
             full_resolution: None,
+            merged_indices: None,
+            merged_batches: Vec::new(),
             view_errors: None,
             settings: None,
             culled: false,
@@ -1638,6 +1701,47 @@ fn patch_batches(drawn: impl Iterator<Item = bool>, max_patches: Option<u32>) ->
         .into_iter()
         .map(|(first, n)| (first * 4, n * 4))
         .collect()
+}
+
+/// A host-visible buffer's memory, for the error LOD's per-frame choice.
+fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
+    buffer
+        .mapped_mut()
+        .ok_or_else(|| VkError::Unsupported("error LOD memory is not host-mapped".into()))
+}
+
+/// The control point indices of `merge`'s nodes holding a patch `drawn`,
+/// four a node in control point order; each drawn node's patches take its
+/// predicted error in `choice`.
+fn merged_node_draws(
+    terrain: &Terrain,
+    merge: &PatchMerge,
+    drawn: &[bool],
+    choice: &mut TessErrorChoice,
+) -> Vec<u32> {
+    let grid = terrain.grid();
+    let cols = grid.patch_cols();
+    let indices = terrain.indices();
+    let mut list = Vec::new();
+    for node in &merge.nodes {
+        let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
+        let patches =
+            || (r..r + s).flat_map(move |row| (c..c + s).map(move |col| row * cols + col));
+        if !patches().any(|p| drawn[p]) {
+            continue;
+        }
+        for p in patches() {
+            choice.predicted_px[p] = node.predicted_px;
+        }
+        let corner = |col: usize, row: usize, k: usize| indices[4 * (row * cols + col) + k];
+        list.extend([
+            corner(c, r, 0),
+            corner(c + s - 1, r, 1),
+            corner(c, r + s - 1, 2),
+            corner(c + s - 1, r + s - 1, 3),
+        ]);
+    }
+    list
 }
 
 /// The error table `bound` as `view` sees it for the patches `drawn`

@@ -156,6 +156,9 @@ pub struct RenderSettings {
     /// Draw the patches occlusion culled over the frame, in one colour
     /// (tess path).
     pub show_culled: bool,
+    /// Tess path, error LOD: draw blocks of patches whose every factor is
+    /// 1 as one larger patch (`terrain::patch_merge`).
+    pub merge_patches: bool,
     pub lighting: Lighting,
     pub fog: Option<Fog>,
     /// The peers' published parameters.
@@ -178,6 +181,7 @@ impl Default for RenderSettings {
             cull: true,
             occlusion: true,
             show_culled: false,
+            merge_patches: true,
             lighting: Lighting::default(),
             fog: None,
             peer: PeerLod::default(),

@@ -307,6 +307,29 @@ pub fn edge_distance(a: Vec2, b: Vec2, y_lo: f32, y_hi: f32) -> f32 {
     (p.dot(p) + dy * dy).sqrt()
 }
 
+/// What lies across a patch's edge, for its error-bounded factor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Across<'a> {
+    /// The terrain's border: the edge is the patch's own.
+    Border,
+    /// A patch tessellated by its errors: the edge takes the larger of each.
+    Patch(&'a PatchErrors),
+    /// A patch drawn at full resolution: a vertex on every sample.
+    FullResolution,
+    /// A merged node (`terrain::patch_merge`): one segment, as the node
+    /// puts one on each patch along its side.
+    Merged,
+}
+
+/// Distance from the eye to the strip standing on the edge `ends` (eye-
+/// relative, only x and z read) between the terrain's lowest and highest
+/// heights (`height_range`, eye-relative): what every patch or node
+/// sharing the edge knows alike.
+pub fn strip_distance((a, b): (Vec3, Vec3), height_range: [f32; 2]) -> f32 {
+    let xz = |v: Vec3| Vec2::new(v.x, v.z);
+    edge_distance(xz(a), xz(b), height_range[0], height_range[1])
+}
+
 /// Error-bounded factors of one patch: each edge from the errors it shares
 /// with the neighbour across it (left, top, right, bottom; None at the
 /// terrain's border), the inside from the patch's own errors. Each is
@@ -317,31 +340,32 @@ pub fn edge_distance(a: Vec2, b: Vec2, y_lo: f32, y_hi: f32) -> f32 {
 ///   alike, so they agree on its factor;
 /// - the inside from the patch's box: its corners' x and z, `bounds_y`.
 ///
-/// A neighbour given with `true` is drawn at full resolution, so the edge
-/// towards it gets a vertex on every sample. `cells` is the patch's
-/// (columns, rows). `corners` and both height pairs are eye-relative.
+/// What lies across each edge (`Across`) sets the edges towards a
+/// full-resolution patch (a vertex on every sample) and towards a merged
+/// node (one segment). `cells` is the patch's (columns, rows). `corners`
+/// and both height pairs are eye-relative.
 #[allow(clippy::too_many_arguments)]
 pub fn patch_error_factors(
     corners: [Vec3; 4],
     bounds_y: [f32; 2],
     height_range: [f32; 2],
     own: &PatchErrors,
-    neighbours: [Option<(&PatchErrors, bool)>; 4],
+    neighbours: [Across; 4],
     cells: [u32; 2],
     pixels_per_radian: f32,
     pixel_error: f32,
 ) -> PatchTessFactors {
-    let xz = |v: Vec3| Vec2::new(v.x, v.z);
     let ends = patch_edges(corners);
     let [cx, cz] = cells;
     let edge_cells = [cz, cx, cz, cx];
     let edges = std::array::from_fn(|i| {
-        if let Some((_, true)) = neighbours[i] {
-            return edge_cells[i] as f32;
-        }
-        let errors = shared_edge_errors(own, neighbours[i].map(|(e, _)| e));
-        let (a, b) = ends[i];
-        let d = edge_distance(xz(a), xz(b), height_range[0], height_range[1]);
+        let errors = match neighbours[i] {
+            Across::FullResolution => return edge_cells[i] as f32,
+            Across::Merged => return MIN_TESS_FACTOR,
+            Across::Border => *own,
+            Across::Patch(theirs) => shared_edge_errors(own, Some(theirs)),
+        };
+        let d = strip_distance(ends[i], height_range);
         error_tess_factor(&errors, d, pixels_per_radian, pixel_error, edge_cells[i])
     });
     let distance = patch_box_distance(corners, bounds_y);

@@ -12,6 +12,7 @@ pub mod grid;
 pub mod heightmap;
 pub mod info;
 pub mod lod;
+pub mod patch_merge;
 mod query;
 pub mod shading;
 pub mod tiled;
