@@ -175,6 +175,70 @@ fn render_takes_heightmap_and_camera_options() {
     succeeded(&wire);
 }
 
+/// From far off, the error LOD draws the DEM's flat blocks as merged
+/// nodes: fewer patches reach the control shader than are in view, and
+/// `--merge-patches off` sends every patch in view (none of them at full
+/// resolution from there).
+#[test]
+fn render_stats_count_merged_nodes_and_merging_turns_off() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let dem = data_path("jacksboro_fault_dem.r16").display().to_string();
+    let stats = |merge: &str| {
+        let out = vkterrain(
+            dir.path(),
+            &[
+                "render",
+                "--validate",
+                "--heightmap",
+                &dem,
+                "--size",
+                "403x344",
+                "--height-scale",
+                "65535",
+                "--cell-spacing",
+                "74.48,92.15",
+                "--cells-per-patch",
+                "16",
+                "--eye=0,60000,1",
+                "--target",
+                "0,0,0",
+                "--pixel-error",
+                "4",
+                "--error-measure",
+                "bound",
+                "--merge-patches",
+                merge,
+                "--width",
+                "320",
+                "--height",
+                "240",
+                "--out",
+                "m.png",
+                "--stats",
+                "m.json",
+            ],
+        );
+        succeeded(&out);
+        json_file(&dir.path().join("m.json"))
+    };
+    let on = stats("on");
+    let off = stats("off");
+    for s in [&on, &off] {
+        assert_eq!(s["patches_full_resolution"], 0);
+        assert_eq!(s["validation_messages"], 0);
+    }
+    let in_view = on["patches_in_frustum"].as_u64().unwrap();
+    let nodes = on["merged_nodes"].as_u64().unwrap();
+    assert!(nodes >= 2, "{nodes} merged nodes");
+    let tcs = on["tcs_patches"].as_u64().unwrap();
+    assert!(tcs < in_view / 2, "{tcs} patches shaded of {in_view}");
+    assert_eq!(off["merged_nodes"], 0);
+    assert_eq!(off["tcs_patches"], in_view);
+}
+
 #[test]
 fn bare_command_without_a_display_renders_headless_and_says_where() {
     if skip_gpu() {

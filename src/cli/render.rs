@@ -367,6 +367,9 @@ pub struct FrameStats {
     /// Of those, the patches the tess path's error LOD drew at full
     /// resolution without the control shader.
     pub patches_full_resolution: usize,
+    /// Merged nodes the tess path's error LOD drew, each one patch for a
+    /// block of patches (`terrain::patch_merge`).
+    pub merged_nodes: usize,
     pub tcs_patches: Option<u64>,
     pub tes_invocations: Option<u64>,
     pub triangles: Option<u64>,
@@ -511,6 +514,7 @@ pub fn render_scene(
             patches_total: terrain.grid().patch_count(),
             patches_in_frustum: frame.patches_in_frustum,
             patches_full_resolution: renderer.full_resolution_patches(),
+            merged_nodes: renderer.merged_nodes(),
             tcs_patches: statistics.map(|s| s.tcs_patches),
             tes_invocations: statistics.map(|s| s.tes_invocations),
             triangles: statistics.map(|s| s.clipping_primitives),
