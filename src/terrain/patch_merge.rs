@@ -201,8 +201,9 @@ struct Candidates {
     patch_max: Vec<PatchErrors>,
     /// The block's lowest and highest height.
     bounds: Vec<[f32; 2]>,
-    /// Whether the block may be drawn as one node.
-    mergeable: Vec<bool>,
+    /// The node the block may be drawn as, where it may be merged; at
+    /// level 0 a block is one patch, and its node the patch itself.
+    nodes: Vec<Option<MergedNode>>,
 }
 
 /// Chooses the frame's merged nodes for the error LOD at `pixel_error`
@@ -225,13 +226,13 @@ pub fn merge_patches(
     let errors =
         |p: usize| -> &PatchErrors { table.patch(p).try_into().expect("LEVEL_COUNT levels") };
     // Level 0: the patches that may be merged.
-    let flat: Vec<bool> = (0..grid.patch_count())
+    let flat: Vec<Option<MergedNode>> = (0..grid.patch_count())
         .into_par_iter()
         .map(|p| {
             let id = grid.patch_id(p);
             let rect = grid.sample_rect(id);
             if rect.cells_x() != n || rect.cells_z() != n || choice.is_full_resolution(p) {
-                return false;
+                return None;
             }
             let mut neighbours = [Across::Border; 4];
             let offsets = [(-1, 0), (0, -1), (1, 0), (0, 1)];
@@ -242,7 +243,7 @@ pub fn merge_patches(
                 }
                 let q = r as usize * cols + c as usize;
                 if choice.is_full_resolution(q) {
-                    return false;
+                    return None;
                 }
                 *across = Across::Patch(errors(q));
             }
@@ -258,11 +259,18 @@ pub fn merge_patches(
                 pixels_per_radian,
                 pixel_error,
             );
-            factors
+            let one_segment = factors
                 .edges
                 .iter()
                 .chain(&factors.inside)
-                .all(|&f| f == 1.0)
+                .all(|&f| f == 1.0);
+            one_segment.then_some(MergedNode {
+                col: id.col as u32,
+                row: id.row as u32,
+                level: 0,
+                errors: *errors(p),
+                predicted_px: choice.predicted_px[p],
+            })
         })
         .collect();
     let mut levels = vec![Candidates {
@@ -270,7 +278,7 @@ pub fn merge_patches(
         rows,
         patch_max: (0..grid.patch_count()).map(|p| *errors(p)).collect(),
         bounds: terrain.y_bounds().to_vec(),
-        mergeable: flat,
+        nodes: flat,
     }];
     for level in 1..=MAX_MERGE_LEVEL {
         let below = levels.last().expect("level 0");
@@ -279,7 +287,7 @@ pub fn merge_patches(
             break;
         }
         let span = 1usize << level;
-        let blocks: Vec<(PatchErrors, [f32; 2], bool)> = (0..c_cols * c_rows)
+        let blocks: Vec<(PatchErrors, [f32; 2], Option<MergedNode>)> = (0..c_cols * c_rows)
             .into_par_iter()
             .map(|b| {
                 let (bc, br) = (b % c_cols, b / c_cols);
@@ -296,21 +304,33 @@ pub fn merge_patches(
                         bounds[1].max(below.bounds[c][1]),
                     ];
                 }
-                let mut mergeable = children.iter().all(|&c| below.mergeable[c]);
-                if mergeable {
-                    let own = node_errors(&patch_max, bounds[1] - bounds[0], level);
-                    let corners = block_corners(terrain, (bc * span, br * span), span, eye_local);
-                    let distance = patch_box_distance(corners, range);
-                    let inside = error_tess_factor(
-                        &own,
-                        distance,
-                        pixels_per_radian,
-                        pixel_error,
-                        (n as u32) << level,
-                    );
-                    mergeable = inside <= span as f32;
-                }
-                (patch_max, bounds, mergeable)
+                let node = children
+                    .iter()
+                    .all(|&c| below.nodes[c].is_some())
+                    .then(|| {
+                        let (col, row) = (bc * span, br * span);
+                        let own = node_errors(&patch_max, bounds[1] - bounds[0], level);
+                        let corners = block_corners(terrain, (col, row), span, eye_local);
+                        let distance = patch_box_distance(corners, range);
+                        let inside = error_tess_factor(
+                            &own,
+                            distance,
+                            pixels_per_radian,
+                            pixel_error,
+                            (n as u32) << level,
+                        );
+                        let k = (inside as u32).trailing_zeros() as usize;
+                        (inside <= span as f32).then_some(MergedNode {
+                            col: col as u32,
+                            row: row as u32,
+                            level,
+                            errors: own,
+                            predicted_px: own[k] * pixels_per_radian
+                                / distance.max(f32::MIN_POSITIVE),
+                        })
+                    })
+                    .flatten();
+                (patch_max, bounds, node)
             })
             .collect();
         levels.push(Candidates {
@@ -318,42 +338,22 @@ pub fn merge_patches(
             rows: c_rows,
             patch_max: blocks.iter().map(|b| b.0).collect(),
             bounds: blocks.iter().map(|b| b.1).collect(),
-            mergeable: blocks.iter().map(|b| b.2).collect(),
+            nodes: blocks.into_iter().map(|b| b.2).collect(),
         });
     }
     // The largest mergeable blocks, coarsest first; a block inside a
     // chosen one is already taken.
     let mut merge = PatchMerge::none(grid.patch_count());
-    for (level, candidates) in levels.iter().enumerate().skip(1).rev() {
-        let span = 1usize << level;
-        for b in 0..candidates.cols * candidates.rows {
-            let (bc, br) = (b % candidates.cols, b / candidates.cols);
-            let (col, row) = (bc * span, br * span);
-            if !candidates.mergeable[b] || merge.levels[row * cols + col] != 0 {
+    for candidates in levels.iter().skip(1).rev() {
+        for node in candidates.nodes.iter().flatten() {
+            let (col, row, span) = (node.col as usize, node.row as usize, node.span() as usize);
+            if merge.levels[row * cols + col] != 0 {
                 continue;
             }
             for r in row..row + span {
-                merge.levels[r * cols + col..r * cols + col + span].fill(level as u8);
+                merge.levels[r * cols + col..r * cols + col + span].fill(node.level as u8);
             }
-            let [b_lo, b_hi] = candidates.bounds[b];
-            let own = node_errors(&candidates.patch_max[b], b_hi - b_lo, level as u32);
-            let corners = block_corners(terrain, (col, row), span, eye_local);
-            let distance = patch_box_distance(corners, range);
-            let inside = error_tess_factor(
-                &own,
-                distance,
-                pixels_per_radian,
-                pixel_error,
-                (n as u32) << level,
-            );
-            let k = (inside as u32).trailing_zeros() as usize;
-            merge.nodes.push(MergedNode {
-                col: col as u32,
-                row: row as u32,
-                level: level as u32,
-                errors: own,
-                predicted_px: own[k] * pixels_per_radian / distance.max(f32::MIN_POSITIVE),
-            });
+            merge.nodes.push(*node);
         }
     }
     merge
