@@ -13,19 +13,6 @@ fn vkterrain(args: &[&str]) -> Output {
         .expect("the binary runs")
 }
 
-fn dem_args() -> Vec<String> {
-    vec![
-        "--heightmap".into(),
-        data_path("jacksboro_fault_dem.r16").display().to_string(),
-        "--size".into(),
-        "403x344".into(),
-        "--height-scale".into(),
-        "65535".into(),
-        "--cell-spacing".into(),
-        "74.48,92.15".into(),
-    ]
-}
-
 fn run_ok(args: &[String]) -> serde_json::Value {
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let out = vkterrain(&args);

@@ -79,28 +79,25 @@ fn render_writes_the_png_and_its_stats() {
     assert!(!dir.path().join(".f.png.partial").exists());
 }
 
+/// `render --validate` of the DEM in 16-cell patches, in `dir`, with
+/// `options` after.
+fn render_dem(dir: &Path, options: &[&str]) -> std::process::Output {
+    let dem = dem_args();
+    let mut args = vec!["render", "--validate", "--cells-per-patch", "16"];
+    args.extend(dem.iter().map(String::as_str));
+    args.extend(options);
+    vkterrain(dir, &args)
+}
+
 #[test]
 fn render_takes_heightmap_and_camera_options() {
     if skip_gpu() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let dem = data_path("jacksboro_fault_dem.r16").display().to_string();
-    let out = vkterrain(
+    let out = render_dem(
         dir.path(),
         &[
-            "render",
-            "--validate",
-            "--heightmap",
-            &dem,
-            "--size",
-            "403x344",
-            "--height-scale",
-            "65535",
-            "--cell-spacing",
-            "74.48,92.15",
-            "--cells-per-patch",
-            "16",
             "--eye=-15000,9000,-16000",
             "--target",
             "0,600,0",
@@ -185,23 +182,10 @@ fn render_stats_count_merged_nodes_and_merging_turns_off() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let dem = data_path("jacksboro_fault_dem.r16").display().to_string();
     let stats = |merge: &str| {
-        let out = vkterrain(
+        let out = render_dem(
             dir.path(),
             &[
-                "render",
-                "--validate",
-                "--heightmap",
-                &dem,
-                "--size",
-                "403x344",
-                "--height-scale",
-                "65535",
-                "--cell-spacing",
-                "74.48,92.15",
-                "--cells-per-patch",
-                "16",
                 "--eye=0,60000,1",
                 "--target",
                 "0,0,0",

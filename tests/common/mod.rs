@@ -110,6 +110,21 @@ pub fn vkterrain_in(dir: &std::path::Path, args: &[&str]) -> std::process::Outpu
         .expect("the binary runs")
 }
 
+/// The command-line options that load the Jacksboro DEM as `dem_info` does
+/// (its samples, scale and spacing).
+pub fn dem_args() -> Vec<String> {
+    vec![
+        "--heightmap".into(),
+        data_path("jacksboro_fault_dem.r16").display().to_string(),
+        "--size".into(),
+        "403x344".into(),
+        "--height-scale".into(),
+        "65535".into(),
+        "--cell-spacing".into(),
+        "74.48,92.15".into(),
+    ]
+}
+
 pub mod gpu;
 
 /// Asserts that a command succeeded, showing its stderr where it did not,
