@@ -5,6 +5,8 @@
 //! - [`app`]: the window demo (winit and a swapchain).
 //! - [`bench`]: speed against error: the screen-space error measurement.
 //! - [`render`]: the terrain renderer, drawing into a target it is given.
+//! - [`lod`]: the level choice, from a terrain and a view to a frame plan.
+//!   No GPU types.
 //! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
 //! - [`material`]: a scene's textures, blend maps and lightmap, loaded.
 //! - [`scene`]: what to load.
@@ -20,6 +22,7 @@
 pub mod app;
 pub mod bench;
 pub mod cli;
+pub mod lod;
 pub mod material;
 pub mod output;
 pub mod render;

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use glam::{DVec2, Vec3};
-use vkterrain::terrain::geomip::*;
+use vkterrain::lod::geomip::*;
 use vkterrain::terrain::{Terrain, TerrainInfo};
 
 /// (row, column) of a template vertex index.

@@ -8,10 +8,10 @@ use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec3};
 use vkterrain::bench::error::enclosed_background;
+use vkterrain::lod::geomip::{neighbour_masks, select_levels_by_distance};
 use vkterrain::render::{FrameView, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
-use vkterrain::terrain::geomip::{neighbour_masks, select_levels_by_distance};
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
 
 fn settings(d0: f32, morph: bool) -> RenderSettings {

@@ -11,11 +11,11 @@ use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use vkterrain::bench::error::enclosed_background;
 use vkterrain::bench::error::{measure, DepthView};
+use vkterrain::lod::{choose_tess_error, patch_tess_factors};
 use vkterrain::material::Appearance;
 use vkterrain::render::{ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::camera::Camera;
-use vkterrain::terrain::lod::{choose_tess_error, patch_tess_factors};
 use vkterrain::terrain::{DistanceLod, DistanceMode, Heightmap, Terrain, TerrainInfo};
 
 fn default_terrain(cells_per_patch: u32) -> Terrain {
@@ -672,7 +672,7 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
 
 #[test]
 fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
-    use vkterrain::terrain::lod::{patch_error_factors, Across};
+    use vkterrain::lod::{patch_error_factors, Across};
     let terrain = dem_terrain(32, DVec2::ZERO);
     let table = terrain.error_table();
     let grid = terrain.grid();
@@ -960,7 +960,7 @@ fn peer_policies_are_crack_free() {
     let cams = crack_cameras(&terrain);
     let (w, h) = (384, 256);
     let mut scene = GpuScene::new(terrain, w, h, false);
-    for metric in vkterrain::terrain::lod::PeerPolicy::ALL.map(LodMetric::Peer) {
+    for metric in vkterrain::lod::PeerPolicy::ALL.map(LodMetric::Peer) {
         let settings = RenderSettings {
             lod_metric: metric,
             ..flat_settings(&scene.terrain, DistanceMode::Smooth)
@@ -1153,7 +1153,7 @@ fn paths_a_renderer_lacks_are_built_when_a_frame_asks() {
     full.finish();
 }
 
-/// Merged nodes (`terrain::patch_merge`) on the DEM, whose last patch
+/// Merged nodes (`lod::patch_merge`) on the DEM, whose last patch
 /// column and row are remainders, from views where nodes of two or more
 /// levels meet patches drawn on their own: no cracks against brute's
 /// outline, the p99 of the per-pixel error against brute within tau or

@@ -5,7 +5,7 @@ mod common;
 use common::*;
 use glam::Vec3;
 use proptest::prelude::*;
-use vkterrain::terrain::lod::{patch_tess_factors, tess_factor, LodError};
+use vkterrain::lod::{patch_tess_factors, tess_factor, LodError};
 use vkterrain::terrain::{DistanceLod, DistanceMode, PatchId, Terrain};
 
 const LOD: DistanceLod = DistanceLod {
@@ -179,7 +179,7 @@ proptest! {
 
 #[test]
 fn error_factors_are_powers_of_two_below_the_cells_or_the_cells() {
-    use vkterrain::terrain::lod::{error_tess_factor, patch_is_full_resolution};
+    use vkterrain::lod::{error_tess_factor, patch_is_full_resolution};
     // At distance 1 with 1 pixel per radian, level k projects to 8 / 2^k px.
     let errors = [8.0, 4.0, 2.0, 1.0, 0.5, 0.25, 0.125];
     let factor = |d: f32, px: f32, cells: u32| error_tess_factor(&errors, d, 1.0, px, cells);
@@ -202,7 +202,7 @@ fn error_factors_are_powers_of_two_below_the_cells_or_the_cells() {
 
 #[test]
 fn peer_policies_give_shared_edges_identical_factors() {
-    use vkterrain::terrain::lod::{patch_peer_factors, PeerLod, PeerPolicy, ScreenParams};
+    use vkterrain::lod::{patch_peer_factors, PeerLod, PeerPolicy, ScreenParams};
     let terrain = Terrain::new(dem_info(16), 0.0).unwrap();
     let grid = terrain.grid();
     let eye = Vec3::new(-9000.0, 2500.0, -12000.0);

@@ -5,11 +5,11 @@ mod common;
 
 use common::*;
 use glam::{DVec2, Vec3};
-use vkterrain::terrain::lod::{choose_tess_error, patch_error_factors, Across};
-use vkterrain::terrain::patch_merge::{
+use vkterrain::lod::patch_merge::{
     merge_patches, node_across, node_error_factors, node_errors, NodeAcross, PatchMerge,
     MAX_MERGE_LEVEL,
 };
+use vkterrain::lod::{choose_tess_error, patch_error_factors, Across};
 use vkterrain::terrain::{PatchId, Terrain, TerrainInfo};
 
 /// Pixels per radian of a 1280-pixel-wide view with a 60 degree field.
@@ -125,7 +125,7 @@ fn shared_sides_agree_from_both_sides() {
         if levels.len() >= 3 {
             mixed += 1;
         }
-        let node_corners = |n: &vkterrain::terrain::patch_merge::MergedNode| {
+        let node_corners = |n: &vkterrain::lod::patch_merge::MergedNode| {
             let s = n.span() as usize;
             let (c, r) = (n.col as usize, n.row as usize);
             let at = |c: usize, r: usize, k: usize| {

@@ -6,10 +6,10 @@ mod common;
 use common::gpu::camera;
 use common::*;
 use glam::{DVec2, Vec3};
+use vkterrain::lod::view_measure::{view_error_table, Diagonal, ViewErrors, ViewLod};
+use vkterrain::lod::viewshed::Viewshed;
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::{look_at, perspective, Frustum};
-use vkterrain::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
-use vkterrain::terrain::viewshed::Viewshed;
 use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
 
 /// A terrain of `map` with unit spacing and 16-cell patches, centred on 0.
@@ -382,7 +382,7 @@ fn geomip_morph_limits_are_factors_for_the_level_each_patch_expects() {
             .patch_corners(grid.patch_id(p))
             .map(|c| c - view.eye_local);
         let [lo, hi] = t.y_bounds()[p];
-        let d = vkterrain::terrain::lod::patch_box_distance(
+        let d = vkterrain::lod::patch_box_distance(
             corners,
             [lo - view.eye_local.y, hi - view.eye_local.y],
         );

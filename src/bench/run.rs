@@ -7,13 +7,14 @@ use serde::{Deserialize, Serialize};
 
 use super::cameras::{flythrough, named_views, FLYTHROUGH};
 use super::error::{differing_pixels, pixel_errors, DepthView, ErrorHistogram};
+use crate::lod::geomip;
+use crate::lod::{PeerLod, PeerPolicy};
 use crate::render::{
     Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
     TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
-use crate::terrain::lod::{PeerLod, PeerPolicy};
-use crate::terrain::{geomip, DistanceLod, Terrain};
+use crate::terrain::{DistanceLod, Terrain};
 use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
 use crate::vk::Gpu;
 
@@ -41,7 +42,7 @@ pub enum Config {
     /// Tessellation factors bounding the projected error to tau pixels.
     TessError(f32),
     /// A peer's LOD policy with its published parameters
-    /// (`terrain::lod::PeerLod`); CDLOD's ranges start at the scene's first
+    /// (`lod::PeerLod`); CDLOD's ranges start at the scene's first
     /// LOD distance.
     TessPeer(PeerPolicy),
     /// Geomip levels by distance, the first level reaching this far.

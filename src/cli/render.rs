@@ -13,6 +13,7 @@ use super::args::{
     parse_color, parse_dvec3, parse_fov, parse_range, parse_samples, with_gpu, FeatureArgs,
     SizeArgs, TerrainArgs,
 };
+use crate::lod::PeerPolicy;
 use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
 use crate::render::settings::{measurement_notes, sample_count};
@@ -25,7 +26,6 @@ use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::lod::PeerPolicy;
 use crate::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
 use crate::vk::Capabilities;
 
@@ -368,7 +368,7 @@ pub struct FrameStats {
     /// resolution without the control shader.
     pub patches_full_resolution: usize,
     /// Merged nodes the tess path's error LOD drew, each one patch for a
-    /// block of patches (`terrain::patch_merge`).
+    /// block of patches (`lod::patch_merge`).
     pub merged_nodes: usize,
     pub tcs_patches: Option<u64>,
     pub tes_invocations: Option<u64>,

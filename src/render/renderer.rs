@@ -12,7 +12,7 @@
 //!   vertex template and one index list per level and stitched-side mask,
 //!   shared by every patch; levels chosen on the CPU each frame, patches
 //!   drawn with their level in push constants, geomorphing in the vertex
-//!   shader (see `terrain::geomip`).
+//!   shader (see `lod::geomip`).
 //! - **brute**: every sample a vertex, with `height_at`'s triangle split and
 //!   no buffers at all (the vertex shader derives each sample from its
 //!   index); the reference that error is measured against.
@@ -38,6 +38,10 @@ use super::shaders;
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
+use crate::lod::geomip;
+use crate::lod::patch_merge::{merge_patches, PatchMerge};
+use crate::lod::view_measure::{view_error_table, Diagonal, ViewErrors, ViewLod};
+use crate::lod::{choose_tess_error, TessErrorChoice};
 use crate::material::Appearance;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP, BINDING_PAGES,
@@ -45,11 +49,8 @@ use crate::shader_constants::{
     OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND,
 };
 use crate::shader_variants::{Placing, Shader};
-use crate::terrain::lod::{choose_tess_error, TessErrorChoice};
-use crate::terrain::patch_merge::{merge_patches, PatchMerge};
 use crate::terrain::tiled::TiledHeightmap;
-use crate::terrain::view_error::{view_error_table, Diagonal, ViewErrors, ViewLod};
-use crate::terrain::{geomip, ErrorTable, Terrain, TerrainInfo};
+use crate::terrain::{ErrorTable, Terrain, TerrainInfo};
 use crate::vk::commands::{Recorder, RenderingPart};
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
 use crate::vk::memory::{Buffer, Image};
@@ -67,7 +68,7 @@ struct FrameSlot {
     queries: FrameQueries,
     /// The tess path's choice (error LOD): its full-resolution patches,
     /// one bit each, then the level of each patch's merged node, one byte
-    /// each (see `terrain::patch_merge`).
+    /// each (see `lod::patch_merge`).
     full_resolution: Option<Buffer>,
     /// The tess path's merged nodes this frame (error LOD), four control
     /// point indices each.
@@ -724,13 +725,13 @@ impl TerrainRenderer {
 
     /// The frame's 99th percentile error the last prepared frame's level
     /// choice expects on screen, in pixels, where the view measured it
-    /// (`terrain::view_error`): None for the distance LOD, the brute path
+    /// (`lod::view_measure`): None for the distance LOD, the brute path
     /// and streamed terrains.
     pub fn predicted_p99_px(&self) -> Option<f32> {
         self.predicted_p99_px
     }
 
-    /// How many merged nodes (`terrain::patch_merge`) the last prepared
+    /// How many merged nodes (`lod::patch_merge`) the last prepared
     /// frame of the tess path's error LOD draws, each instead of its block
     /// of patches (0 on other paths).
     pub fn merged_nodes(&self) -> usize {
@@ -1745,7 +1746,7 @@ fn merged_node_draws(
 }
 
 /// The error table `bound` as `view` sees it for the patches `drawn`
-/// (`terrain::view_error`), where `settings` measure the view and the CPU
+/// (`lod::view_measure`), where `settings` measure the view and the CPU
 /// holds the heights; None keeps the bounds (a streamed terrain's too),
 /// with no expectation to report.
 fn seen_errors(

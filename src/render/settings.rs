@@ -2,8 +2,8 @@
 //! metric, shading, and the rest of `RenderSettings`, with the one policy
 //! that fits them to what a device can do.
 
+use crate::lod::{PeerLod, PeerPolicy};
 use crate::scene::{Fog, Lighting, Scene};
-use crate::terrain::lod::{PeerLod, PeerPolicy};
 use crate::terrain::{DistanceLod, DistanceMode};
 
 /// Which way the terrain is drawn.
@@ -119,7 +119,7 @@ pub enum LodMetric {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum ErrorMeasure {
     /// The frame's 99th percentile error, as the view sees each level
-    /// (`terrain::view_error`): at most 1 % of the terrain's pixels may be
+    /// (`lod::view_measure`): at most 1 % of the terrain's pixels may be
     /// over, where that saves the most triangles. Terrains whose heights
     /// stream (the CPU does not hold them) use `Bound`.
     #[default]
@@ -157,7 +157,7 @@ pub struct RenderSettings {
     /// (tess path).
     pub show_culled: bool,
     /// Tess path, error LOD: draw blocks of patches whose every factor is
-    /// 1 as one larger patch (`terrain::patch_merge`).
+    /// 1 as one larger patch (`lod::patch_merge`).
     pub merge_patches: bool,
     pub lighting: Lighting,
     pub fog: Option<Fog>,

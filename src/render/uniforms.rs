@@ -7,12 +7,12 @@ use glam::{Vec3, Vec4};
 
 use super::settings::{LodMetric, RenderSettings, Shading};
 use super::view::FrameView;
+use crate::lod::PeerPolicy;
 use crate::scene::MAX_LIGHTS;
 use crate::shader_constants::{
     LOD_METRIC_CDLOD, LOD_METRIC_DISTANCE, LOD_METRIC_EDGE_LENGTH, LOD_METRIC_ERROR,
     LOD_METRIC_SPHERE, LOD_MODE_DEBUG, LOD_MODE_SMOOTH, SHADE_FLAT, SHADE_LIT, SHADE_LOD_COLORS,
 };
-use crate::terrain::lod::PeerPolicy;
 use crate::terrain::{DistanceMode, Terrain};
 
 #[repr(C)]

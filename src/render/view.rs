@@ -3,8 +3,8 @@
 
 use glam::{DVec3, Mat4, Vec3, Vec4};
 
+use crate::lod::ScreenParams;
 use crate::terrain::camera::{clip_planes_for_box, Camera, Frustum};
-use crate::terrain::lod::ScreenParams;
 use crate::terrain::Terrain;
 
 /// The matrices and planes of one frame, camera-relative.

@@ -156,7 +156,7 @@ fn split(k: usize, cells: usize, level: usize) -> (usize, usize) {
 /// on ABC where `upper` (u + v <= 1), else on DCB. The caller decides the
 /// side, exactly where it can.
 #[inline]
-pub(super) fn split_bc([a, b, c, d]: [f64; 4], u: f64, v: f64, upper: bool) -> f64 {
+pub(crate) fn split_bc([a, b, c, d]: [f64; 4], u: f64, v: f64, upper: bool) -> f64 {
     if upper {
         a + u * (b - a) + v * (c - a)
     } else {
@@ -167,7 +167,7 @@ pub(super) fn split_bc([a, b, c, d]: [f64; 4], u: f64, v: f64, upper: bool) -> f
 /// The same quad split along A-D: on ABD where `right` (u >= v), else on
 /// ACD.
 #[inline]
-pub(super) fn split_ad([a, b, c, d]: [f64; 4], u: f64, v: f64, right: bool) -> f64 {
+pub(crate) fn split_ad([a, b, c, d]: [f64; 4], u: f64, v: f64, right: bool) -> f64 {
     if right {
         a + u * (b - a) + v * (d - b)
     } else {

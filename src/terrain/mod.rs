@@ -7,17 +7,13 @@ pub mod camera;
 pub mod error;
 pub mod error_table;
 pub mod generate;
-pub mod geomip;
 pub mod grid;
 pub mod heightmap;
 pub mod info;
-pub mod lod;
-pub mod patch_merge;
+pub mod lod_params;
 mod query;
 pub mod shading;
 pub mod tiled;
-pub mod view_error;
-pub mod viewshed;
 
 pub use camera::{look_at, perspective, Frustum};
 pub use error::{HeightmapError, TerrainError};
@@ -25,7 +21,7 @@ pub use error_table::{ErrorTable, PatchErrors, ERROR_LEVELS};
 pub use grid::{PatchGrid, PatchId, SampleRect};
 pub use heightmap::{Heightmap, HeightmapFormat, LoadOptions};
 pub use info::{Placement, TerrainInfo, DEFAULT_CELLS_PER_PATCH};
-pub use lod::{DistanceLod, DistanceMode, PatchTessFactors};
+pub use lod_params::{DistanceLod, DistanceMode, LodError};
 
 use glam::Vec3;
 

@@ -48,12 +48,12 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
-use super::lod::{
+use super::factors::{
     error_tess_factor, patch_box_distance, patch_error_factors, shared_edge_errors, strip_distance,
     Across, PatchTessFactors, TessErrorChoice,
 };
-use super::{PatchId, Terrain};
+use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
+use crate::terrain::{PatchId, Terrain};
 
 /// The coarsest node: 2^6 x 2^6 patches, whose sides towards other levels
 /// need 64 segments, the largest factor.
@@ -155,7 +155,7 @@ pub fn node_error_factors(
     pixel_error: f32,
 ) -> PatchTessFactors {
     let cells = cells_per_patch << level;
-    let ends = super::lod::patch_edges(corners);
+    let ends = super::factors::patch_edges(corners);
     let edges = std::array::from_fn(|i| {
         let errors = match across[i] {
             NodeAcross::Other => return (1u32 << level) as f32,

@@ -37,9 +37,9 @@
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
-use super::camera::Frustum;
-use super::heightmap::Heightmap;
-use super::TerrainInfo;
+use crate::terrain::camera::Frustum;
+use crate::terrain::heightmap::Heightmap;
+use crate::terrain::TerrainInfo;
 
 /// A silhouette sample (`Viewshed::crest`).
 #[derive(Clone, Copy, Debug, PartialEq)]

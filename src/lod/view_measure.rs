@@ -108,16 +108,16 @@
 
 use glam::{DVec2, DVec3, Vec3};
 
-use super::camera::Frustum;
+use crate::terrain::camera::Frustum;
 use rayon::prelude::*;
 
-use super::error_table::{split_ad, split_bc, ErrorTable, LEVEL_COUNT};
+use super::factors::{patch_box_distance, within_tolerance};
 use super::geomip;
-use super::grid::SampleRect;
-use super::heightmap::Heightmap;
-use super::lod::{patch_box_distance, within_tolerance};
 use super::viewshed::Viewshed;
-use super::Terrain;
+use crate::terrain::error_table::{split_ad, split_bc, ErrorTable, LEVEL_COUNT};
+use crate::terrain::grid::SampleRect;
+use crate::terrain::heightmap::Heightmap;
+use crate::terrain::Terrain;
 
 /// Share of the frame's terrain pixels the view's choice lets its modelled
 /// errors put over tau: half the 1 % a 99th percentile allows. The other
@@ -607,7 +607,7 @@ fn sweep_viewshed(
 /// and an estimate's pixels over tau at a level (its index) with the given
 /// sides stitched to coarser neighbours.
 struct Stitching<'a> {
-    grid: &'a super::grid::PatchGrid,
+    grid: &'a crate::terrain::grid::PatchGrid,
     over: &'a (dyn Fn(&Estimate, usize, u8) -> f64 + Sync),
 }
 
@@ -1034,7 +1034,7 @@ impl<'a> PatchSamples<'a> {
         map: &'a Heightmap,
         rect: SampleRect,
         layout: Layout,
-        info: &super::TerrainInfo,
+        info: &crate::terrain::TerrainInfo,
         view: &ViewLod,
         viewshed: &Viewshed,
     ) -> Self {

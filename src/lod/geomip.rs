@@ -26,9 +26,9 @@
 
 use glam::Vec3;
 
-use super::error_table::ErrorTable;
-use super::grid::{PatchGrid, PatchId};
-use super::Terrain;
+use crate::terrain::error_table::ErrorTable;
+use crate::terrain::grid::{PatchGrid, PatchId};
+use crate::terrain::Terrain;
 
 /// Sides of a patch, as bits of a mask.
 pub const LEFT: u8 = 1;
@@ -215,7 +215,7 @@ pub fn level_for_distance(distance: f32, d0: f32, levels: usize) -> usize {
 pub fn morph_factor(distance: f32, d0: f32, level: usize) -> f32 {
     let end = d0 * (1u32 << (level + 1)) as f32;
     let start = 0.7 * end;
-    super::lod::saturate((distance - start) / (end - start))
+    super::factors::saturate((distance - start) / (end - start))
 }
 
 /// Balances levels so neighbours differ by at most one, only ever lowering
@@ -358,7 +358,7 @@ pub fn select_levels_by_error(
                 // The next level is as good: fully on its surface.
                 return 1.0;
             }
-            super::lod::saturate((d - from) / (to - from))
+            super::factors::saturate((d - from) / (to - from))
         })
         .collect();
     PatchLevels { levels, morph }
@@ -460,9 +460,9 @@ pub fn predicted_px(
                 let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
                 let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
                 // Left, top, right, bottom, as the masks' bits.
-                for (bit, (a, b)) in super::lod::patch_edges(corners).into_iter().enumerate() {
+                for (bit, (a, b)) in super::factors::patch_edges(corners).into_iter().enumerate() {
                     if coarser & (1 << bit) != 0 {
-                        let d = super::lod::edge_distance(xz(a), xz(b), lo, hi);
+                        let d = super::factors::edge_distance(xz(a), xz(b), lo, hi);
                         px = px.max(
                             error(p, level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE),
                         );

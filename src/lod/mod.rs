@@ -1,0 +1,17 @@
+//! The level choice: which level each part of the terrain is drawn at, for
+//! one view. Pure Rust, no GPU types.
+//!
+//! - [`factors`]: the tessellation-factor formulas the control shader
+//!   mirrors (distance, error-bounded, the peers' policies).
+//! - [`geomip`]: geomipmapping's levels, stitching and morphing.
+//! - [`patch_merge`]: merged nodes, blocks of flat patches drawn as one.
+//! - [`view_measure`] and [`viewshed`]: the error a view sees, measured
+//!   sample by sample (`--error-measure view`, for offline stills).
+
+pub mod factors;
+pub mod geomip;
+pub mod patch_merge;
+pub mod view_measure;
+pub mod viewshed;
+
+pub use factors::*;
