@@ -240,6 +240,24 @@ pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
     }
 }
 
+/// `balance` where every patch but those listed in `lowered` is at the
+/// coarsest level (`levels.len()` patches of `grid`): the same levels, in
+/// time that grows with the patches listed and the levels, not the grid.
+/// A lowered patch lowers its neighbours to one level above it, and so on
+/// outwards, which ends within `level_count` steps of it.
+pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[u32]) {
+    let mut queue: Vec<u32> = lowered.to_vec();
+    while let Some(p) = queue.pop() {
+        let limit = levels[p as usize] + 1;
+        for q in grid.neighbours(p as usize).into_iter().flatten() {
+            if levels[q] > limit {
+                levels[q] = limit;
+                queue.push(q as u32);
+            }
+        }
+    }
+}
+
 /// Sides of `id` whose neighbour is coarser (`.0`) and finer (`.1`), for
 /// balanced levels.
 pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8) {
@@ -418,58 +436,59 @@ pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32,
     (own, grid.neighbours(p).map(side))
 }
 
-/// The error each patch's level choice expects on screen, in pixels: its
+/// The error patch `p`'s level choice expects on screen, in pixels: its
 /// level's error from its box's nearest point, or while it glides towards
 /// the next coarser level (`geomorph`), the blend of the two by its largest
 /// morph factor; a side stitched to a coarser neighbour adds that level's
 /// error from the nearest point of that side. Level 0 is the reference
-/// itself (error 0).
+/// itself (error 0), and so is a patch the eye is inside, whose level the
+/// choice keeps at 0.
 pub fn predicted_px(
     terrain: &Terrain,
     table: &ErrorTable,
     chosen: &PatchLevels,
+    p: usize,
     eye_local: Vec3,
     pixels_per_radian: f32,
     geomorph: bool,
-) -> Vec<f32> {
+) -> f32 {
     let grid = terrain.grid();
     let count = level_count(grid.cells_per_patch());
-    let error = |p: usize, level: usize| {
+    let error = |level: usize| {
         if level == 0 {
             0.0
         } else {
             table.error(p, (count - 1) - level.min(count - 1))
         }
     };
-    patch_distances(terrain, eye_local)
-        .iter()
-        .enumerate()
-        .map(|(p, &d)| {
-            let id = grid.patch_id(p);
-            let level = usize::from(chosen.levels[p]);
-            let mut e = error(p, level);
-            if geomorph {
-                let (interior, sides) = patch_morph(chosen, grid, id);
-                let m = sides.iter().fold(interior, |a, &b| a.max(b));
-                e = (1.0 - m) * e + m * error(p, level + 1);
+    let id = grid.patch_id(p);
+    let (centre, extents) = terrain.patch_aabb(id);
+    let d = ((eye_local - centre).abs() - extents)
+        .max(Vec3::ZERO)
+        .length();
+    let level = usize::from(chosen.levels[p]);
+    if level == 0 || d <= 0.0 {
+        return 0.0;
+    }
+    let mut e = error(level);
+    if geomorph {
+        let (interior, sides) = patch_morph(chosen, grid, id);
+        let m = sides.iter().fold(interior, |a, &b| a.max(b));
+        e = (1.0 - m) * e + m * error(level + 1);
+    }
+    let mut px = e * pixels_per_radian / d;
+    let (coarser, _) = neighbour_masks(&chosen.levels, grid, id);
+    if coarser != 0 {
+        let corners = terrain.patch_corners(id).map(|c| c - eye_local);
+        let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
+        let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
+        // Left, top, right, bottom, as the masks' bits.
+        for (bit, (a, b)) in super::factors::patch_edges(corners).into_iter().enumerate() {
+            if coarser & (1 << bit) != 0 {
+                let d = super::factors::edge_distance(xz(a), xz(b), lo, hi);
+                px = px.max(error(level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE));
             }
-            let mut px = e * pixels_per_radian / d.max(f32::MIN_POSITIVE);
-            let (coarser, _) = neighbour_masks(&chosen.levels, grid, id);
-            if coarser != 0 {
-                let corners = terrain.patch_corners(id).map(|c| c - eye_local);
-                let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
-                let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
-                // Left, top, right, bottom, as the masks' bits.
-                for (bit, (a, b)) in super::factors::patch_edges(corners).into_iter().enumerate() {
-                    if coarser & (1 << bit) != 0 {
-                        let d = super::factors::edge_distance(xz(a), xz(b), lo, hi);
-                        px = px.max(
-                            error(p, level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE),
-                        );
-                    }
-                }
-            }
-            px
-        })
-        .collect()
+        }
+    }
+    px
 }

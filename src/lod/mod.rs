@@ -10,7 +10,10 @@
 
 pub mod factors;
 pub mod geomip;
+pub mod hierarchy;
 pub mod patch_merge;
+pub mod plan;
+pub mod view;
 pub mod view_measure;
 pub mod viewshed;
 

@@ -10,6 +10,7 @@ pub mod residency;
 pub mod settings;
 pub mod shaders;
 pub mod streaming;
+mod tess_choice;
 pub mod uniforms;
 pub mod view;
 

@@ -27,6 +27,7 @@
 
 use std::mem::size_of;
 use std::sync::Arc;
+use std::time::Instant;
 
 use ash::vk;
 
@@ -36,12 +37,14 @@ use super::residency::StreamShape;
 use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use super::shaders;
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
+use super::tess_choice::{patch_batches, ChoiceBuffers};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
 use crate::lod::geomip;
-use crate::lod::patch_merge::{merge_patches, PatchMerge};
+use crate::lod::hierarchy::Hierarchy;
+use crate::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs};
+use crate::lod::view::Tau;
 use crate::lod::view_measure::{view_error_table, Diagonal, ViewErrors, ViewLod};
-use crate::lod::{choose_tess_error, TessErrorChoice};
 use crate::material::Appearance;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP, BINDING_PAGES,
@@ -66,19 +69,12 @@ struct FrameSlot {
     uniforms: Buffer,
     set: DescriptorSet,
     queries: FrameQueries,
-    /// The tess path's choice (error LOD): its full-resolution patches,
-    /// one bit each, then the level of each patch's merged node, one byte
-    /// each (see `lod::patch_merge`).
-    full_resolution: Option<Buffer>,
-    /// The tess path's merged nodes this frame (error LOD), four control
-    /// point indices each.
-    merged_indices: Option<Buffer>,
-    /// Draws of `merged_indices`, (first index, index count), split where
-    /// the driver limits patches per draw.
+    /// The tess path's error LOD: the buffers its control shader reads
+    /// the frame plan from.
+    choice: Option<ChoiceBuffers>,
+    /// Draws of the choice's merged node indices, (first index, index
+    /// count), split where the driver limits patches per draw.
     merged_batches: Vec<(u32, u32)>,
-    /// The tess path's error table as this frame's view sees it (error
-    /// LOD), read by the control shader.
-    view_errors: Option<Buffer>,
     /// What `prepare` set this slot's frame up for; `record` draws it.
     settings: Option<RenderSettings>,
     /// Whether the slot's last recorded frame was drawn in two passes
@@ -251,6 +247,13 @@ pub struct TerrainRenderer {
     predicted_p99_px: Option<f32>,
     /// Merged nodes the last prepared frame draws (tess path, error LOD).
     merged_nodes: usize,
+    /// The quadtree the level choices walk, built with the first path
+    /// that draws patches.
+    hierarchy: Option<Hierarchy>,
+    /// Milliseconds the last prepared frame's level choice took (the tess
+    /// path's frame plan, or the geomip path's levels), the view measure
+    /// included where it runs.
+    lod_ms: Option<f64>,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -383,6 +386,8 @@ impl TerrainRenderer {
             predicted_max_px: None,
             predicted_p99_px: None,
             merged_nodes: 0,
+            lod_ms: None,
+            hierarchy: None,
         };
         for &path in &options.paths {
             renderer.ensure(terrain, path, options.wireframe)?;
@@ -485,13 +490,17 @@ impl TerrainRenderer {
                 // path's error LOD has its own, for its fixed diagonal.
                 // Both come from one pass, kept by the terrain.
                 let (table, _) = self.error_tables(terrain);
-                if self.frames.iter().any(|f| f.view_errors.is_none()) {
+                self.hierarchy
+                    .get_or_insert_with(|| Hierarchy::new(terrain, table));
+                if self.frames.iter().any(|f| f.choice.is_none()) {
                     self.add_error_lod_buffers(terrain, table)?;
                 }
                 self.tess = Some(build_tess(self, terrain, table.clone(), wireframe)?);
             }
             RenderPath::Geomip => {
-                let (_, table) = self.error_tables(terrain);
+                let (tess_table, table) = self.error_tables(terrain);
+                self.hierarchy
+                    .get_or_insert_with(|| Hierarchy::new(terrain, tess_table));
                 self.geomip = Some(build_geomip(self, terrain, table.clone(), wireframe)?);
             }
             RenderPath::Brute => {
@@ -520,48 +529,19 @@ impl TerrainRenderer {
         tables
     }
 
-    /// Per frame slot, the buffers of full-resolution patch bits and of
-    /// the view's error table (starting as `table`), and the slot's set
-    /// pointed at them and the occlusion state (the bindings of the tess
-    /// path's control shader).
+    /// Per frame slot, the tess path's choice buffers (starting as
+    /// `table`), and the slot's set pointed at them and the occlusion
+    /// state (the bindings of the tess path's control shader).
     fn add_error_lod_buffers(&mut self, terrain: &Terrain, table: &ErrorTable) -> Result<()> {
-        let device = &self.device;
-        let patches = terrain.grid().patch_count();
-        let words = patches.div_ceil(32) + patches.div_ceil(4);
         for (i, frame) in self.frames.iter_mut().enumerate() {
-            let bits = device.create_host_buffer(
-                &format!("terrain.patch_choice[{i}]"),
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(&vec![0u32; words]),
-            )?;
-            // A node holds at least 2x2 patches: at most a quarter as many
-            // nodes as patches, four indices each.
-            frame.merged_indices = Some(device.create_host_buffer(
-                &format!("terrain.merged_indices[{i}]"),
-                vk::BufferUsageFlags::INDEX_BUFFER,
-                bytemuck::cast_slice(&vec![0u32; patches.max(4)]),
+            frame.choice = Some(ChoiceBuffers::new(
+                &self.device,
+                i,
+                terrain,
+                table,
+                frame.set,
+                &self.occlusion.visibility,
             )?);
-            let errors = device.create_host_buffer(
-                &format!("terrain.view_errors[{i}]"),
-                vk::BufferUsageFlags::STORAGE_BUFFER,
-                bytemuck::cast_slice(table.as_slice()),
-            )?;
-            for (binding, buffer) in [
-                (BINDING_ERROR_TABLE, &errors),
-                (BINDING_FULL_RESOLUTION, &bits),
-                (BINDING_VISIBILITY, &self.occlusion.visibility),
-            ] {
-                let size = buffer.desc.size;
-                device.write_buffer(
-                    frame.set,
-                    binding,
-                    vk::DescriptorType::STORAGE_BUFFER,
-                    buffer,
-                    size,
-                );
-            }
-            frame.full_resolution = Some(bits);
-            frame.view_errors = Some(errors);
         }
         Ok(())
     }
@@ -612,6 +592,7 @@ impl TerrainRenderer {
         self.predicted_max_px = None;
         self.predicted_p99_px = None;
         self.merged_nodes = 0;
+        self.lod_ms = None;
         self.frames[slot].tess_batches.clear();
         self.frames[slot].merged_batches.clear();
         if let Some(tess) = self.tess.as_mut() {
@@ -619,99 +600,113 @@ impl TerrainRenderer {
         }
         match (settings.path, settings.lod_metric) {
             (RenderPath::Geomip, _) => {
-                if let Some(geomip) = self.geomip.as_mut() {
-                    let drawn = view.patches_drawn(terrain, settings.cull);
-                    let predicted = geomip.choose(terrain, view, settings, &drawn);
+                if let (Some(geomip), Some(hierarchy)) =
+                    (self.geomip.as_mut(), self.hierarchy.as_ref())
+                {
+                    if let (LodMetric::Error(_), ErrorMeasure::Sight) =
+                        (settings.lod_metric, settings.error_measure)
+                    {
+                        // Computed once per terrain, before the choice is
+                        // timed.
+                        terrain.sight_table();
+                    }
+                    let start = Instant::now();
+                    let predicted = geomip.choose(terrain, hierarchy, view, settings);
+                    self.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
                     self.predicted_max_px = predicted.map(|p| p.0);
                     self.predicted_p99_px = predicted.and_then(|p| p.1);
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
-                let frame = &mut self.frames[slot];
-                let (Some(tess), Some(bits), Some(view_errors)) = (
-                    self.tess.as_mut(),
-                    frame.full_resolution.as_mut(),
-                    frame.view_errors.as_mut(),
-                ) else {
-                    return Err(VkError::Unsupported(
-                        "the tess path's error LOD was not built".into(),
-                    ));
-                };
+                self.prepare_tess_error(slot, terrain, view, settings, pixels)?;
+            }
+            (RenderPath::Tess, _) => {
+                let hierarchy = self
+                    .hierarchy
+                    .as_ref()
+                    .ok_or_else(|| VkError::Unsupported("the tess path was not built".into()))?;
+                let start = Instant::now();
+                let lod_view = view.lod_view(Tau::DEFAULT);
+                let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+                self.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+                self.frames[slot].tess_batches = patch_batches(visible, self.max_patches_per_draw);
+            }
+            (RenderPath::Brute, _) => {}
+        }
+        Ok(())
+    }
+
+    /// The tess path's error LOD for slot `slot`: the frame plan (with the
+    /// view's measured table under `ErrorMeasure::View`), written into the
+    /// slot's choice buffers, and the frame's draws.
+    fn prepare_tess_error(
+        &mut self,
+        slot: usize,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+        pixels: f32,
+    ) -> Result<()> {
+        let (Some(tess), Some(hierarchy)) = (self.tess.as_mut(), self.hierarchy.as_ref()) else {
+            return Err(VkError::Unsupported("the tess path was not built".into()));
+        };
+        let sight = match settings.error_measure {
+            // Computed once per terrain, before the choice is timed.
+            ErrorMeasure::Sight => terrain.sight_table(),
+            _ => None,
+        };
+        let start = Instant::now();
+        let seen = match settings.error_measure {
+            ErrorMeasure::View => {
                 let drawn = view.patches_drawn(terrain, settings.cull);
-                let seen = seen_errors(
+                seen_errors(
                     terrain,
                     &tess.errors,
                     Diagonal::Either,
                     view,
                     (settings, pixels),
                     &drawn,
-                );
-                let table = seen.as_ref().map_or(&tess.errors, |s| &s.table);
-                let mut choice = choose_tess_error(
-                    terrain,
-                    table,
-                    view.eye_local,
-                    view.pixels_per_radian,
-                    pixels,
-                );
-                let merge = match settings.merge_patches {
-                    true => merge_patches(
-                        terrain,
-                        table,
-                        &choice,
-                        view.eye_local,
-                        view.pixels_per_radian,
-                        pixels,
-                    ),
-                    false => PatchMerge::none(terrain.grid().patch_count()),
-                };
-                // The table, with each merged node's errors in its first
-                // patch's row, which only the node and its same-level
-                // neighbours read.
-                let errors: &mut [f32] = bytemuck::cast_slice_mut(host(view_errors)?);
-                errors.copy_from_slice(table.as_slice());
-                let grid = terrain.grid();
-                for node in &merge.nodes {
-                    let first = node.row as usize * grid.patch_cols() + node.col as usize;
-                    errors[first * ErrorTable::LEVELS..(first + 1) * ErrorTable::LEVELS]
-                        .copy_from_slice(&node.errors);
-                }
-                let words: &mut [u32] = bytemuck::cast_slice_mut(host(bits)?);
-                let (full, levels) = words.split_at_mut(choice.full_resolution.len());
-                full.copy_from_slice(&choice.full_resolution);
-                levels.copy_from_slice(&merge.level_words());
-                let drawn_nodes = merged_node_draws(terrain, &merge, &drawn, &mut choice);
-                let indices: &mut [u32] =
-                    bytemuck::cast_slice_mut(host(frame.merged_indices.as_mut().ok_or_else(
-                        || VkError::Unsupported("the merged nodes' indices were not built".into()),
-                    )?)?);
-                indices[..drawn_nodes.len()].copy_from_slice(&drawn_nodes);
-                frame.merged_batches = patch_batches(
-                    (0..drawn_nodes.len() / 4).map(|_| true),
-                    self.max_patches_per_draw,
-                );
-                let geomip = self.geomip.as_ref().ok_or_else(|| {
-                    VkError::Unsupported("the tess path's exact draws need geomip".into())
-                })?;
-                let bound_px = tess.set_exact_draws(terrain, &drawn, &choice, geomip);
-                self.predicted_max_px =
-                    Some(seen.as_ref().map_or(bound_px, |s| s.predicted_max_px));
-                self.predicted_p99_px = seen.map(|s| s.predicted_p99_px);
-                let tessellated = drawn
-                    .iter()
-                    .enumerate()
-                    .map(|(p, &d)| d && !choice.is_full_resolution(p) && merge.levels[p] == 0);
-                self.frames[slot].tess_batches =
-                    patch_batches(tessellated, self.max_patches_per_draw);
-                self.merged_nodes = drawn_nodes.len() / 4;
+                )
             }
-            (RenderPath::Tess, _) => {
-                let drawn = view.patches_drawn(terrain, settings.cull);
-                self.frames[slot].tess_batches =
-                    patch_batches(drawn.into_iter(), self.max_patches_per_draw);
-            }
-            (RenderPath::Brute, _) => {}
-        }
+            _ => None,
+        };
+        let lod_view = view.lod_view(Tau::new(pixels).unwrap_or_default());
+        let frame_plan = plan(
+            terrain,
+            hierarchy,
+            &lod_view,
+            &PlanInputs {
+                table: seen.as_ref().map_or(&tess.errors, |s| &s.table),
+                sight,
+                merge: settings.merge_patches,
+                cull: settings.cull,
+            },
+        );
+        self.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+        let frame = &mut self.frames[slot];
+        let choice = frame.choice.as_mut().ok_or_else(|| {
+            VkError::Unsupported("the tess path's error LOD was not built".into())
+        })?;
+        let merged_indices = choice.write(&frame_plan, &tess.errors, terrain)?;
+        frame.merged_batches = patch_batches(0..merged_indices / 4, self.max_patches_per_draw);
+        let geomip = self.geomip.as_ref().ok_or_else(|| {
+            VkError::Unsupported("the tess path's exact draws need geomip".into())
+        })?;
+        tess.set_exact_draws(terrain, &frame_plan, geomip);
+        frame.tess_batches = patch_batches(
+            frame_plan
+                .patches
+                .iter()
+                .filter(|p| !p.full_resolution)
+                .map(|p| p.index),
+            self.max_patches_per_draw,
+        );
+        self.predicted_max_px = Some(
+            seen.as_ref()
+                .map_or(frame_plan.predicted_max_px, |s| s.predicted_max_px),
+        );
+        self.predicted_p99_px = seen.map(|s| s.predicted_p99_px);
+        self.merged_nodes = frame_plan.merged.len();
         Ok(())
     }
 
@@ -729,6 +724,14 @@ impl TerrainRenderer {
     /// and streamed terrains.
     pub fn predicted_p99_px(&self) -> Option<f32> {
         self.predicted_p99_px
+    }
+
+    /// Milliseconds the last prepared frame spent choosing its levels: the
+    /// frame plan of the tess path (its frustum walk alone for the distance
+    /// and peer policies), the geomip path's levels, the view measure
+    /// where it runs. None for the brute path.
+    pub fn lod_ms(&self) -> Option<f64> {
+        self.lod_ms
     }
 
     /// How many merged nodes (`lod::patch_merge`) the last prepared
@@ -917,11 +920,11 @@ impl TerrainRenderer {
                 let pipeline = pipelines.select(settings.wireframe)?;
                 self.draw_patches(rec, frame, (tess, pipeline), phase, indirect);
                 // Merged nodes go in the first pass, untested for occlusion.
-                if let (Some(indices), OCCLUSION_PHASE_ALL | OCCLUSION_PHASE_FIRST) =
-                    (&frame.merged_indices, phase)
+                if let (Some(choice), OCCLUSION_PHASE_ALL | OCCLUSION_PHASE_FIRST) =
+                    (&frame.choice, phase)
                 {
                     if !frame.merged_batches.is_empty() {
-                        rec.bind_geometry(&tess.control_points, indices);
+                        rec.bind_geometry(&tess.control_points, &choice.merged_indices);
                         for &(first, count) in &frame.merged_batches {
                             rec.draw_indexed(first, count);
                         }
@@ -1078,10 +1081,8 @@ fn build_frames(
             uniforms,
             set,
             queries,
-            full_resolution: None,
-            merged_indices: None,
+            choice: None,
             merged_batches: Vec::new(),
-            view_errors: None,
             settings: None,
             culled: false,
             tess_batches: Vec::new(),
@@ -1536,67 +1537,159 @@ fn build_geomip(
 }
 
 impl GeomipGeometry {
-    /// Levels by distance or error, balanced; the patches `drawn` this
-    /// frame become its draws, with their morph factors. Returns the largest
-    /// error the error LOD expects on screen.
+    /// Levels by distance or error for the patches in view, balanced; they
+    /// become this frame's draws, with their morph factors. Returns the
+    /// largest error the error LOD expects on screen, and the 99th
+    /// percentile where the view measured it.
     fn choose(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        view: &FrameView,
+        settings: &RenderSettings,
+    ) -> Option<(f32, Option<f32>)> {
+        let grid = terrain.grid();
+        let count = geomip::level_count(grid.cells_per_patch());
+        let tau = match settings.lod_metric {
+            LodMetric::Error(pixels) => Some(pixels),
+            _ => None,
+        };
+        let lod_view = view.lod_view(tau.and_then(|t| Tau::new(t).ok()).unwrap_or_default());
+        if let Some(chosen) = self.given.take() {
+            let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+            self.set_draws(terrain, settings, &visible, &chosen);
+            self.given = Some(chosen);
+            return None;
+        }
+        if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
+            return Some(self.choose_by_view_measure(terrain, view, settings, pixels));
+        }
+        // Every patch starts at the coarsest level, and those in view get
+        // theirs; the coarsest constrains no neighbour.
+        let mut levels = vec![(count - 1) as u8; grid.patch_count()];
+        let visible: Vec<u32> = match tau {
+            None => {
+                let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+                for &p in &visible {
+                    let d = patch_distance(terrain, p as usize, view.eye_local);
+                    levels[p as usize] =
+                        geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
+                }
+                visible
+            }
+            Some(_) => {
+                let sight = match settings.error_measure {
+                    ErrorMeasure::Sight => terrain.sight_table(),
+                    _ => None,
+                };
+                let frame_plan = plan(
+                    terrain,
+                    hierarchy,
+                    &lod_view,
+                    &PlanInputs {
+                        table: &self.errors,
+                        sight,
+                        merge: false,
+                        cull: settings.cull,
+                    },
+                );
+                // Geomip level l has n / 2^l segments a side: the error
+                // table's level index log2(n) - l.
+                for patch in &frame_plan.patches {
+                    let k = usize::from(patch.level).min(count - 1);
+                    levels[patch.index as usize] = (count - 1 - k) as u8;
+                }
+                frame_plan.patches.iter().map(|p| p.index).collect()
+            }
+        };
+        geomip::balance_from(&mut levels, grid, &visible);
+        let mut chosen = geomip::PatchLevels {
+            morph: vec![0.0; levels.len()],
+            levels,
+        };
+        for &p in &visible {
+            let p = p as usize;
+            let level = usize::from(chosen.levels[p]);
+            if level + 1 >= count {
+                continue;
+            }
+            let d = patch_distance(terrain, p, view.eye_local);
+            chosen.morph[p] = match tau {
+                None => geomip::morph_factor(d, settings.lod.min_dist, level),
+                // The fraction of the way from where the bound accepts this
+                // level to where it accepts the next coarser one.
+                Some(pixels) => {
+                    let threshold = |l: usize| {
+                        self.errors.error(p, count - 1 - l) * view.pixels_per_radian
+                            / pixels.max(f32::MIN_POSITIVE)
+                    };
+                    let (from, to) = (threshold(level), threshold(level + 1));
+                    if to <= from {
+                        1.0
+                    } else {
+                        crate::lod::saturate((d - from) / (to - from))
+                    }
+                }
+            };
+        }
+        self.set_draws(terrain, settings, &visible, &chosen);
+        tau.map(|_| {
+            let max = visible
+                .iter()
+                .map(|&p| {
+                    geomip::predicted_px(
+                        terrain,
+                        &self.errors,
+                        &chosen,
+                        p as usize,
+                        view.eye_local,
+                        view.pixels_per_radian,
+                        settings.geomorph,
+                    )
+                })
+                .fold(0.0, f32::max);
+            (max, None)
+        })
+    }
+
+    /// The error LOD's levels from the view measure's table (every patch,
+    /// sample by sample): the patches in the frustum become the draws.
+    fn choose_by_view_measure(
         &mut self,
         terrain: &Terrain,
         view: &FrameView,
         settings: &RenderSettings,
-        drawn: &[bool],
-    ) -> Option<(f32, Option<f32>)> {
-        if let Some(chosen) = self.given.take() {
-            self.set_draws(terrain, settings, drawn, &chosen);
-            self.given = Some(chosen);
-            return None;
-        }
-        let view_errors = match settings.lod_metric {
-            LodMetric::Error(pixels) => seen_errors(
-                terrain,
-                &self.errors,
-                Diagonal::Reference,
-                view,
-                (settings, pixels),
-                drawn,
-            ),
-            _ => None,
-        };
-        let table = view_errors.as_ref().map_or(&self.errors, |s| &s.table);
-        let mut chosen = match settings.lod_metric {
-            // The peers' policies are tessellation factors; geomip draws
-            // them by distance.
-            LodMetric::Distance | LodMetric::Peer(_) => {
-                geomip::select_levels_by_distance(terrain, view.eye_local, settings.lod.min_dist)
-            }
-            LodMetric::Error(pixels) => geomip::select_levels_by_error(
-                terrain,
-                table,
-                view.eye_local,
-                view.pixels_per_radian,
-                pixels,
-                drawn,
-            ),
-        };
-        if let Some(v) = &view_errors {
-            geomip::limit_morph(&mut chosen, &v.morph_limits, drawn, terrain.grid());
-        }
-        self.set_draws(terrain, settings, drawn, &chosen);
-        let LodMetric::Error(_) = settings.lod_metric else {
-            return None;
-        };
-        if let Some(v) = view_errors {
-            return Some((v.predicted_max_px, Some(v.predicted_p99_px)));
-        }
-        let predicted = geomip::predicted_px(
+        pixels: f32,
+    ) -> (f32, Option<f32>) {
+        let drawn = view.patches_drawn(terrain, settings.cull);
+        let seen = seen_errors(
             terrain,
             &self.errors,
-            &chosen,
+            Diagonal::Reference,
+            view,
+            (settings, pixels),
+            &drawn,
+        );
+        let table = seen.as_ref().map_or(&self.errors, |s| &s.table);
+        let mut chosen = geomip::select_levels_by_error(
+            terrain,
+            table,
             view.eye_local,
             view.pixels_per_radian,
-            settings.geomorph,
+            pixels,
+            &drawn,
         );
-        Some((max_drawn(drawn, &predicted), None))
+        if let Some(v) = &seen {
+            geomip::limit_morph(&mut chosen, &v.morph_limits, &drawn, terrain.grid());
+        }
+        let visible: Vec<u32> = (0..drawn.len() as u32)
+            .filter(|&p| drawn[p as usize])
+            .collect();
+        self.set_draws(terrain, settings, &visible, &chosen);
+        match seen {
+            Some(v) => (v.predicted_max_px, Some(v.predicted_p99_px)),
+            None => (0.0, None),
+        }
     }
 
     /// The unstitched full-resolution index list of a patch of `cells`.
@@ -1637,18 +1730,19 @@ impl GeomipGeometry {
         Ok(())
     }
 
-    /// The patches `drawn` this frame, at their `chosen` levels, become its
-    /// draws.
+    /// The patches `visible` this frame (in grid order), at their `chosen`
+    /// levels, become its draws.
     fn set_draws(
         &mut self,
         terrain: &Terrain,
         settings: &RenderSettings,
-        drawn: &[bool],
+        visible: &[u32],
         chosen: &geomip::PatchLevels,
     ) {
         let grid = terrain.grid();
         self.draws.clear();
-        for (p, _) in drawn.iter().enumerate().filter(|&(_, &d)| d) {
+        for &p in visible {
+            let p = p as usize;
             let id = grid.patch_id(p);
             let level = usize::from(chosen.levels[p]);
             let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
@@ -1678,73 +1772,6 @@ impl GeomipGeometry {
     }
 }
 
-/// The tess path's draws of the patches `drawn` (one flag per patch, in
-/// patch order), as (first index, index count) with four indices a patch:
-/// one draw per run of consecutive drawn patches, split into draws of at
-/// most `max_patches` (see `Workarounds::max_patches_per_draw`). Patches
-/// left out never reach the control shader.
-fn patch_batches(drawn: impl Iterator<Item = bool>, max_patches: Option<u32>) -> Vec<(u32, u32)> {
-    let max_patches = max_patches.unwrap_or(u32::MAX).max(1);
-    let mut batches = Vec::new();
-    let mut run: Option<(u32, u32)> = None;
-    for (p, d) in drawn.enumerate() {
-        let p = p as u32;
-        run = match (run, d) {
-            (Some((first, n)), true) if n < max_patches => Some((first, n + 1)),
-            (run, d) => {
-                batches.extend(run);
-                d.then_some((p, 1))
-            }
-        };
-    }
-    batches.extend(run);
-    batches
-        .into_iter()
-        .map(|(first, n)| (first * 4, n * 4))
-        .collect()
-}
-
-/// A host-visible buffer's memory, for the error LOD's per-frame choice.
-fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
-    buffer
-        .mapped_mut()
-        .ok_or_else(|| VkError::Unsupported("error LOD memory is not host-mapped".into()))
-}
-
-/// The control point indices of `merge`'s nodes holding a patch `drawn`,
-/// four a node in control point order; each drawn node's patches take its
-/// predicted error in `choice`.
-fn merged_node_draws(
-    terrain: &Terrain,
-    merge: &PatchMerge,
-    drawn: &[bool],
-    choice: &mut TessErrorChoice,
-) -> Vec<u32> {
-    let grid = terrain.grid();
-    let cols = grid.patch_cols();
-    let indices = terrain.indices();
-    let mut list = Vec::new();
-    for node in &merge.nodes {
-        let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
-        let patches =
-            || (r..r + s).flat_map(move |row| (c..c + s).map(move |col| row * cols + col));
-        if !patches().any(|p| drawn[p]) {
-            continue;
-        }
-        for p in patches() {
-            choice.predicted_px[p] = node.predicted_px;
-        }
-        let corner = |col: usize, row: usize, k: usize| indices[4 * (row * cols + col) + k];
-        list.extend([
-            corner(c, r, 0),
-            corner(c + s - 1, r, 1),
-            corner(c, r + s - 1, 2),
-            corner(c + s - 1, r + s - 1, 3),
-        ]);
-    }
-    list
-}
-
 /// The error table `bound` as `view` sees it for the patches `drawn`
 /// (`lod::view_measure`), where `settings` measure the view and the CPU
 /// holds the heights; None keeps the bounds (a streamed terrain's too),
@@ -1757,7 +1784,7 @@ fn seen_errors(
     (settings, pixel_error): (&RenderSettings, f32),
     drawn: &[bool],
 ) -> Option<ViewErrors> {
-    if settings.error_measure == ErrorMeasure::Bound {
+    if settings.error_measure != ErrorMeasure::View {
         return None;
     }
     let heightmap = terrain.info().heightmap()?;
@@ -1777,33 +1804,23 @@ fn seen_errors(
     ))
 }
 
-/// The largest of per-patch `values` over the patches `drawn` (0 if none).
-fn max_drawn(drawn: &[bool], values: &[f32]) -> f32 {
-    values
-        .iter()
-        .zip(drawn)
-        .filter(|&(_, &d)| d)
-        .fold(0.0, |m, (&v, _)| m.max(v))
+/// Distance from `eye_local` to the nearest point of patch `p`'s box.
+fn patch_distance(terrain: &Terrain, p: usize, eye_local: glam::Vec3) -> f32 {
+    let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+    ((eye_local - centre).abs() - extents)
+        .max(glam::Vec3::ZERO)
+        .length()
 }
 
 impl TessGeometry {
-    /// The full-resolution patches of `choice` that are `drawn` this frame
-    /// become its exact draws (geomip level 0, no stitching: every edge
-    /// they share is tessellated with a vertex on every sample). Returns
-    /// the largest error the choice expects on screen.
-    fn set_exact_draws(
-        &mut self,
-        terrain: &Terrain,
-        drawn: &[bool],
-        choice: &TessErrorChoice,
-        geomip: &GeomipGeometry,
-    ) -> f32 {
+    /// The full-resolution patches of `plan` become its exact draws
+    /// (geomip level 0, no stitching: every edge they share is tessellated
+    /// with a vertex on every sample).
+    fn set_exact_draws(&mut self, terrain: &Terrain, plan: &FramePlan, geomip: &GeomipGeometry) {
         let grid = terrain.grid();
         self.exact.clear();
-        for (p, _) in drawn.iter().enumerate().filter(|&(_, &d)| d) {
-            if !choice.is_full_resolution(p) {
-                continue;
-            }
+        for patch in plan.patches.iter().filter(|p| p.full_resolution) {
+            let p = patch.index as usize;
             let rect = grid.sample_rect(grid.patch_id(p));
             let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
             self.exact.push(GeomipDraw {
@@ -1818,30 +1835,5 @@ impl TessGeometry {
                 },
             });
         }
-        max_drawn(drawn, &choice.predicted_px)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::patch_batches;
-
-    fn batches(drawn: &str, max: Option<u32>) -> Vec<(u32, u32)> {
-        patch_batches(drawn.chars().map(|c| c == '#'), max)
-    }
-
-    #[test]
-    fn tess_draws_cover_exactly_the_drawn_patches() {
-        // Runs, in indices (four a patch).
-        assert_eq!(batches("##..###.#", None), vec![(0, 8), (16, 12), (32, 4)]);
-        assert_eq!(batches("....", None), vec![]);
-        assert_eq!(batches("", Some(8)), vec![]);
-        // Split where the driver limits a draw, and runs end at gaps.
-        assert_eq!(
-            batches("#####.##", Some(2)),
-            vec![(0, 8), (8, 8), (16, 4), (24, 8)]
-        );
-        let all = batches(&"#".repeat(17), Some(8));
-        assert_eq!(all, vec![(0, 32), (32, 32), (64, 4)]);
     }
 }

@@ -118,11 +118,18 @@ pub enum LodMetric {
 /// What the error LOD holds within its tolerance.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum ErrorMeasure {
-    /// The frame's 99th percentile error, as the view sees each level
-    /// (`lod::view_measure`): at most 1 % of the terrain's pixels may be
-    /// over, where that saves the most triangles. Terrains whose heights
-    /// stream (the CPU does not hold them) use `Bound`.
+    /// The frame's 99th percentile error from the terrain's precomputed
+    /// view model (`terrain::sight`, `lod::plan`): 1 % of the terrain's
+    /// pixels may be over, half of it spent where it saves the most
+    /// triangles. Chosen in well under a millisecond. Patches without a
+    /// model (the far remainders, a terrain whose heights the CPU does not
+    /// hold) keep `Bound`.
     #[default]
+    Sight,
+    /// The frame's 99th percentile error, as the view sees each level,
+    /// measured sample by sample every frame (`lod::view_measure`): the
+    /// fewest triangles, at tens of milliseconds to seconds of CPU a
+    /// frame. For stills. Terrains whose heights stream use `Bound`.
     View,
     /// Every patch's largest vertical error anywhere, projected face-on
     /// from its nearest point (the error table's bound).
@@ -170,7 +177,7 @@ impl Default for RenderSettings {
         RenderSettings {
             path: RenderPath::Tess,
             lod_metric: LodMetric::Distance,
-            error_measure: ErrorMeasure::View,
+            error_measure: ErrorMeasure::Sight,
             geomorph: true,
             lod: DistanceLod::default(),
             lod_mode: DistanceMode::Smooth,

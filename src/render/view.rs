@@ -106,6 +106,18 @@ impl FrameView {
             .collect()
     }
 
+    /// What the level choice needs of this view, with the error LOD's
+    /// tolerance `tau`.
+    pub fn lod_view(&self, tau: crate::lod::view::Tau) -> crate::lod::view::LodView {
+        crate::lod::view::LodView {
+            eye_local: self.eye_local,
+            pixels_per_radian: self.pixels_per_radian,
+            frustum: self.frustum,
+            viewport: self.viewport,
+            tau,
+        }
+    }
+
     /// What the screen-space peers need of the camera.
     pub fn screen(&self) -> ScreenParams {
         ScreenParams {

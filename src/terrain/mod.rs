@@ -13,6 +13,7 @@ pub mod info;
 pub mod lod_params;
 mod query;
 pub mod shading;
+pub mod sight;
 pub mod tiled;
 
 pub use camera::{look_at, perspective, Frustum};
@@ -40,6 +41,9 @@ pub struct Terrain {
     /// every renderer of this terrain shares them.
     /// Shared with the info's stored tables where it has them.
     error_tables: std::sync::OnceLock<std::sync::Arc<(ErrorTable, ErrorTable)>>,
+    /// The error LOD's view model (`sight`), computed on first use and
+    /// kept; None for a terrain whose heights the CPU does not hold whole.
+    sight: std::sync::OnceLock<Option<std::sync::Arc<sight::SightTable>>>,
 }
 
 /// The height under each control point of a tiled terrain, from each
@@ -123,6 +127,7 @@ impl Terrain {
             control_heights,
             indices,
             error_tables,
+            sight: std::sync::OnceLock::new(),
         })
     }
 
@@ -169,6 +174,23 @@ impl Terrain {
                 .expect("a tiled terrain's info holds its stored tables");
             std::sync::Arc::new(ErrorTable::compute_pair(h, &self.grid))
         })
+    }
+
+    /// The error LOD's view model of every full-size patch (see `sight`),
+    /// computed the first time it is asked for; None where the heights are
+    /// not held whole (a tiled terrain read a tile at a time).
+    pub fn sight_table(&self) -> Option<&sight::SightTable> {
+        self.sight
+            .get_or_init(|| {
+                let map = self.info.heightmap()?;
+                let spacing = self.info.spacing();
+                Some(std::sync::Arc::new(sight::SightTable::compute(
+                    map,
+                    &self.grid,
+                    (spacing.x, spacing.y),
+                )))
+            })
+            .as_deref()
     }
 
     /// Widens each patch's Y bounds to those of the square block of

@@ -1,0 +1,240 @@
+//! The tess path's error LOD on the GPU side: one frame slot's buffers the
+//! control shader reads the frame plan from, written each frame in time
+//! that grows with what the plan draws, not with the terrain.
+//!
+//! The error table starts as the terrain's bound and the choice buffer as
+//! all zero. A frame writes its planned patches' rows, its merged nodes'
+//! rows (in their first patch), its full-resolution bits and its merged
+//! nodes' level bytes, and remembers them; the next frame in the same slot
+//! puts those back first. So a patch the plan leaves out reads its bound,
+//! whatever frames came before.
+
+use ash::vk;
+
+use crate::lod::patch_merge::MergedNode;
+use crate::lod::plan::FramePlan;
+use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY};
+use crate::terrain::{ErrorTable, Terrain};
+use crate::vk::descriptors::DescriptorSet;
+use crate::vk::memory::Buffer;
+use crate::vk::{Device, Result, VkError};
+
+/// One frame slot's choice buffers and what its last frame wrote.
+pub(super) struct ChoiceBuffers {
+    /// Errors of each patch at 1, 2, ..., 64 segments, as the control
+    /// shader reads them.
+    errors: Buffer,
+    /// One full-resolution bit a patch, 32 to a word, then one merged
+    /// level byte a patch, four to a word.
+    choice: Buffer,
+    /// Four control point indices per merged node drawn.
+    pub(super) merged_indices: Buffer,
+    /// Patches whose error row the last frame wrote.
+    written_rows: Vec<u32>,
+    /// Patches whose full-resolution bit the last frame set.
+    full_bits: Vec<u32>,
+    /// The merged nodes whose level bytes the last frame set.
+    merged: Vec<MergedNode>,
+}
+
+impl ChoiceBuffers {
+    /// Slot `slot`'s buffers for `terrain`, starting as `bound`, and its
+    /// descriptor set pointed at them and at the occlusion state
+    /// `visibility`.
+    pub(super) fn new(
+        device: &Device,
+        slot: usize,
+        terrain: &Terrain,
+        bound: &ErrorTable,
+        set: DescriptorSet,
+        visibility: &Buffer,
+    ) -> Result<Self> {
+        let patches = terrain.grid().patch_count();
+        let words = patches.div_ceil(32) + patches.div_ceil(4);
+        let choice = device.create_host_buffer(
+            &format!("terrain.patch_choice[{slot}]"),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            bytemuck::cast_slice(&vec![0u32; words]),
+        )?;
+        // A node holds at least 2x2 patches: at most a quarter as many
+        // nodes as patches, four indices each.
+        let merged_indices = device.create_host_buffer(
+            &format!("terrain.merged_indices[{slot}]"),
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            bytemuck::cast_slice(&vec![0u32; patches.max(4)]),
+        )?;
+        let errors = device.create_host_buffer(
+            &format!("terrain.view_errors[{slot}]"),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            bytemuck::cast_slice(bound.as_slice()),
+        )?;
+        for (binding, buffer) in [
+            (BINDING_ERROR_TABLE, &errors),
+            (BINDING_FULL_RESOLUTION, &choice),
+            (BINDING_VISIBILITY, visibility),
+        ] {
+            let size = buffer.desc.size;
+            device.write_buffer(
+                set,
+                binding,
+                vk::DescriptorType::STORAGE_BUFFER,
+                buffer,
+                size,
+            );
+        }
+        Ok(ChoiceBuffers {
+            errors,
+            choice,
+            merged_indices,
+            written_rows: Vec::new(),
+            full_bits: Vec::new(),
+            merged: Vec::new(),
+        })
+    }
+
+    /// Puts the last frame's writes back and writes `plan`: its patches'
+    /// rows where they differ from `bound`, its full-resolution bits, and
+    /// its merged nodes' rows, level bytes and control point indices
+    /// (`indices`, four a patch). Returns the number of merged nodes'
+    /// indices written.
+    pub(super) fn write(
+        &mut self,
+        plan: &FramePlan,
+        bound: &ErrorTable,
+        terrain: &Terrain,
+    ) -> Result<u32> {
+        let levels = ErrorTable::LEVELS;
+        let grid = terrain.grid();
+        let cols = grid.patch_cols();
+        let patches = grid.patch_count();
+        let bits_words = patches.div_ceil(32);
+        {
+            let errors: &mut [f32] = bytemuck::cast_slice_mut(host(&mut self.errors)?);
+            for &p in &self.written_rows {
+                let p = p as usize;
+                errors[p * levels..(p + 1) * levels].copy_from_slice(bound.patch(p));
+            }
+            self.written_rows.clear();
+            for patch in &plan.patches {
+                let p = patch.index as usize;
+                if patch.errors[..] != *bound.patch(p) {
+                    errors[p * levels..(p + 1) * levels].copy_from_slice(&patch.errors);
+                    self.written_rows.push(patch.index);
+                }
+            }
+            for node in &plan.merged {
+                let first = node.row as usize * cols + node.col as usize;
+                errors[first * levels..(first + 1) * levels].copy_from_slice(&node.errors);
+                self.written_rows.push(first as u32);
+            }
+        }
+        let words: &mut [u32] = bytemuck::cast_slice_mut(host(&mut self.choice)?);
+        let (bits, level_words) = words.split_at_mut(bits_words);
+        let level_bytes: &mut [u8] = bytemuck::cast_slice_mut(level_words);
+        for &p in &self.full_bits {
+            bits[p as usize / 32] &= !(1 << (p % 32));
+        }
+        self.full_bits.clear();
+        for patch in plan.patches.iter().filter(|p| p.full_resolution) {
+            let p = patch.index;
+            bits[p as usize / 32] |= 1 << (p % 32);
+            self.full_bits.push(p);
+        }
+        // The first patch in the low byte of each word: the bytes in
+        // memory order on a little-endian host, as the shader reads them.
+        let fill = |bytes: &mut [u8], node: &MergedNode, value: u8| {
+            let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
+            for row in r..r + s {
+                bytes[row * cols + c..row * cols + c + s].fill(value);
+            }
+        };
+        for node in &self.merged {
+            fill(level_bytes, node, 0);
+        }
+        for node in &plan.merged {
+            fill(level_bytes, node, node.level as u8);
+        }
+        self.merged.clear();
+        self.merged.extend_from_slice(&plan.merged);
+        let indices = terrain.indices();
+        let corner = |col: usize, row: usize, k: usize| indices[4 * (row * cols + col) + k];
+        let merged: &mut [u32] = bytemuck::cast_slice_mut(host(&mut self.merged_indices)?);
+        for (i, node) in plan.merged.iter().enumerate() {
+            let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
+            merged[4 * i..4 * i + 4].copy_from_slice(&[
+                corner(c, r, 0),
+                corner(c + s - 1, r, 1),
+                corner(c, r + s - 1, 2),
+                corner(c + s - 1, r + s - 1, 3),
+            ]);
+        }
+        Ok(4 * plan.merged.len() as u32)
+    }
+}
+
+#[cfg(target_endian = "big")]
+compile_error!("the merged level bytes are written in little-endian order");
+
+/// A host-visible buffer's memory.
+fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
+    buffer
+        .mapped_mut()
+        .ok_or_else(|| VkError::Unsupported("error LOD memory is not host-mapped".into()))
+}
+
+/// The tess path's draws of the patches `drawn` (indices in increasing
+/// order), as (first index, index count) with four indices a patch: one
+/// draw per run of consecutive patches, split into draws of at most
+/// `max_patches` (see `Workarounds::max_patches_per_draw`). Patches left
+/// out never reach the control shader.
+pub(super) fn patch_batches(
+    drawn: impl IntoIterator<Item = u32>,
+    max_patches: Option<u32>,
+) -> Vec<(u32, u32)> {
+    let max_patches = max_patches.unwrap_or(u32::MAX).max(1);
+    let mut batches = Vec::new();
+    let mut run: Option<(u32, u32)> = None;
+    for p in drawn {
+        run = match run {
+            Some((first, n)) if first + n == p && n < max_patches => Some((first, n + 1)),
+            run => {
+                batches.extend(run);
+                Some((p, 1))
+            }
+        };
+    }
+    batches.extend(run);
+    batches
+        .into_iter()
+        .map(|(first, n)| (first * 4, n * 4))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::patch_batches;
+
+    fn batches(drawn: &str, max: Option<u32>) -> Vec<(u32, u32)> {
+        let indices = drawn
+            .chars()
+            .enumerate()
+            .filter(|&(_, c)| c == '#')
+            .map(|(i, _)| i as u32);
+        patch_batches(indices, max)
+    }
+
+    #[test]
+    fn tess_draws_cover_exactly_the_drawn_patches() {
+        // Runs, in indices (four a patch).
+        assert_eq!(batches("##..###.#", None), vec![(0, 8), (16, 12), (32, 4)]);
+        assert_eq!(batches("....", None), vec![]);
+        assert_eq!(batches("", Some(8)), vec![]);
+        // Split where the driver limits a draw, and runs end at gaps.
+        assert_eq!(
+            batches("#####.##", Some(2)),
+            vec![(0, 8), (8, 8), (16, 4), (24, 8)]
+        );
+        let all = batches(&"#".repeat(17), Some(8));
+        assert_eq!(all, vec![(0, 32), (32, 32), (64, 4)]);
+    }
+}
