@@ -10,7 +10,7 @@ use vkterrain::bench::error::{ErrorHistogram, PixelError};
 use vkterrain::bench::look::LookRow;
 use vkterrain::bench::report::{check_targets, csv, markdown, merge, Results};
 use vkterrain::bench::run::{
-    configs, Config, Row, RowLod, RowPath, OCCLUSION_TAU, QUICK_TAUS, TAUS,
+    configs, Config, Row, RowLod, RowPath, OCCLUSION_TAU, QUICK_TAUS, TAUS, VIEW_MEASURE_TAU,
 };
 use vkterrain::terrain::{DistanceLod, TerrainInfo};
 
@@ -180,7 +180,22 @@ fn configurations_cover_every_path_and_tolerance() {
     // Without tessellation there are no tess rows, the rest remains.
     let fallback = configs(lod, false, false);
     assert!(fallback.iter().all(|c| c.path() != RowPath::Tess));
-    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3 - 1);
+    assert_eq!(fallback.len(), full.len() - 8 - TAUS.len() - 3 - 2);
+    // The view measure's rows, once per error mode at tau = 1 px, beside
+    // the real-time choice's.
+    let view: Vec<Config> = full
+        .iter()
+        .copied()
+        .filter(|c| c.lod() == Some(RowLod::ErrorView))
+        .collect();
+    assert_eq!(
+        view,
+        [
+            Config::TessErrorView(VIEW_MEASURE_TAU),
+            Config::GeomipErrorView(VIEW_MEASURE_TAU)
+        ]
+    );
+    assert!(quick.iter().any(|c| c.lod() == Some(RowLod::ErrorView)));
     // The peers' policies, each once, in the quick run too.
     for run in [&full, &quick] {
         let peers: Vec<_> = run
@@ -258,6 +273,10 @@ fn row(
         config: format!("{path} {lod:?} {tau:?}, {tris}"),
         gpu_ms: Some(gpu),
         cpu_ms: 0.1,
+        // The error rows' level choice takes a little longer the finer tau.
+        lod_ms: tau.map(|t| 0.05 / f64::from(t)),
+        lod_ms_max: tau.map(|t| 0.2 / f64::from(t)),
+        frame_ms: Some(gpu + 0.1),
         triangles: Some(tris),
         tes_invocations: Some(tris / 2),
         gpu_memory_bytes: 1 << 20,
@@ -297,14 +316,19 @@ fn targets_are_read_from_the_rows() {
     let c = check_targets(&refs);
     assert_eq!(c.tess_p99, [Some(0.4), Some(0.8), Some(2.5)]);
     assert_eq!(c.tess_vs_brute_triangles, Some(0.04));
-    assert_eq!(c.brute_vs_tess_triangles, Some(25.0));
-    assert_eq!(c.brute_vs_tess_gpu, Some(10.0));
     // The fewest triangles at p99 <= 1 px: the oracle's 3 000 (the 2 000
     // distance setting measures 3 px).
-    assert!(c.best_config.as_deref().unwrap().contains("oracle"));
-    assert_eq!(c.tess_vs_best, Some(4.0 / 3.0));
-    assert_eq!(c.geomip_p99, Some(0.2));
-    assert_eq!(c.geomip_vs_best, Some(20.0 / 3.0));
+    assert!(c.fewest_config.as_deref().unwrap().contains("oracle"));
+    assert_eq!(c.tess_vs_fewest, Some(4.0 / 3.0));
+    // The fastest frame at p99 <= 1 px: the oracle's 4.1 ms, against tess
+    // error mode's 5.1 ms at 1 px.
+    assert!(c.fastest_config.as_deref().unwrap().contains("oracle"));
+    assert_eq!(c.tess_frame_ms, Some(5.1));
+    assert_eq!(c.tess_vs_fastest, Some(5.1 / 4.1));
+    // The largest level choice of any error row: tau 0.5's 0.4 ms.
+    assert_eq!(c.tess_lod_ms_max, Some(0.4));
+    assert_eq!(c.geomip_lod_ms_max, Some(0.2));
+    assert_eq!(c.geomip_p99, [None, Some(0.2), None]);
     let look_row = |config: &str, gpu_ms: f64| LookRow {
         scene: "default".into(),
         device: "llvmpipe".into(),
@@ -346,10 +370,14 @@ fn targets_are_read_from_the_rows() {
         md.contains("|T.y - R.y| * K / |R - eye|"),
         "the definition is written down"
     );
-    assert!(md.contains("1.33x (met)"), "tess within 1.5x of the best");
+    assert!(md.contains("1.33x (met)"), "tess within 2x of the fewest");
     assert!(
-        md.contains("6.67x (**missed**, 3.33x off)"),
-        "geomip beyond 2x"
+        md.contains("1.24x (met)"),
+        "tess's frame within 1.25x of the fastest"
+    );
+    assert!(
+        md.contains("0.40 ms (met)"),
+        "the level choice's largest frame within 0.5 ms"
     );
     assert!(
         md.contains("2.50 px (**missed**, 1.25x off)"),
@@ -372,7 +400,7 @@ fn targets_are_read_from_the_rows() {
         ..row("v", "tess", Some("error"), Some(1.0), 1_000, 2.5, 0.8)
     });
     let refs: Vec<&Row> = with_occlusion.iter().collect();
-    assert_eq!(check_targets(&refs).tess_vs_best, Some(4.0 / 3.0));
+    assert_eq!(check_targets(&refs).tess_vs_fewest, Some(4.0 / 3.0));
     let md = markdown(
         &Results {
             rows: &with_occlusion,
@@ -387,7 +415,7 @@ fn targets_are_read_from_the_rows() {
         ),
         "{md}"
     );
-    assert!(md.contains("![GPU time and triangles against p99 error](pareto.png)"));
+    assert!(md.contains("![Triangles and frame time against p99 error](pareto.png)"));
 }
 
 #[test]

@@ -97,17 +97,13 @@ fn a_quick_run_measures_every_configuration() {
                 assert_eq!(tessellates, r.path == RowPath::Tess, "{}", r.config);
             }
             // The error LOD says what it expects; nothing else does.
-            assert_eq!(
-                r.predicted_max_px.is_some(),
-                r.lod == Some(RowLod::Error),
-                "{}",
-                r.config
-            );
-            // The view's choice expects the frame's 99th percentile within
+            let error_lod = matches!(r.lod, Some(RowLod::Error | RowLod::ErrorView));
+            assert_eq!(r.predicted_max_px.is_some(), error_lod, "{}", r.config);
+            // The view measure expects the frame's 99th percentile within
             // tau (its largest error may be more: 1 % of pixels may).
             assert_eq!(
                 r.predicted_p99_px.is_some(),
-                r.lod == Some(RowLod::Error),
+                r.lod == Some(RowLod::ErrorView),
                 "{}",
                 r.config
             );
@@ -118,6 +114,14 @@ fn a_quick_run_measures_every_configuration() {
                     r.config
                 );
             }
+            // Every row but brute's chooses levels and times it, in every
+            // frame; the frame's time is the CPU's and the GPU's.
+            assert_eq!(r.lod_ms.is_some(), r.path != RowPath::Brute, "{}", r.config);
+            if let (Some(median), Some(max)) = (r.lod_ms, r.lod_ms_max) {
+                assert!(median <= max && median > 0.0, "{}", r.config);
+            }
+            let frame = r.frame_ms.expect("lavapipe has timestamps");
+            assert!(frame >= r.gpu_ms.unwrap(), "{}", r.config);
         }
         // Looser tolerances draw no more. The oracle picks each patch's
         // level on its own, so every step holds. The error modes share the
@@ -256,7 +260,7 @@ fn bench_command_writes_every_output_and_merges_runs() {
     let csv = std::fs::read_to_string(dir.path().join("out/results.csv")).unwrap();
     assert_eq!(
         csv.lines().count(),
-        1 + rows.len() + rows.len() - 10,
+        1 + rows.len() + rows.len() - 11,
         "second run has no tess rows"
     );
 

@@ -19,9 +19,11 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
+use crate::lod::view::Tau;
+use crate::lod::PeerPolicy;
 use crate::render::{
-    FrameMeasurements, FrameView, RenderPath, RenderSettings, RendererOptions, Shading,
-    TerrainRenderer,
+    ErrorMeasure, FrameMeasurements, FrameView, LodMetric, RenderPath, RenderSettings,
+    RendererOptions, Shading, TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
@@ -44,7 +46,9 @@ vkterrain controls
   F3  LOD colours                F4  freeze culling (keep the current frustum)
   F5  LOD debug mode             F6  render path (tess, geomip, brute)
   F7  occlusion culling on / off F8  show occlusion-culled patches
-  - / =   LOD distances down / up
+  F9  LOD policy (error, distance, sphere, edge length, CDLOD)
+  F10 error measure (sight, view, bound)
+  - / =   LOD distances down / up      [ / ]   pixel error down / up
   F12 screenshot                 Esc     quit";
 
 /// What the demo runs.
@@ -171,6 +175,10 @@ struct Stats {
     fps_window: (Instant, u64),
     fps: f64,
     last: FrameMeasurements,
+    /// CPU milliseconds of the last frame's preparing and recording, and
+    /// of its level choice alone.
+    cpu_ms: f64,
+    lod_ms: Option<f64>,
     patches_drawn: usize,
     screenshots: u32,
     swapchains_built: u32,
@@ -184,6 +192,8 @@ struct Running {
     input: Input,
     stats: Stats,
     settings: RenderSettings,
+    /// The error LOD's tolerance, kept while another policy is shown.
+    tau: f32,
     rebuild: bool,
     /// Also held by the surface made from it.
     window: Arc<Window>,
@@ -368,6 +378,35 @@ impl Graphics {
     }
 }
 
+/// The LOD policy after `metric` in F9's cycle: the error LOD at `tau`,
+/// distance, then each peer's policy.
+fn next_policy(metric: LodMetric, tau: f32) -> LodMetric {
+    match metric {
+        LodMetric::Error(_) => LodMetric::Distance,
+        LodMetric::Distance => LodMetric::Peer(PeerPolicy::ALL[0]),
+        LodMetric::Peer(p) => match PeerPolicy::ALL.iter().position(|&q| q == p) {
+            Some(i) if i + 1 < PeerPolicy::ALL.len() => LodMetric::Peer(PeerPolicy::ALL[i + 1]),
+            _ => LodMetric::Error(tau),
+        },
+    }
+}
+
+/// The LOD policy as the title shows it.
+fn policy_name(settings: &RenderSettings) -> String {
+    match settings.lod_metric {
+        LodMetric::Error(tau) => {
+            let measure = match settings.error_measure {
+                ErrorMeasure::Sight => "sight",
+                ErrorMeasure::View => "view measure",
+                ErrorMeasure::Bound => "bound",
+            };
+            format!("error {tau:.2} px ({measure})")
+        }
+        LodMetric::Distance => "distance".into(),
+        LodMetric::Peer(p) => p.name().into(),
+    }
+}
+
 /// The paths a device can draw, in the order F6 cycles through them.
 fn paths(caps: &crate::vk::Capabilities) -> Vec<RenderPath> {
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
@@ -411,11 +450,17 @@ impl Running {
                 fps_window: (Instant::now(), 0),
                 fps: 0.0,
                 last: FrameMeasurements::default(),
+                cpu_ms: 0.0,
+                lod_ms: None,
                 patches_drawn: 0,
                 screenshots: 0,
                 swapchains_built: 0,
                 sizes: Vec::new(),
                 storm_step: 0,
+            },
+            tau: match settings.lod_metric {
+                LodMetric::Error(tau) => tau,
+                _ => Tau::DEFAULT.px(),
             },
             settings,
             rebuild: false,
@@ -539,6 +584,31 @@ impl Running {
                     "occlusion culling {}",
                     if self.settings.occlusion { "on" } else { "off" }
                 );
+            }
+            KeyCode::F9 => {
+                self.settings.lod_metric = next_policy(self.settings.lod_metric, self.tau);
+                log::info!("LOD policy: {}", policy_name(&self.settings));
+            }
+            KeyCode::F10 => {
+                self.settings.error_measure = match self.settings.error_measure {
+                    ErrorMeasure::Sight => ErrorMeasure::View,
+                    ErrorMeasure::View => ErrorMeasure::Bound,
+                    ErrorMeasure::Bound => ErrorMeasure::Sight,
+                };
+                log::info!("error measure: {:?}", self.settings.error_measure);
+            }
+            KeyCode::BracketLeft | KeyCode::BracketRight => {
+                let scale = if code == KeyCode::BracketRight {
+                    1.25
+                } else {
+                    0.8
+                };
+                let tau = (self.tau * scale).clamp(Tau::MIN_PX, 64.0);
+                self.tau = Tau::new(tau).map_or(self.tau, Tau::px);
+                if let LodMetric::Error(_) = self.settings.lod_metric {
+                    self.settings.lod_metric = LodMetric::Error(self.tau);
+                }
+                log::info!("pixel error {:.2} px", self.tau);
             }
             KeyCode::F8 => {
                 self.settings.show_culled = !self.settings.show_culled;
@@ -703,15 +773,12 @@ impl Running {
         if let Some(frozen) = &self.input.frozen {
             view = view.with_frustum_of(frozen);
         }
+        let start = Instant::now();
         graphics
             .renderer
             .prepare(slot, &options.terrain, &view, &self.settings)?;
-        // Every path draws what the frustum test keeps, or all with culling off.
-        self.stats.patches_drawn = if self.settings.cull {
-            view.patches_in_frustum(&options.terrain)
-        } else {
-            options.terrain.grid().patch_count()
-        };
+        self.stats.lod_ms = graphics.renderer.lod_ms();
+        self.stats.patches_drawn = graphics.renderer.patches_in_view();
 
         if capture && !swapchain.readable {
             bail!("this swapchain's images cannot be read back for a screenshot");
@@ -733,6 +800,7 @@ impl Running {
         swapchain.record_begin(&rec, index);
         graphics.renderer.record(&rec, slot, &views)?;
         swapchain.record_present(&rec, index, capture_into);
+        self.stats.cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         rec.submit_frame(
             &graphics.image_available[slot],
             swapchain.render_finished(index),
@@ -759,10 +827,15 @@ impl Running {
             .last
             .statistics
             .map_or("n/a".into(), |s| s.clipping_primitives.to_string());
+        let lod = stats
+            .lod_ms
+            .map_or("n/a".into(), |ms| format!("{ms:.2} ms"));
         let mut title = format!(
-            "vkterrain | {:?} | {:.1} fps | GPU {gpu} | {triangles} triangles | {}/{} patches",
+            "vkterrain | {:?} | {} | {:.1} fps | LOD {lod} | CPU {:.1} ms | GPU {gpu} | {triangles} triangles | {}/{} patches",
             self.settings.path,
+            policy_name(&self.settings),
             stats.fps,
+            stats.cpu_ms,
             stats.patches_drawn,
             options.terrain.grid().patch_count()
         );

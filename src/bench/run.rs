@@ -10,8 +10,8 @@ use super::error::{differing_pixels, pixel_errors, DepthView, ErrorHistogram};
 use crate::lod::geomip;
 use crate::lod::{PeerLod, PeerPolicy};
 use crate::render::{
-    Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
-    TerrainRenderer,
+    ErrorMeasure, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
+    Shading, TerrainRenderer,
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceLod, Terrain};
@@ -25,6 +25,9 @@ pub const QUICK_TAUS: [f32; 3] = [0.5, 1.0, 2.0];
 /// The tolerance of the error modes run with occlusion culling (its
 /// counterparts without are in both tau lists).
 pub const OCCLUSION_TAU: f32 = 1.0;
+/// The tolerance of the error modes run with the view measure, beside the
+/// real-time choice's rows at the same tolerance.
+pub const VIEW_MEASURE_TAU: f32 = 1.0;
 /// Frames timed per named view, after `WARM_UP` untimed ones.
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
@@ -56,6 +59,11 @@ pub enum Config {
     TessErrorOccluded(f32),
     /// `GeomipError` with occlusion culling.
     GeomipErrorOccluded(f32),
+    /// `TessError` with the view measured sample by sample every frame
+    /// (`--error-measure view`).
+    TessErrorView(f32),
+    /// `GeomipError` with the view measured sample by sample.
+    GeomipErrorView(f32),
 }
 
 /// How a row was drawn: a render path, or the oracle (geomip levels from
@@ -75,6 +83,8 @@ pub enum RowPath {
 pub enum RowLod {
     Distance,
     Error,
+    /// The error LOD with the view measured sample by sample every frame.
+    ErrorView,
     /// A peer's policy, by `PeerPolicy::name`.
     Sphere,
     EdgeLength,
@@ -97,6 +107,7 @@ impl RowLod {
         match self {
             RowLod::Distance => "distance",
             RowLod::Error => "error",
+            RowLod::ErrorView => "error-view",
             RowLod::Sphere => PeerPolicy::Sphere.name(),
             RowLod::EdgeLength => PeerPolicy::EdgeLength.name(),
             RowLod::Cdlod => PeerPolicy::Cdlod.name(),
@@ -111,10 +122,12 @@ impl Config {
             Config::TessDistance(_)
             | Config::TessError(_)
             | Config::TessPeer(_)
-            | Config::TessErrorOccluded(_) => RowPath::Tess,
-            Config::GeomipDistance(_) | Config::GeomipError(_) | Config::GeomipErrorOccluded(_) => {
-                RowPath::Geomip
-            }
+            | Config::TessErrorOccluded(_)
+            | Config::TessErrorView(_) => RowPath::Tess,
+            Config::GeomipDistance(_)
+            | Config::GeomipError(_)
+            | Config::GeomipErrorOccluded(_)
+            | Config::GeomipErrorView(_) => RowPath::Geomip,
             Config::Oracle(_) => RowPath::Oracle,
         }
     }
@@ -127,6 +140,7 @@ impl Config {
             | Config::GeomipError(_)
             | Config::TessErrorOccluded(_)
             | Config::GeomipErrorOccluded(_) => Some(RowLod::Error),
+            Config::TessErrorView(_) | Config::GeomipErrorView(_) => Some(RowLod::ErrorView),
             Config::TessPeer(PeerPolicy::Sphere) => Some(RowLod::Sphere),
             Config::TessPeer(PeerPolicy::EdgeLength) => Some(RowLod::EdgeLength),
             Config::TessPeer(PeerPolicy::Cdlod) => Some(RowLod::Cdlod),
@@ -139,7 +153,9 @@ impl Config {
             | Config::GeomipError(t)
             | Config::Oracle(t)
             | Config::TessErrorOccluded(t)
-            | Config::GeomipErrorOccluded(t) => Some(t),
+            | Config::GeomipErrorOccluded(t)
+            | Config::TessErrorView(t)
+            | Config::GeomipErrorView(t) => Some(t),
             _ => None,
         }
     }
@@ -187,6 +203,8 @@ impl Config {
             Config::Oracle(t) => format!("oracle {t} px"),
             Config::TessErrorOccluded(t) => format!("tess error {t} px + occlusion"),
             Config::GeomipErrorOccluded(t) => format!("geomip error {t} px + occlusion"),
+            Config::TessErrorView(t) => format!("tess error {t} px, view measure"),
+            Config::GeomipErrorView(t) => format!("geomip error {t} px, view measure"),
         }
     }
 
@@ -196,7 +214,8 @@ impl Config {
             Config::TessDistance(_)
             | Config::TessError(_)
             | Config::TessPeer(_)
-            | Config::TessErrorOccluded(_) => RenderPath::Tess,
+            | Config::TessErrorOccluded(_)
+            | Config::TessErrorView(_) => RenderPath::Tess,
             _ => RenderPath::Geomip,
         }
     }
@@ -219,6 +238,11 @@ impl Config {
             | Config::TessErrorOccluded(t)
             | Config::GeomipErrorOccluded(t) => RenderSettings {
                 lod_metric: LodMetric::Error(t),
+                ..base
+            },
+            Config::TessErrorView(t) | Config::GeomipErrorView(t) => RenderSettings {
+                lod_metric: LodMetric::Error(t),
+                error_measure: ErrorMeasure::View,
                 ..base
             },
             Config::TessPeer(policy) => RenderSettings {
@@ -272,6 +296,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
         configs.extend(taus.iter().map(|&t| Config::TessError(t)));
         configs.extend(PeerPolicy::ALL.map(Config::TessPeer));
         configs.push(Config::TessErrorOccluded(OCCLUSION_TAU));
+        configs.push(Config::TessErrorView(VIEW_MEASURE_TAU));
     }
     let geomip_scales: &[f32] = if quick { &[1.0] } else { &[0.5, 1.0, 2.0, 4.0] };
     configs.extend(
@@ -282,6 +307,7 @@ pub fn configs(scene_lod: DistanceLod, quick: bool, tessellation: bool) -> Vec<C
     configs.extend(taus.iter().map(|&t| Config::GeomipError(t)));
     configs.extend(taus.iter().map(|&t| Config::Oracle(t)));
     configs.push(Config::GeomipErrorOccluded(OCCLUSION_TAU));
+    configs.push(Config::GeomipErrorView(VIEW_MEASURE_TAU));
     configs
 }
 
@@ -322,6 +348,18 @@ pub struct Row {
     pub gpu_ms: Option<f64>,
     /// Median CPU time to prepare and record a frame.
     pub cpu_ms: f64,
+    /// Median CPU time of the level choice alone (part of `cpu_ms`); null
+    /// for the brute path and the oracle's given levels.
+    #[serde(default)]
+    pub lod_ms: Option<f64>,
+    /// The largest level choice of any frame of the row, warm-up frames
+    /// and each fixed view's first frame included.
+    #[serde(default)]
+    pub lod_ms_max: Option<f64>,
+    /// Median over the timed frames of CPU plus GPU time: what a frame
+    /// costs a user. Null without GPU timestamps.
+    #[serde(default)]
+    pub frame_ms: Option<f64>,
     /// Clipping primitives per frame (mean over the flythrough); null
     /// without pipeline statistics.
     pub triangles: Option<u64>,
@@ -376,6 +414,9 @@ pub trait Progress {
 struct Gathered {
     gpu_ms: Vec<f64>,
     cpu_ms: Vec<f64>,
+    lod_ms: Vec<f64>,
+    lod_ms_max: Option<f64>,
+    frame_ms: Vec<f64>,
     triangles: Vec<u64>,
     tes_invocations: Vec<u64>,
     predicted_max_px: Option<f64>,
@@ -388,7 +429,7 @@ struct Gathered {
 }
 
 /// The median; None for no values.
-pub(crate) fn median(values: &mut [f64]) -> Option<f64> {
+pub fn median(values: &mut [f64]) -> Option<f64> {
     if values.is_empty() {
         return None;
     }
@@ -528,9 +569,16 @@ impl<'a> Bench<'a> {
                     *into = Some(into.map_or(px, |m| m.max(px)));
                 }
             }
+            if let Some(ms) = frame.lod_ms {
+                gathered.lod_ms_max = Some(gathered.lod_ms_max.map_or(ms, |m| m.max(ms)));
+            }
             if first_sample + r >= self.warm_up {
                 gathered.gpu_ms.extend(frame.measurements.gpu_ms);
                 gathered.cpu_ms.push(frame.cpu_ms);
+                gathered.lod_ms.extend(frame.lod_ms);
+                gathered
+                    .frame_ms
+                    .extend(frame.measurements.gpu_ms.map(|gpu| gpu + frame.cpu_ms));
                 let culling = frame.measurements.occlusion.and_then(|o| o.culling_ms);
                 gathered.culling_ms.extend(culling);
             }
@@ -702,8 +750,11 @@ impl<'a> Bench<'a> {
                     true => Some(self.render(camera, config, levels)?),
                     false => None,
                 };
-                if cut.is_some() {
+                if let Some(cut) = &cut {
                     progress.advance(&message);
+                    if let Some(ms) = cut.lod_ms {
+                        g.lod_ms_max = Some(g.lod_ms_max.map_or(ms, |m| m.max(ms)));
+                    }
                 }
                 let frame = self.render_gathered(
                     camera,
@@ -816,6 +867,9 @@ impl<'a> Bench<'a> {
                     config: config.label(),
                     gpu_ms: median(&mut g.gpu_ms),
                     cpu_ms: median(&mut g.cpu_ms).unwrap_or(0.0),
+                    lod_ms: median(&mut g.lod_ms),
+                    lod_ms_max: g.lod_ms_max,
+                    frame_ms: median(&mut g.frame_ms),
                     triangles: mean_count(&g.triangles),
                     tes_invocations: mean_count(&g.tes_invocations),
                     gpu_memory_bytes: bytes,

@@ -219,19 +219,26 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         let group: Vec<_> = rows.iter().filter(|r| r.camera == camera).collect();
         let c = check_targets(&group);
         let f = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.2}"));
+        let f3 = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.3}"));
         writeln!(
             out,
-            "  {camera}: tess error p99 {} / {} / {} px at tau 0.5 / 1 / 2; at 1 px: \
-             tess/brute triangles {}x, tess/best {}x, geomip p99 {} px, geomip/best {}x; \
-             best at p99 <= 1 px: {}",
+            "  {camera}: tess error p99 {} / {} / {} px at tau 0.5 / 1 / 2, level choice at most \
+             {} ms (geomip {} ms); at 1 px: frame {} ms, tess/fastest {}x (fastest at p99 <= 1 px: \
+             {}), tess/brute triangles {}x, tess/fewest {}x (fewest: {}); geomip p99 {} / {} / {} px",
             f(c.tess_p99[0]),
             f(c.tess_p99[1]),
             f(c.tess_p99[2]),
+            f3(c.tess_lod_ms_max),
+            f3(c.geomip_lod_ms_max),
+            f(c.tess_frame_ms),
+            f(c.tess_vs_fastest),
+            c.fastest_config.as_deref().unwrap_or("none"),
             f(c.tess_vs_brute_triangles),
-            f(c.tess_vs_best),
-            f(c.geomip_p99),
-            f(c.geomip_vs_best),
-            c.best_config.as_deref().unwrap_or("none"),
+            f(c.tess_vs_fewest),
+            c.fewest_config.as_deref().unwrap_or("none"),
+            f(c.geomip_p99[0]),
+            f(c.geomip_p99[1]),
+            f(c.geomip_p99[2]),
         )?;
     }
     for r in &look {

@@ -59,6 +59,8 @@ pub struct StreamFrame {
     pub frame: usize,
     /// CPU milliseconds to prepare and record the frame.
     pub cpu_ms: f64,
+    /// Of that, the level choice's.
+    pub lod_ms: Option<f64>,
     pub gpu_ms: Option<f64>,
     pub triangles: Option<u64>,
     pub stream: StreamStats,
@@ -87,6 +89,9 @@ pub struct StreamReport {
     pub frames: usize,
     pub holes: usize,
     pub max_cpu_ms: f64,
+    /// The level choice's median and largest milliseconds over the frames.
+    pub lod_ms: Option<f64>,
+    pub max_lod_ms: Option<f64>,
     pub max_upload_bytes: u64,
     pub upload_bytes: u64,
     pub uploaded_pages: u64,
@@ -205,6 +210,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             frames.push(StreamFrame {
                 frame: i,
                 cpu_ms: frame.cpu_ms,
+                lod_ms: frame.lod_ms,
                 gpu_ms: frame.measurements.gpu_ms,
                 triangles: frame.measurements.statistics.map(|s| s.clipping_primitives),
                 stream: stats,
@@ -237,6 +243,10 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             frames: frames.len(),
             holes: frames.iter().map(|f| f.holes).sum(),
             max_cpu_ms: frames.iter().map(|f| f.cpu_ms).fold(0.0, f64::max),
+            lod_ms: crate::bench::run::median(
+                &mut frames.iter().filter_map(|f| f.lod_ms).collect::<Vec<_>>(),
+            ),
+            max_lod_ms: max_f64(&mut frames.iter().filter_map(|f| f.lod_ms)),
             max_upload_bytes: frames
                 .iter()
                 .map(|f| f.stream.upload_bytes)
@@ -292,7 +302,8 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
     writeln!(
         out,
         "{} frames on {}: {} holes, {} pages uploaded ({} bytes, at most {} a frame), {} evicted, \
-         CPU at most {:.1} ms a frame, largest pop {:.2} px{error}, {} validation messages{}",
+         CPU at most {:.1} ms a frame, level choice {} ms (median, at most {} ms), largest pop \
+         {:.2} px{error}, {} validation messages{}",
         report.frames,
         report.device,
         report.holes,
@@ -301,6 +312,10 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         report.max_upload_bytes,
         report.evicted_pages,
         report.max_cpu_ms,
+        report.lod_ms.map_or("n/a".into(), |v| format!("{v:.3}")),
+        report
+            .max_lod_ms
+            .map_or("n/a".into(), |v| format!("{v:.3}")),
         report.max_pop_px,
         report.validation_messages,
         if report.validation_enabled {

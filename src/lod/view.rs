@@ -18,9 +18,9 @@ pub struct TauError(pub f32);
 impl Tau {
     /// The tolerance when none is given: one pixel.
     pub const DEFAULT: Tau = Tau(1.0);
-    /// The smallest tolerance accepted, below which no level but full
-    /// resolution would ever do.
-    pub const MIN_PX: f32 = 1e-3;
+    /// The smallest tolerance accepted: any positive one, however small
+    /// (below a few thousandths of a pixel only full resolution will do).
+    pub const MIN_PX: f32 = f32::MIN_POSITIVE;
 
     pub fn new(px: f32) -> Result<Tau, TauError> {
         if px.is_finite() && px >= Self::MIN_PX {

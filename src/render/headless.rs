@@ -19,6 +19,8 @@ pub struct HeadlessFrame {
     pub measurements: FrameMeasurements,
     /// CPU time to prepare and record the frame (not waiting for the GPU).
     pub cpu_ms: f64,
+    /// Of that, the level choice's (`TerrainRenderer::lod_ms`).
+    pub lod_ms: Option<f64>,
     pub view: FrameView,
     pub patches_in_frustum: usize,
 }
@@ -97,7 +99,6 @@ impl Headless {
             renderer.settle(0, &view)?;
         }
         let start = Instant::now();
-        let patches_in_frustum = view.patches_in_frustum(terrain);
         renderer.prepare(0, terrain, &view, settings)?;
         let rec = self.commands.begin(0)?;
         self.target.record_begin(&rec);
@@ -105,10 +106,13 @@ impl Headless {
         self.target.record_readback(&rec);
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         rec.submit_and_wait()?;
+        // Counted for the frame's statistics, after its time is taken.
+        let patches_in_frustum = view.patches_in_frustum(terrain);
         Ok(HeadlessFrame {
             readback: self.target.read()?,
             measurements: renderer.measurements(0)?,
             cpu_ms,
+            lod_ms: renderer.lod_ms(),
             view,
             patches_in_frustum,
         })

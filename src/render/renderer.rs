@@ -254,6 +254,8 @@ pub struct TerrainRenderer {
     /// path's frame plan, or the geomip path's levels), the view measure
     /// included where it runs.
     lod_ms: Option<f64>,
+    /// Patches in view in the last prepared frame (`patches_in_view`).
+    patches_in_view: usize,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -387,6 +389,7 @@ impl TerrainRenderer {
             predicted_p99_px: None,
             merged_nodes: 0,
             lod_ms: None,
+            patches_in_view: 0,
             hierarchy: None,
         };
         for &path in &options.paths {
@@ -615,6 +618,7 @@ impl TerrainRenderer {
                     self.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
                     self.predicted_max_px = predicted.map(|p| p.0);
                     self.predicted_p99_px = predicted.and_then(|p| p.1);
+                    self.patches_in_view = geomip.draws.len();
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
@@ -629,9 +633,10 @@ impl TerrainRenderer {
                 let lod_view = view.lod_view(Tau::DEFAULT);
                 let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
                 self.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+                self.patches_in_view = visible.len();
                 self.frames[slot].tess_batches = patch_batches(visible, self.max_patches_per_draw);
             }
-            (RenderPath::Brute, _) => {}
+            (RenderPath::Brute, _) => self.patches_in_view = terrain.grid().patch_count(),
         }
         Ok(())
     }
@@ -707,6 +712,12 @@ impl TerrainRenderer {
         );
         self.predicted_p99_px = seen.map(|s| s.predicted_p99_px);
         self.merged_nodes = frame_plan.merged.len();
+        self.patches_in_view = frame_plan.patches.len()
+            + frame_plan
+                .merged
+                .iter()
+                .map(|n| (n.span() * n.span()) as usize)
+                .sum::<usize>();
         Ok(())
     }
 
@@ -732,6 +743,12 @@ impl TerrainRenderer {
     /// where it runs. None for the brute path.
     pub fn lod_ms(&self) -> Option<f64> {
         self.lod_ms
+    }
+
+    /// How many patches the last prepared frame found in view (all of them
+    /// for the brute path): drawn on their own or in merged nodes.
+    pub fn patches_in_view(&self) -> usize {
+        self.patches_in_view
     }
 
     /// How many merged nodes (`lod::patch_merge`) the last prepared

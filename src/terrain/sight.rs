@@ -103,7 +103,8 @@ impl LatticePoint {
         let a = phi / std::f32::consts::TAU * AZIMUTHS as f32;
         let a0 = (a.floor() as usize).min(AZIMUTHS - 1);
         let last = SLOPES.len() - 1;
-        let (s0, slope_weight) = if !(t > SLOPES[0]) {
+        // NaN falls to the lowest slope.
+        let (s0, slope_weight) = if t.is_nan() || t <= SLOPES[0] {
             (0, 0.0)
         } else if t >= SLOPES[last] {
             (last - 1, 1.0)
@@ -376,7 +377,7 @@ struct Histogram {
 }
 
 /// The quarter-octave steps within an octave: 2^(1/4), 2^(1/2), 2^(3/4).
-const QUARTERS: [f32; 3] = [1.189_207_1, 1.414_213_5, 1.681_792_8];
+const QUARTERS: [f32; 3] = [1.189_207_1, std::f32::consts::SQRT_2, 1.681_792_8];
 const _: () = assert!(BINS_PER_OCTAVE == 4.0);
 
 impl Histogram {
