@@ -94,7 +94,7 @@ pub fn run_mirror_check(
         "mirror.results",
     )?;
     let stage = vk::ShaderStageFlags::COMPUTE;
-    let mut bindings = super::renderer::frame_bindings(stage).to_vec();
+    let mut bindings = super::frame::frame_bindings(stage).to_vec();
     for binding in [BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS] {
         bindings.push((binding, vk::DescriptorType::STORAGE_BUFFER, stage));
     }
@@ -111,7 +111,7 @@ pub fn run_mirror_check(
         "mirror.set",
     )?;
     let set = sets.get(0);
-    super::renderer::write_frame_bindings(device, set, &frame, &heightmap, &sampler);
+    super::frame::write_frame_bindings(device, set, &frame, &heightmap, &sampler);
     let no_stream = super::streaming::NoStream::new(device, "mirror")?;
     no_stream.write_bindings(device, set, &sampler);
     device.write_buffer(

@@ -1,18 +1,22 @@
 //! The terrain renderer: pipelines, descriptor sets, per-frame uniforms, and
 //! draw recording into a target it is given. Knows nothing of windows.
 
+mod frame;
+mod geomip_path;
 pub mod headless;
 pub mod material;
 pub mod mirror;
 pub mod occlusion;
+mod pipelines;
 pub mod renderer;
 pub mod residency;
 pub mod settings;
 pub mod shaders;
 pub mod streaming;
-mod tess_choice;
+mod tess_path;
 pub mod uniforms;
 pub mod view;
+mod view_measure;
 
 pub use headless::{offscreen, Headless, HeadlessFrame};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};

@@ -1,6 +1,7 @@
-//! The tess path's error LOD on the GPU side: one frame slot's buffers the
-//! control shader reads the frame plan from, written each frame in time
-//! that grows with what the plan draws, not with the terrain.
+//! The tess path on the GPU: its control points, indices and pipelines,
+//! and for the error LOD, one frame slot's buffers the control shader
+//! reads the frame plan from, written each frame in time that grows with
+//! what the plan draws, not with the terrain.
 //!
 //! The error table starts as the terrain's bound and the choice buffer as
 //! all zero. A frame writes its planned patches' rows, its merged nodes'
@@ -9,15 +10,180 @@
 //! puts those back first. So a patch the plan leaves out reads its bound,
 //! whatever frames came before.
 
+use std::time::Instant;
+
 use ash::vk;
 
+use super::geomip_path::{GeomipConstants, GeomipDraw, GeomipGeometry};
+use super::pipelines::{build_pipelines, PathPipelines, PipelineTarget};
+use super::settings::{ErrorMeasure, RenderPath, RenderSettings};
+use super::view::FrameView;
+use super::view_measure::seen_errors;
+use crate::lod::hierarchy::Hierarchy;
 use crate::lod::patch_merge::MergedNode;
-use crate::lod::plan::FramePlan;
+use crate::lod::plan::{plan, FramePlan, PlanInputs};
+use crate::lod::view::Tau;
+use crate::lod::view_measure::Diagonal;
 use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY};
 use crate::terrain::{ErrorTable, Terrain};
 use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::Buffer;
+use crate::vk::owned::PipelineLayout;
 use crate::vk::{Device, Result, VkError};
+
+pub(super) struct TessGeometry {
+    pub(super) control_points: Buffer,
+    pub(super) indices: Buffer,
+    /// Fractional even spacing, for the distance LOD.
+    pub(super) pipelines: PathPipelines,
+    /// Equal spacing, for the error LOD's whole factors.
+    pub(super) error_pipelines: PathPipelines,
+    /// Per-patch errors, for choosing the full-resolution patches.
+    pub(super) errors: ErrorTable,
+}
+
+impl TessGeometry {
+    /// The path's control points, indices and pipelines for `terrain` on
+    /// `layout`; `errors` is its error table (either diagonal).
+    pub(super) fn new(
+        target: &PipelineTarget,
+        layout: &PipelineLayout,
+        terrain: &Terrain,
+        errors: ErrorTable,
+        wireframe: bool,
+    ) -> Result<TessGeometry> {
+        let device = target.device;
+        Ok(TessGeometry {
+            control_points: device.upload_buffer(
+                "terrain.control_points",
+                vk::BufferUsageFlags::VERTEX_BUFFER,
+                bytemuck::cast_slice(terrain.control_points()),
+            )?,
+            indices: device.upload_buffer(
+                "terrain.patch_indices",
+                vk::BufferUsageFlags::INDEX_BUFFER,
+                bytemuck::cast_slice(terrain.indices()),
+            )?,
+            pipelines: build_pipelines(target, layout, (RenderPath::Tess, false), wireframe)?,
+            error_pipelines: build_pipelines(target, layout, (RenderPath::Tess, true), wireframe)?,
+            errors,
+        })
+    }
+
+    /// Plans one frame of the error LOD at `pixels` (with the view's
+    /// measured table under `ErrorMeasure::View`), writes it into
+    /// `choice`, and sets the frame's exact draws; returns the frame's
+    /// draws and what it expects.
+    pub(super) fn plan_error_frame(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        geomip: &GeomipGeometry,
+        (view, settings, pixels): (&FrameView, &RenderSettings, f32),
+        (choice, exact): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>),
+        max_patches_per_draw: Option<u32>,
+    ) -> Result<PlannedFrame> {
+        let sight = match settings.error_measure {
+            // Computed once per terrain, before the choice is timed.
+            ErrorMeasure::Sight => terrain.sight_table(),
+            _ => None,
+        };
+        let start = Instant::now();
+        let seen = match settings.error_measure {
+            ErrorMeasure::View => {
+                let drawn = view.patches_drawn(terrain, settings.cull);
+                seen_errors(
+                    terrain,
+                    &self.errors,
+                    Diagonal::Either,
+                    view,
+                    (settings, pixels),
+                    &drawn,
+                )
+            }
+            _ => None,
+        };
+        let lod_view = view.lod_view(Tau::new(pixels).unwrap_or_default());
+        let frame_plan = plan(
+            terrain,
+            hierarchy,
+            &lod_view,
+            &PlanInputs {
+                table: seen.as_ref().map_or(&self.errors, |s| &s.table),
+                sight,
+                merge: settings.merge_patches,
+                cull: settings.cull,
+            },
+        );
+        let lod_ms = start.elapsed().as_secs_f64() * 1e3;
+        let merged_indices = choice.write(&frame_plan, &self.errors, terrain)?;
+        exact_draws(terrain, &frame_plan, geomip, exact);
+        Ok(PlannedFrame {
+            lod_ms,
+            tess_batches: patch_batches(
+                frame_plan
+                    .patches
+                    .iter()
+                    .filter(|p| !p.full_resolution)
+                    .map(|p| p.index),
+                max_patches_per_draw,
+            ),
+            merged_batches: patch_batches(0..merged_indices / 4, max_patches_per_draw),
+            predicted_max_px: seen
+                .as_ref()
+                .map_or(frame_plan.predicted_max_px, |s| s.predicted_max_px),
+            predicted_p99_px: seen.map(|s| s.predicted_p99_px),
+            merged_nodes: frame_plan.merged.len(),
+            patches_in_view: frame_plan.patches.len()
+                + frame_plan
+                    .merged
+                    .iter()
+                    .map(|n| (n.span() * n.span()) as usize)
+                    .sum::<usize>(),
+        })
+    }
+}
+/// The full-resolution patches of `plan` as exact draws
+/// (geomip level 0, no stitching: every edge they share is tessellated
+/// with a vertex on every sample).
+fn exact_draws(
+    terrain: &Terrain,
+    plan: &FramePlan,
+    geomip: &GeomipGeometry,
+    exact: &mut Vec<GeomipDraw>,
+) {
+    let grid = terrain.grid();
+    exact.clear();
+    for patch in plan.patches.iter().filter(|p| p.full_resolution) {
+        let p = patch.index as usize;
+        let rect = grid.sample_rect(grid.patch_id(p));
+        let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
+        exact.push(GeomipDraw {
+            patch: p as u32,
+            first,
+            count,
+            constants: GeomipConstants {
+                origin: [rect.col0 as i32, rect.row0 as i32],
+                level: 0,
+                interior: 0.0,
+                sides: [0.0; 4],
+            },
+        });
+    }
+}
+
+/// One frame of the error LOD as the renderer draws and reports it.
+pub(super) struct PlannedFrame {
+    /// Milliseconds of the level choice, the view measure included.
+    pub(super) lod_ms: f64,
+    /// The tessellated patches' and the merged nodes' draws.
+    pub(super) tess_batches: Vec<(u32, u32)>,
+    pub(super) merged_batches: Vec<(u32, u32)>,
+    pub(super) predicted_max_px: f32,
+    pub(super) predicted_p99_px: Option<f32>,
+    pub(super) merged_nodes: usize,
+    pub(super) patches_in_view: usize,
+}
 
 /// One frame slot's choice buffers and what its last frame wrote.
 pub(super) struct ChoiceBuffers {

@@ -1,0 +1,186 @@
+//! What each frame in flight owns (its uniform block, descriptor set,
+//! queries and the tess path's choice buffers), and the descriptor set
+//! layout every frame's set follows.
+
+use std::mem::size_of;
+
+use ash::vk;
+
+use super::geomip_path::GeomipDraw;
+use super::material::GpuAppearance;
+use super::settings::RenderSettings;
+use super::tess_path::ChoiceBuffers;
+use super::uniforms::FrameUniforms;
+use crate::shader_constants::{
+    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP, BINDING_PAGES,
+    BINDING_PAGE_TABLE, BINDING_VISIBILITY,
+};
+use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
+use crate::vk::memory::{Buffer, Image};
+use crate::vk::owned::Sampler;
+use crate::vk::queries::FrameQueries;
+use crate::vk::{Device, Result};
+
+/// Per-frame-in-flight resources: the uniform block is rewritten each frame,
+/// so a frame still on the GPU keeps its own.
+pub(super) struct FrameSlot {
+    pub(super) uniforms: Buffer,
+    pub(super) set: DescriptorSet,
+    pub(super) queries: FrameQueries,
+    /// The tess path's error LOD: the buffers its control shader reads
+    /// the frame plan from.
+    pub(super) choice: Option<ChoiceBuffers>,
+    /// Draws of the choice's merged node indices, (first index, index
+    /// count), split where the driver limits patches per draw.
+    pub(super) merged_batches: Vec<(u32, u32)>,
+    /// What `prepare` set this slot's frame up for; `record` draws it.
+    pub(super) settings: Option<RenderSettings>,
+    /// Whether the slot's last recorded frame was drawn in two passes
+    /// with occlusion culling between them.
+    pub(super) culled: bool,
+    /// The tess path's draws this frame, (first index, index count): the
+    /// runs of patches the CPU's frustum test keeps (and the error LOD
+    /// does not draw at full resolution), split where the driver limits
+    /// patches per draw.
+    pub(super) tess_batches: Vec<(u32, u32)>,
+    /// What `prepare` chose for this slot's frame.
+    pub(super) prepared: PreparedFrame,
+}
+
+/// What a prepared frame chose to draw and what it expects; the renderer
+/// reports the last prepared slot's.
+#[derive(Clone, Debug, Default)]
+pub(super) struct PreparedFrame {
+    /// Milliseconds of the level choice (None for the brute path).
+    pub(super) lod_ms: Option<f64>,
+    /// The largest error and the 99th percentile the choice expects on
+    /// screen, in pixels (error LOD).
+    pub(super) predicted_max_px: Option<f32>,
+    pub(super) predicted_p99_px: Option<f32>,
+    /// Merged nodes drawn (tess path, error LOD).
+    pub(super) merged_nodes: usize,
+    /// Patches in view, drawn on their own or in merged nodes.
+    pub(super) patches_in_view: usize,
+    /// The tess path's full-resolution patches, drawn with the geomip
+    /// path's level 0.
+    pub(super) exact: Vec<GeomipDraw>,
+    /// The geomip path's patches.
+    pub(super) geomip: Vec<GeomipDraw>,
+}
+
+/// One uniform block and query set per descriptor set, with the set
+/// written (the tess path adds its own bindings when it is built).
+pub(super) fn build_frames(
+    device: &Device,
+    sets: &DescriptorSets,
+    (heightmap, sampler): (&Image, &Sampler),
+    appearance: &GpuAppearance,
+) -> Result<Vec<FrameSlot>> {
+    let mut frames = Vec::new();
+    for (i, set) in sets.iter().enumerate() {
+        let uniforms = device.create_host_buffer(
+            &format!("terrain.frame_uniforms[{i}]"),
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            bytemuck::bytes_of(&FrameUniforms::default()),
+        )?;
+        let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
+        write_frame_bindings(device, set, &uniforms, heightmap, sampler);
+        appearance.write(device, set);
+        frames.push(FrameSlot {
+            uniforms,
+            set,
+            queries,
+            choice: None,
+            merged_batches: Vec::new(),
+            settings: None,
+            culled: false,
+            tess_batches: Vec::new(),
+            prepared: PreparedFrame::default(),
+        });
+    }
+    Ok(frames)
+}
+
+/// Points a set's frame-uniform and heightmap bindings at their objects:
+/// what every pipeline of the renderer (and the mirror check) reads.
+pub(super) fn write_frame_bindings(
+    device: &Device,
+    set: DescriptorSet,
+    uniforms: &Buffer,
+    heightmap: &Image,
+    sampler: &Sampler,
+) {
+    let size = size_of::<FrameUniforms>() as u64;
+    device.write_buffer(
+        set,
+        BINDING_FRAME,
+        vk::DescriptorType::UNIFORM_BUFFER,
+        uniforms,
+        size,
+    );
+    device.write_sampled_image(set, BINDING_HEIGHTMAP, heightmap, sampler);
+}
+
+/// The bindings of glsl/terrain_common.glsl in `stages`: the frame's
+/// uniforms, the heightmap, the page pool and the page table; what every terrain pipeline's layout (and the mirror check's)
+/// starts with, and `write_frame_bindings` and `NoStream` fill.
+pub(super) fn frame_bindings(
+    stages: vk::ShaderStageFlags,
+) -> [(u32, vk::DescriptorType, vk::ShaderStageFlags); 4] {
+    use vk::DescriptorType as D;
+    [
+        (BINDING_FRAME, D::UNIFORM_BUFFER, stages),
+        (BINDING_HEIGHTMAP, D::COMBINED_IMAGE_SAMPLER, stages),
+        (BINDING_PAGES, D::COMBINED_IMAGE_SAMPLER, stages),
+        (BINDING_PAGE_TABLE, D::STORAGE_BUFFER, stages),
+    ]
+}
+
+/// The bindings of the renderer's one descriptor set layout, and what its
+/// pool must hold per set: only what the built paths and the scene's
+/// material use.
+pub(super) struct DescriptorPlan {
+    pub(super) bindings: Vec<(u32, vk::DescriptorType, vk::ShaderStageFlags)>,
+    pub(super) pool_sizes: Vec<(vk::DescriptorType, u32)>,
+}
+
+impl DescriptorPlan {
+    pub(super) fn new(tess: bool, appearance: &GpuAppearance) -> Self {
+        let mut stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        if tess {
+            stages |= vk::ShaderStageFlags::TESSELLATION_CONTROL
+                | vk::ShaderStageFlags::TESSELLATION_EVALUATION;
+        }
+        let mut plan = DescriptorPlan {
+            bindings: frame_bindings(stages).to_vec(),
+            pool_sizes: vec![
+                (vk::DescriptorType::UNIFORM_BUFFER, 1),
+                (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
+                (vk::DescriptorType::STORAGE_BUFFER, 1),
+            ],
+        };
+        if tess {
+            // The control shader's: the error table, the full-resolution
+            // bits and the occlusion state.
+            for binding in [
+                BINDING_ERROR_TABLE,
+                BINDING_FULL_RESOLUTION,
+                BINDING_VISIBILITY,
+            ] {
+                plan.bindings.push((
+                    binding,
+                    vk::DescriptorType::STORAGE_BUFFER,
+                    vk::ShaderStageFlags::TESSELLATION_CONTROL,
+                ));
+            }
+            plan.pool_sizes
+                .push((vk::DescriptorType::STORAGE_BUFFER, 3));
+        }
+        let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
+        for binding in appearance.bindings(vertex_stages) {
+            plan.pool_sizes.push((binding.1, 1));
+            plan.bindings.push(binding);
+        }
+        plan
+    }
+}

@@ -1,0 +1,364 @@
+//! The geomip path on the GPU: one vertex template and one index list
+//! per level and stitched-side mask, shared by every patch; each frame the
+//! patches in view become draws with their level and morph factors in
+//! push constants (see `lod::geomip`).
+
+use std::mem::size_of;
+
+use ash::vk;
+
+use super::occlusion::DRAW_COMMAND_BYTES;
+use super::pipelines::{build_pipelines, PathPipelines, PipelineTarget};
+use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
+use super::view::FrameView;
+use super::view_measure::seen_errors;
+use crate::lod::geomip;
+use crate::lod::hierarchy::Hierarchy;
+use crate::lod::plan::{patches_in_view, plan, PlanInputs};
+use crate::lod::view::Tau;
+use crate::lod::view_measure::Diagonal;
+use crate::terrain::{ErrorTable, Terrain};
+use crate::vk::commands::Recorder;
+use crate::vk::descriptors::DescriptorSet;
+use crate::vk::memory::Buffer;
+use crate::vk::owned::{DescriptorSetLayout, PipelineLayout};
+use crate::vk::Result;
+
+pub(super) struct GeomipGeometry {
+    template: Buffer,
+    indices: Buffer,
+    variants: Vec<(u32, u32)>,
+    /// (first index, count) of the unstitched full-resolution list of each
+    /// patch size (cells x, z) the grid has: remainder patches at the far
+    /// edges draw only their own cells.
+    full_resolution: Vec<([usize; 2], (u32, u32))>,
+    pub(super) pipelines: PathPipelines,
+    /// The shared layout plus the per-patch push constants.
+    layout: PipelineLayout,
+    /// Per-patch errors of each level, for choosing levels by projected error.
+    errors: ErrorTable,
+    /// Levels set from outside (`set_geomip_levels`) instead of chosen,
+    /// balanced, with no morph.
+    pub(super) given: Option<geomip::PatchLevels>,
+}
+
+/// One patch of the geomip path: its index list and push constants.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct GeomipDraw {
+    /// The patch's index in the grid.
+    pub(super) patch: u32,
+    pub(super) first: u32,
+    pub(super) count: u32,
+    pub(super) constants: GeomipConstants,
+}
+
+/// Push constants of glsl/geomip.vert.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GeomipConstants {
+    pub origin: [i32; 2],
+    pub level: i32,
+    pub interior: f32,
+    pub sides: [f32; 4],
+}
+const _: () = assert!(size_of::<GeomipConstants>() == 32);
+const _: () = assert!(std::mem::offset_of!(GeomipConstants, sides) == 16);
+impl GeomipGeometry {
+    /// The path's vertex template, index lists and pipelines for
+    /// `terrain`, on the renderer's set layout; `errors` is its error
+    /// table (the reference's diagonal).
+    pub(super) fn new(
+        target: &PipelineTarget,
+        set_layout: &DescriptorSetLayout,
+        terrain: &Terrain,
+        errors: ErrorTable,
+        wireframe: bool,
+    ) -> Result<GeomipGeometry> {
+        let device = target.device;
+        let n = terrain.grid().cells_per_patch();
+        let mut variants = geomip::IndexVariants::build(n);
+        let grid = terrain.grid();
+        let mut full_resolution: Vec<([usize; 2], (u32, u32))> = Vec::new();
+        for p in 0..grid.patch_count() {
+            let rect = grid.sample_rect(grid.patch_id(p));
+            let cells = [rect.cells_x(), rect.cells_z()];
+            if full_resolution.iter().all(|(c, _)| *c != cells) {
+                let list = geomip::full_resolution_indices(n, cells);
+                let range = (variants.indices.len() as u32, list.len() as u32);
+                variants.indices.extend(list);
+                full_resolution.push((cells, range));
+            }
+        }
+        let layout = device.create_pipeline_layout_with_push(
+            &[set_layout],
+            vk::ShaderStageFlags::VERTEX,
+            size_of::<GeomipConstants>() as u32,
+            "terrain.pipeline_layout.geomip",
+        )?;
+        Ok(GeomipGeometry {
+            template: device.upload_buffer(
+                "terrain.geomip_vertex_template",
+                vk::BufferUsageFlags::VERTEX_BUFFER,
+                bytemuck::cast_slice(&geomip::vertex_template(n)),
+            )?,
+            indices: device.upload_buffer(
+                "terrain.geomip_indices",
+                vk::BufferUsageFlags::INDEX_BUFFER,
+                bytemuck::cast_slice(&variants.indices),
+            )?,
+            variants: variants.ranges,
+            full_resolution,
+            pipelines: build_pipelines(target, &layout, (RenderPath::Geomip, false), wireframe)?,
+            layout,
+            errors,
+            given: None,
+        })
+    }
+}
+
+impl GeomipGeometry {
+    /// Levels by distance or error for the patches in view, balanced; they
+    /// become this frame's draws, with their morph factors. Returns the
+    /// largest error the error LOD expects on screen, and the 99th
+    /// percentile where the view measured it.
+    pub(super) fn choose(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        view: &FrameView,
+        settings: &RenderSettings,
+        draws: &mut Vec<GeomipDraw>,
+    ) -> Option<(f32, Option<f32>)> {
+        let grid = terrain.grid();
+        let count = geomip::level_count(grid.cells_per_patch());
+        let tau = match settings.lod_metric {
+            LodMetric::Error(pixels) => Some(pixels),
+            _ => None,
+        };
+        let lod_view = view.lod_view(tau.and_then(|t| Tau::new(t).ok()).unwrap_or_default());
+        if let Some(chosen) = self.given.take() {
+            let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+            self.set_draws(terrain, settings, &visible, &chosen, draws);
+            self.given = Some(chosen);
+            return None;
+        }
+        if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
+            return Some(self.choose_by_view_measure(terrain, view, settings, pixels, draws));
+        }
+        // Every patch starts at the coarsest level, and those in view get
+        // theirs; the coarsest constrains no neighbour.
+        let mut levels = vec![(count - 1) as u8; grid.patch_count()];
+        let visible: Vec<u32> = match tau {
+            None => {
+                let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+                for &p in &visible {
+                    let d = patch_distance(terrain, p as usize, view.eye_local);
+                    levels[p as usize] =
+                        geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
+                }
+                visible
+            }
+            Some(_) => {
+                let sight = match settings.error_measure {
+                    ErrorMeasure::Sight => terrain.sight_table(),
+                    _ => None,
+                };
+                let frame_plan = plan(
+                    terrain,
+                    hierarchy,
+                    &lod_view,
+                    &PlanInputs {
+                        table: &self.errors,
+                        sight,
+                        merge: false,
+                        cull: settings.cull,
+                    },
+                );
+                // Geomip level l has n / 2^l segments a side: the error
+                // table's level index log2(n) - l.
+                for patch in &frame_plan.patches {
+                    let k = usize::from(patch.level).min(count - 1);
+                    levels[patch.index as usize] = (count - 1 - k) as u8;
+                }
+                frame_plan.patches.iter().map(|p| p.index).collect()
+            }
+        };
+        geomip::balance_from(&mut levels, grid, &visible);
+        let mut chosen = geomip::PatchLevels {
+            morph: vec![0.0; levels.len()],
+            levels,
+        };
+        for &p in &visible {
+            let p = p as usize;
+            let level = usize::from(chosen.levels[p]);
+            if level + 1 >= count {
+                continue;
+            }
+            let d = patch_distance(terrain, p, view.eye_local);
+            chosen.morph[p] = match tau {
+                None => geomip::morph_factor(d, settings.lod.min_dist, level),
+                // The fraction of the way from where the bound accepts this
+                // level to where it accepts the next coarser one.
+                Some(pixels) => {
+                    let threshold = |l: usize| {
+                        self.errors.error(p, count - 1 - l) * view.pixels_per_radian
+                            / pixels.max(f32::MIN_POSITIVE)
+                    };
+                    let (from, to) = (threshold(level), threshold(level + 1));
+                    if to <= from {
+                        1.0
+                    } else {
+                        crate::lod::saturate((d - from) / (to - from))
+                    }
+                }
+            };
+        }
+        self.set_draws(terrain, settings, &visible, &chosen, draws);
+        tau.map(|_| {
+            let max = visible
+                .iter()
+                .map(|&p| {
+                    geomip::predicted_px(
+                        terrain,
+                        &self.errors,
+                        &chosen,
+                        p as usize,
+                        view.eye_local,
+                        view.pixels_per_radian,
+                        settings.geomorph,
+                    )
+                })
+                .fold(0.0, f32::max);
+            (max, None)
+        })
+    }
+
+    /// The error LOD's levels from the view measure's table (every patch,
+    /// sample by sample): the patches in the frustum become the draws.
+    pub(super) fn choose_by_view_measure(
+        &mut self,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+        pixels: f32,
+        draws: &mut Vec<GeomipDraw>,
+    ) -> (f32, Option<f32>) {
+        let drawn = view.patches_drawn(terrain, settings.cull);
+        let seen = seen_errors(
+            terrain,
+            &self.errors,
+            Diagonal::Reference,
+            view,
+            (settings, pixels),
+            &drawn,
+        );
+        let table = seen.as_ref().map_or(&self.errors, |s| &s.table);
+        let mut chosen = geomip::select_levels_by_error(
+            terrain,
+            table,
+            view.eye_local,
+            view.pixels_per_radian,
+            pixels,
+            &drawn,
+        );
+        if let Some(v) = &seen {
+            geomip::limit_morph(&mut chosen, &v.morph_limits, &drawn, terrain.grid());
+        }
+        let visible: Vec<u32> = (0..drawn.len() as u32)
+            .filter(|&p| drawn[p as usize])
+            .collect();
+        self.set_draws(terrain, settings, &visible, &chosen, draws);
+        match seen {
+            Some(v) => (v.predicted_max_px, Some(v.predicted_p99_px)),
+            None => (0.0, None),
+        }
+    }
+
+    /// The unstitched full-resolution index list of a patch of `cells`.
+    pub(super) fn full_resolution_range(&self, cells: [usize; 2]) -> (u32, u32) {
+        self.full_resolution
+            .iter()
+            .find(|(c, _)| *c == cells)
+            .map_or(self.variants[0], |&(_, range)| range)
+    }
+
+    /// Draws `draws` (this path's patches, or the tess path's
+    /// full-resolution ones) with the geomip pipeline.
+    /// With `indirect`, draw i reads its instance count (0 or 1, set by
+    /// the occlusion state) from the command buffer's command `first + i`.
+    pub(super) fn draw(
+        &self,
+        rec: &Recorder,
+        set: DescriptorSet,
+        wireframe: bool,
+        draws: &[GeomipDraw],
+        indirect: Option<(&Buffer, u64)>,
+    ) -> Result<()> {
+        rec.bind_graphics(self.pipelines.select(wireframe)?, &self.layout, set);
+        rec.bind_geometry(&self.template, &self.indices);
+        for (i, draw) in draws.iter().enumerate() {
+            rec.push_constants(
+                &self.layout,
+                vk::ShaderStageFlags::VERTEX,
+                bytemuck::bytes_of(&draw.constants),
+            );
+            match indirect {
+                Some((commands, first)) => {
+                    rec.draw_indexed_indirect(commands, (first + i as u64) * DRAW_COMMAND_BYTES)
+                }
+                None => rec.draw_indexed(draw.first, draw.count),
+            }
+        }
+        Ok(())
+    }
+
+    /// The patches `visible` this frame (in grid order), at their `chosen`
+    /// levels, become `draws`.
+    fn set_draws(
+        &mut self,
+        terrain: &Terrain,
+        settings: &RenderSettings,
+        visible: &[u32],
+        chosen: &geomip::PatchLevels,
+        draws: &mut Vec<GeomipDraw>,
+    ) {
+        let grid = terrain.grid();
+        draws.clear();
+        for &p in visible {
+            let p = p as usize;
+            let id = grid.patch_id(p);
+            let level = usize::from(chosen.levels[p]);
+            let (coarser, _) = geomip::neighbour_masks(&chosen.levels, grid, id);
+            let rect = grid.sample_rect(id);
+            let (first, count) = if level == 0 && coarser == 0 {
+                self.full_resolution_range([rect.cells_x(), rect.cells_z()])
+            } else {
+                self.variants[level * 16 + usize::from(coarser)]
+            };
+            let (interior, sides) = if settings.geomorph {
+                geomip::patch_morph(chosen, grid, id)
+            } else {
+                (0.0, [0.0; 4])
+            };
+            draws.push(GeomipDraw {
+                patch: p as u32,
+                first,
+                count,
+                constants: GeomipConstants {
+                    origin: [rect.col0 as i32, rect.row0 as i32],
+                    level: level as i32,
+                    interior,
+                    sides,
+                },
+            });
+        }
+    }
+}
+
+/// Distance from `eye_local` to the nearest point of patch `p`'s box.
+fn patch_distance(terrain: &Terrain, p: usize, eye_local: glam::Vec3) -> f32 {
+    let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+    ((eye_local - centre).abs() - extents)
+        .max(glam::Vec3::ZERO)
+        .length()
+}
