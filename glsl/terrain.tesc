@@ -20,7 +20,8 @@ layout(std430, set = 0, binding = BINDING_ERROR_TABLE) readonly buffer ErrorTabl
 // patch, set where it is drawn at full resolution (with the reference's
 // triangles instead, every edge it shares getting a vertex on every
 // sample); then one byte a patch, the level of the merged node holding it,
-// 0 where it is drawn on its own (see terrain::patch_merge).
+// 0 where it is drawn on its own (see lod::patch_merge); then one byte a
+// patch, the level the share chose (`chosen_level`).
 layout(std430, set = 0, binding = BINDING_FULL_RESOLUTION) readonly buffer PatchChoice {
     uint patch_choice[];
 };
@@ -35,9 +36,26 @@ int merged_level(int patch_index) {
     return int((word >> (8u * uint(patch_index & 3))) & 0xffu);
 }
 
+// The level the frame plan's share of pixels over tau chose for a patch
+// (lod::plan): 0 where its own errors decide, else its level index plus
+// one; one byte a patch after the merged levels. Mirror:
+// render::tess_path::ChosenLevel.
+int chosen_level(int patch_index) {
+    int patches = int(frame.error_lod.z * frame.error_lod.w);
+    int first_word = ((patches + 31) >> 5) + ((patches + 3) >> 2);
+    uint word = patch_choice[first_word + (patch_index >> 2)];
+    return int((word >> (8u * uint(patch_index & 3))) & 0xffu);
+}
+
+// A patch's errors at 1, 2, ..., 64 segments: its row of the table, or
+// where the share chose its level, zero from that level on and rejected
+// below it. Mirror: lod::plan::chosen_errors.
 void read_errors(int patch_index, out float errors[ERROR_LEVEL_COUNT]) {
+    int chosen = chosen_level(patch_index);
     for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
-        errors[k] = patch_errors[patch_index * int(ERROR_LEVEL_COUNT) + k];
+        errors[k] = chosen == 0
+            ? patch_errors[patch_index * int(ERROR_LEVEL_COUNT) + k]
+            : (k < chosen - 1 ? REJECTED_ERROR : 0.0);
     }
 }
 
@@ -184,8 +202,10 @@ void main() {
                     gl_TessLevelOuter[e] = float(edge_cells[e]);
                     continue;
                 }
+                float theirs[ERROR_LEVEL_COUNT];
+                read_errors(q, theirs);
                 for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
-                    shared_errors[k] = max(own[k], patch_errors[q * int(ERROR_LEVEL_COUNT) + k]);
+                    shared_errors[k] = max(own[k], theirs[k]);
                 }
             }
             float d = edge_distance(in_rel[EDGE_ENDS[e].x].xz, in_rel[EDGE_ENDS[e].y].xz, y_lo, y_hi);

@@ -10,7 +10,8 @@ use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::flythrough;
 use crate::material::Appearance;
 use crate::render::{
-    offscreen, with_fallback, LodMetric, RenderPath, RenderSettings, RendererOptions,
+    offscreen, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings,
+    RendererOptions,
 };
 use crate::terrain::Terrain;
 
@@ -82,18 +83,27 @@ fn resident_bytes() -> Result<u64> {
 }
 
 /// The settings of frame `i`: the path and LOD mode change every 50 frames,
-/// cycling through every combination the device supports.
+/// cycling through every combination the device supports; the error LOD
+/// takes each of its measures in turn (the real-time view model, the view
+/// measured sample by sample, the bound).
 fn settings_for(i: u64, paths: &[RenderPath], base: &RenderSettings) -> RenderSettings {
     let phase = i / 50;
     let path = paths[(phase as usize) % paths.len()];
-    let lod_metric = match (phase / paths.len() as u64) % 3 {
+    let round = phase / paths.len() as u64;
+    let lod_metric = match round % 3 {
         0 => LodMetric::Distance,
         1 => LodMetric::Error(1.0),
         _ => LodMetric::Error(4.0),
     };
+    let error_measure = match (round / 3) % 3 {
+        0 => ErrorMeasure::Sight,
+        1 => ErrorMeasure::View,
+        _ => ErrorMeasure::Bound,
+    };
     RenderSettings {
         path,
         lod_metric,
+        error_measure,
         geomorph: phase % 2 == 0,
         ..*base
     }

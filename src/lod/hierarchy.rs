@@ -36,6 +36,9 @@ pub struct Node {
     /// Whether it is a whole 2^m x 2^m block of full-size patches, the
     /// shape a merged node needs.
     pub whole: bool,
+    /// Its footprint in local x and z: the lower-left and upper-right
+    /// corners of its patches' corners.
+    pub footprint: [[f32; 2]; 2],
 }
 
 /// The quadtree over one terrain's patches.
@@ -85,12 +88,15 @@ impl Hierarchy {
             rows,
             nodes: (0..grid.patch_count())
                 .map(|p| {
-                    let rect = grid.sample_rect(grid.patch_id(p));
+                    let id = grid.patch_id(p);
+                    let rect = grid.sample_rect(id);
+                    let (lo, hi) = node_footprint(terrain, [id.col, id.col + 1], [id.row, id.row + 1]);
                     Node {
                         bounds: terrain.y_bounds()[p],
                         patch_max: errors(p),
                         flat_error: flat_with_ring[p],
                         whole: rect.cells_x() == n && rect.cells_z() == n,
+                        footprint: [lo, hi],
                     }
                 })
                 .collect(),
@@ -107,6 +113,7 @@ impl Hierarchy {
                         patch_max: [0.0; LEVEL_COUNT],
                         flat_error: 0.0,
                         whole: true,
+                        footprint: [[f32::INFINITY; 2], [f32::NEG_INFINITY; 2]],
                     };
                     let mut children = 0;
                     for (dc, dr) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
@@ -125,6 +132,11 @@ impl Hierarchy {
                         }
                         node.flat_error = node.flat_error.max(child.flat_error);
                         node.whole &= child.whole;
+                        let [lo, hi] = &mut node.footprint;
+                        for a in 0..2 {
+                            lo[a] = lo[a].min(child.footprint[0][a]);
+                            hi[a] = hi[a].max(child.footprint[1][a]);
+                        }
                     }
                     node.whole &= children == 4;
                     nodes.push(node);

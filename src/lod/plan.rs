@@ -6,38 +6,47 @@
 //! frustum is left with everything under it. A node whose patches, and
 //! the patches around it, would all be drawn with one segment is drawn as
 //! one merged patch (`patch_merge`), by the same rule as patches, from its
-//! precomputed largest one-segment error seen from its nearest point. The
-//! rest is refined down to patches.
+//! precomputed largest one-segment error seen from its nearest point.
 //!
-//! **A patch's level.** The error table bounds each level's largest
-//! vertical error anywhere on the patch; seen face-on from the patch's
-//! nearest point, the coarsest level it keeps within tau is the bound's
-//! choice, and no patch is drawn finer. Where the terrain has a view model
-//! (`terrain::sight`), the frame may let a share of its terrain's pixels
-//! exceed tau (`EXCEED_SHARE`): each patch's pixels over tau at each
-//! coarser level are read off the model from the direction the patch is
-//! seen, and the share is spent greedily on the patches and levels that
-//! save the most triangles for it (the same exchange as the view measure's,
-//! on the model's figures). Patches without a model (the far remainders)
-//! and patches the eye is inside keep the bound's choice.
+//! **Blocks.** Where the terrain has a view model (`terrain::sight`), a
+//! node of up to 2^`BLOCK_LEVELS` x 2^`BLOCK_LEVELS` whole patches that is
+//! small on screen (at most `BLOCK_EXTENT_PX` across) and about as far at
+//! its far side as at its near one (`BLOCK_DEPTH_RATIO`) is decided at
+//! once: every patch in it takes the same level, from the block's entry
+//! seen from its nearest point. Nearer ground is refined down to patches.
+//! So the choice visits a few thousand nodes however large the terrain,
+//! while each decision still sees its ground from where it lies.
 //!
-//! The control shader reads a patch's levels as errors: the bound's own
-//! row, or for a level the greedy chose, zero from that level on and an
-//! infinite error below it. Edges take the larger errors of the two
-//! patches sharing them, so both sides still agree.
+//! **A block's level.** The error table bounds each level's largest
+//! vertical error anywhere on a patch; seen face-on from the block's
+//! nearest point, the coarsest level that keeps all of its patches within
+//! tau is the bound's choice, and no block is drawn finer. The frame may
+//! let a share of its terrain's pixels exceed tau (`EXCEED_SHARE`): each
+//! block's pixels over tau at each coarser level are read off the view
+//! model from the direction the block is seen, and the share is spent
+//! greedily on the blocks and levels that save the most triangles for it
+//! (the same exchange as the view measure's, on the model's figures).
+//! Patches without a model (the far remainders, or a terrain without
+//! one) keep the bound's choice, made by the control shader from their
+//! own errors as before.
+//!
+//! A level the share chose is told to the control shader by a byte per
+//! patch (`ChosenLevel`): its errors read as zero from that level on and
+//! infinite below it. Edges take the larger errors of the two patches
+//! sharing them, so both sides still agree.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use glam::{Vec2, Vec3};
 
-use super::factors::{box_distance, error_tess_factor, patch_box_distance, within_tolerance};
-use super::hierarchy::{node_footprint, Hierarchy, NodeId};
+use super::factors::{box_distance, error_tess_factor, within_tolerance};
+use super::hierarchy::{Hierarchy, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::view::LodView;
 use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
-use crate::terrain::sight::{LatticePoint, SightTable};
-use crate::terrain::Terrain;
+use crate::terrain::sight::{Block, BlockView, LatticePoint, SightTable, BLOCK_LEVELS};
+use crate::terrain::{PatchGrid, Terrain};
 
 /// Share of the frame's terrain pixels the view model's choice may put
 /// over tau: half the 1 % a 99th percentile allows, the other half left to
@@ -45,9 +54,17 @@ use crate::terrain::Terrain;
 /// tessellator's transitions, the lattice's interpolation).
 pub const EXCEED_SHARE: f64 = 0.005;
 
-/// An error no distance brings within tolerance: the control shader then
-/// takes a finer level.
-pub const REJECTED: f32 = f32::MAX;
+/// The largest block decided at once, in pixels across on screen (its
+/// footprint's diagonal seen face-on from its nearest point).
+pub const BLOCK_EXTENT_PX: f32 = 128.0;
+
+/// The most a block's far side may be further than its near side, for
+/// the block to be decided at once: its entry is read at its nearest
+/// point's distance.
+pub const BLOCK_DEPTH_RATIO: f32 = 1.5;
+
+/// An error no distance brings within tolerance.
+pub use crate::shader_constants::REJECTED_ERROR as REJECTED;
 
 /// What the choice keeps within tau, and how.
 #[derive(Clone, Copy, Debug)]
@@ -64,39 +81,71 @@ pub struct PlanInputs<'a> {
     pub cull: bool,
 }
 
-/// A patch the frame draws on its own.
+/// A square of patches the frame draws one by one, all decided at once: a
+/// single patch, or an aligned block of 2^`level` x 2^`level` whole
+/// patches.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PlannedPatch {
-    /// Its index in the grid.
-    pub index: u32,
-    /// The errors the control shader reads for it.
-    pub errors: PatchErrors,
+pub struct PlannedBlock {
+    /// Its first (upper-left) patch.
+    pub col: u32,
+    pub row: u32,
+    /// 2^level patches a side.
+    pub level: u32,
+    /// The level index its patches' insides take (the full-resolution
+    /// index at full resolution).
+    pub patch_level: u8,
     /// Drawn with the reference's own triangles.
     pub full_resolution: bool,
-    /// Its error bound at its level, face-on from its box's nearest point,
-    /// in pixels (0 at full resolution).
+    /// Whether the share chose its level, below the bound's: told to the
+    /// control shader by `ChosenLevel`. Otherwise the patches' own table
+    /// rows decide, each from its own box.
+    pub chosen: bool,
+    /// Its error bound at its level, face-on from its nearest point, in
+    /// pixels (0 at full resolution).
     pub predicted_px: f32,
-    /// The level chosen for its inside: the error table's level index, or
-    /// the full-resolution index.
-    pub level: u8,
+}
+
+impl PlannedBlock {
+    /// Patches a side.
+    pub fn span(&self) -> u32 {
+        1 << self.level
+    }
+
+    /// Its patches' indices in `grid`, row by row (a patch-level block
+    /// has one).
+    pub fn patches<'g>(&self, grid: &'g PatchGrid) -> impl Iterator<Item = usize> + 'g {
+        let cols = grid.patch_cols();
+        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
+        let (c1, r1) = ((c0 + s).min(cols), (r0 + s).min(grid.patch_rows()));
+        (r0..r1).flat_map(move |r| (c0..c1).map(move |c| r * cols + c))
+    }
+}
+
+/// What the control shader reads of a patch whose level the share chose:
+/// its errors, zero from that level on and rejected below it.
+/// Mirror: `chosen_errors` in glsl/terrain.tesc.
+pub fn chosen_errors(level: u8) -> PatchErrors {
+    std::array::from_fn(|k| if k < usize::from(level) { REJECTED } else { 0.0 })
 }
 
 /// What one frame of the tess path draws.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FramePlan {
-    /// Patches in view drawn on their own, in grid order.
-    pub patches: Vec<PlannedPatch>,
+    /// Patches in view drawn one by one, in blocks decided at once.
+    pub blocks: Vec<PlannedBlock>,
     /// Merged nodes in view.
     pub merged: Vec<MergedNode>,
     /// Nodes of the hierarchy the walk visited.
     pub nodes_visited: usize,
-    /// The largest of the drawn patches' and nodes' predicted errors.
+    /// Patches in view, drawn in blocks or merged nodes.
+    pub patches_in_view: usize,
+    /// The largest of the blocks' and merged nodes' predicted errors.
     pub predicted_max_px: f32,
 }
 
-/// A patch whose level the greedy share decides.
+/// A block whose level the greedy share decides.
 struct Candidate {
-    /// Index into the plan's patches.
+    /// Index into the plan's blocks.
     slot: usize,
     /// Pixels over tau at each level index up to `bound`.
     over: [f32; LEVEL_COUNT + 1],
@@ -104,17 +153,22 @@ struct Candidate {
     bound: usize,
     /// The full-resolution level index.
     full: usize,
-    /// Triangles at full resolution.
+    /// Its patches.
+    patches: f32,
+    /// Triangles of one patch at full resolution.
     full_triangles: f32,
+    /// Pixels a unit of length covers face-on at its nearest point.
+    scale: f32,
 }
 
 impl Candidate {
     fn triangles(&self, k: usize) -> f32 {
-        if k >= self.full {
-            self.full_triangles
-        } else {
-            2.0 * 4f32.powi(k as i32)
-        }
+        self.patches
+            * if k >= self.full {
+                self.full_triangles
+            } else {
+                2.0 * 4f32.powi(k as i32)
+            }
     }
 
     /// The best finer level from `from`: (pixels relieved per triangle
@@ -130,6 +184,32 @@ impl Candidate {
     }
 }
 
+/// A node's box: its footprint's x and z, its heights' y.
+struct NodeBox {
+    min: Vec3,
+    max: Vec3,
+}
+
+impl NodeBox {
+    fn of(hierarchy: &Hierarchy, id: NodeId) -> Self {
+        let node = hierarchy.node(id);
+        let [lo, hi] = node.footprint;
+        let [y_lo, y_hi] = node.bounds;
+        NodeBox {
+            min: Vec3::new(lo[0], y_lo, lo[1]),
+            max: Vec3::new(hi[0], y_hi, hi[1]),
+        }
+    }
+
+    /// Its nearest and farthest points' distances from the eye (the
+    /// origin, `eye` subtracted).
+    fn distances(&self, eye: Vec3) -> (f32, f32) {
+        let (lo, hi) = (self.min - eye, self.max - eye);
+        let far = lo.abs().max(hi.abs()).length();
+        (box_distance(lo, hi), far)
+    }
+}
+
 /// Plans one frame of the tess path's error LOD (see the module
 /// documentation).
 pub fn plan(
@@ -139,11 +219,10 @@ pub fn plan(
     inputs: &PlanInputs,
 ) -> FramePlan {
     let mut plan = FramePlan::default();
-    let mut candidates = Vec::new();
-    let mut frame_pixels = 0.0f64;
+    let mut pending = Vec::new();
     let tau = view.tau.px();
-    let n = terrain.grid().cells_per_patch() as u32;
-    let cols = terrain.grid().patch_cols();
+    let grid = terrain.grid();
+    let n = grid.cells_per_patch() as u32;
     let eye = view.eye_local;
     let [range_lo, range_hi] = hierarchy.height_range();
     let mut stack = vec![NodeId {
@@ -154,23 +233,21 @@ pub fn plan(
     while let Some(id) = stack.pop() {
         plan.nodes_visited += 1;
         let node = hierarchy.node(id);
-        let (pc, pr) = hierarchy.patch_range(id);
-        let (lo, hi) = node_footprint(terrain, pc, pr);
+        let bounds = NodeBox::of(hierarchy, id);
         if inputs.cull {
-            let min = Vec3::new(lo[0], node.bounds[0], lo[1]);
-            let max = Vec3::new(hi[0], node.bounds[1], hi[1]);
-            let (centre, half) = (0.5 * (min + max), 0.5 * (max - min));
+            let (centre, half) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
             if view.frustum.aabb_outside(centre - eye, half) {
                 continue;
             }
         }
+        let (pc, pr) = hierarchy.patch_range(id);
         if inputs.merge && id.level >= 1 && id.level <= MAX_MERGE_LEVEL && node.whole {
             // Seen from the nearest point of the node's footprint between
             // the terrain's lowest and highest heights: nearer than any of
             // its patches' boxes and any side's strip.
             let d = box_distance(
-                Vec3::new(lo[0], range_lo, lo[1]) - eye,
-                Vec3::new(hi[0], range_hi, hi[1]) - eye,
+                Vec3::new(bounds.min.x, range_lo, bounds.min.z) - eye,
+                Vec3::new(bounds.max.x, range_hi, bounds.max.z) - eye,
             );
             let scale = view.scale(d);
             if within_tolerance(node.flat_error, scale, tau) {
@@ -181,6 +258,7 @@ pub fn plan(
                     let k = (inside as u32).trailing_zeros() as usize;
                     let predicted_px = own[k] * scale;
                     plan.predicted_max_px = plan.predicted_max_px.max(predicted_px);
+                    plan.patches_in_view += (span * span) as usize;
                     plan.merged.push(MergedNode {
                         col: pc[0] as u32,
                         row: pr[0] as u32,
@@ -192,136 +270,200 @@ pub fn plan(
                 }
             }
         }
-        if id.level > 0 {
-            // Children nearer the eye last, so they are visited first.
+        let block = Block {
+            level: id.level,
+            col: id.col as usize,
+            row: id.row as usize,
+        };
+        let modelled = inputs.sight.filter(|s| id.level <= BLOCK_LEVELS && s.has(block));
+        let decided = match modelled {
+            None => id.level == 0,
+            Some(_) if id.level == 0 => true,
+            Some(_) => {
+                let (near, far) = bounds.distances(eye);
+                let across = (bounds.max - bounds.min).length();
+                near > 0.0 && far <= BLOCK_DEPTH_RATIO * near && across * view.scale(near) <= BLOCK_EXTENT_PX
+            }
+        };
+        if !decided {
             stack.extend(hierarchy.children(id));
             continue;
         }
-        let p = pr[0] * cols + pc[0];
-        let slot = plan.patches.len();
-        let (patch, candidate) = plan_patch(terrain, view, inputs, p, slot, &mut frame_pixels);
-        plan.patches.push(patch);
-        candidates.extend(candidate);
+        let slot = plan.blocks.len();
+        let (planned, to_read) = plan_block(
+            terrain,
+            hierarchy,
+            (id, &bounds),
+            view,
+            (inputs, modelled),
+            slot,
+        );
+        plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
+        plan.blocks.push(planned);
+        pending.extend(to_read);
     }
+    let (candidates, frame_pixels) = match inputs.sight {
+        Some(sight) => read_model(sight, &pending, tau, view.viewport_pixels() as f32),
+        None => (Vec::new(), 0.0),
+    };
     if !candidates.is_empty() {
         let budget = EXCEED_SHARE * frame_pixels.min(view.viewport_pixels());
         let levels = share_greedily(&candidates, budget as f32);
         for (c, level) in candidates.iter().zip(levels) {
-            let patch = &mut plan.patches[c.slot];
-            let scale = patch.predicted_px;
-            patch.level = level as u8;
-            patch.full_resolution = level >= c.full;
-            let row = inputs.table.patch(patch.index as usize);
-            patch.predicted_px = if patch.full_resolution {
+            let block = &mut plan.blocks[c.slot];
+            let id = NodeId {
+                level: block.level,
+                col: block.col >> block.level,
+                row: block.row >> block.level,
+            };
+            let patch_max = hierarchy.node(id).patch_max;
+            block.patch_level = level as u8;
+            block.full_resolution = level >= c.full;
+            block.chosen = level < c.bound;
+            block.predicted_px = if block.full_resolution {
                 0.0
             } else {
-                row[level] * scale
+                patch_max[level] * c.scale
             };
-            patch.errors = std::array::from_fn(|k| if k < level { REJECTED } else { 0.0 });
-            if patch.full_resolution {
-                patch.errors.copy_from_slice(row);
-            }
         }
     }
-    plan.patches.sort_unstable_by_key(|p| p.index);
     plan.predicted_max_px = plan
-        .patches
+        .blocks
         .iter()
-        .map(|p| p.predicted_px)
+        .map(|b| b.predicted_px)
         .fold(plan.predicted_max_px, f32::max);
     plan
 }
 
-/// Patch `p`'s entry in the plan at the bound's level, and, where the view
-/// model may coarsen it, its candidate (whose `PlannedPatch::predicted_px`
-/// holds the patch's scale until the share is spent). Adds the pixels the
-/// model sees of it to `frame_pixels`.
-fn plan_patch(
+/// Block `id`'s entry in the plan at the bound's level, and, where the
+/// view model (`sight`) may coarsen it, what to read of the model.
+fn plan_block(
     terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    (id, bounds): (NodeId, &NodeBox),
     view: &LodView,
-    inputs: &PlanInputs,
-    p: usize,
+    (inputs, sight): (&PlanInputs, Option<&SightTable>),
     slot: usize,
-    frame_pixels: &mut f64,
-) -> (PlannedPatch, Option<Candidate>) {
+) -> (PlannedBlock, Option<Pending>) {
     let grid = terrain.grid();
-    let id = grid.patch_id(p);
-    let rect = grid.sample_rect(id);
-    let (cx, cz) = (rect.cells_x() as u32, rect.cells_z() as u32);
-    let side = cx.min(cz);
+    let eye = view.eye_local;
+    let (pc, pr) = hierarchy.patch_range(id);
+    // A single patch is read from the table; a block takes its patches'
+    // largest errors. Either is seen from its own box: its footprint, its
+    // heights.
+    let d = bounds.distances(eye).0;
+    let (row, cells) = if id.level == 0 {
+        let patch = grid.patch_id(pr[0] * grid.patch_cols() + pc[0]);
+        let p = grid.patch_index(patch);
+        let rect = grid.sample_rect(patch);
+        let row: PatchErrors = inputs
+            .table
+            .patch(p)
+            .try_into()
+            .expect("LEVEL_COUNT levels a patch");
+        (row, [rect.cells_x() as u32, rect.cells_z() as u32])
+    } else {
+        let n = grid.cells_per_patch() as u32;
+        (hierarchy.node(id).patch_max, [n, n])
+    };
+    let scale = view.scale(d);
+    let tau = view.tau.px();
     // The first level index whose segments reach the smaller side.
+    let side = cells[0].min(cells[1]);
     let full = (0..LEVEL_COUNT)
         .find(|&k| (1u32 << k) >= side)
         .unwrap_or(LEVEL_COUNT);
-    let eye = view.eye_local;
-    let corners = terrain.patch_corners(id).map(|c| c - eye);
-    let [y_lo, y_hi] = terrain.y_bounds()[p];
-    let d = patch_box_distance(corners, [y_lo - eye.y, y_hi - eye.y]);
-    let scale = view.scale(d);
-    let tau = view.tau.px();
-    let row: PatchErrors = inputs
-        .table
-        .patch(p)
-        .try_into()
-        .expect("LEVEL_COUNT levels a patch");
     let bound = (0..full)
         .find(|&k| within_tolerance(row[k], scale, tau))
         .unwrap_or(full);
-    let planned = PlannedPatch {
-        index: p as u32,
-        errors: row,
+    let planned = PlannedBlock {
+        col: pc[0] as u32,
+        row: pr[0] as u32,
+        level: id.level,
+        patch_level: bound as u8,
         full_resolution: bound >= full,
-        predicted_px: if bound >= full {
-            0.0
-        } else {
-            row[bound] * scale
-        },
-        level: bound as u8,
+        chosen: false,
+        predicted_px: if bound >= full { 0.0 } else { row[bound] * scale },
     };
-    let Some(sight) = inputs.sight.filter(|s| s.has(p) && d > 0.0) else {
+    if sight.is_none() || d <= 0.0 {
         return (planned, None);
-    };
-    // Seen from the patch's centre direction, falling as the ray to its
+    }
+    // Seen from the block's centre direction, falling as the ray to its
     // box's nearest point falls.
-    let [ul, _, _, lr] = corners;
-    let centre = 0.5 * (Vec2::new(ul.x, ul.z) + Vec2::new(lr.x, lr.z));
-    let reach = (d * d - {
-        let below = (y_lo - eye.y).max(eye.y - y_hi).max(0.0);
-        below * below
-    })
-    .max(0.0)
-    .sqrt();
+    let centre = 0.5 * (Vec2::new(bounds.min.x, bounds.min.z) + Vec2::new(bounds.max.x, bounds.max.z))
+        - Vec2::new(eye.x, eye.z);
+    let below = (bounds.min.y - eye.y).max(eye.y - bounds.max.y).max(0.0);
+    let reach = (d * d - below * below).max(0.0).sqrt();
     let fall = if reach > 0.0 {
-        (eye.y - y_lo) / reach
+        (eye.y - bounds.min.y) / reach
     } else {
         f32::INFINITY
     };
     let at = LatticePoint::new(centre.x, centre.y, fall);
-    let pixels =
-        (sight.area(p, &at).unwrap_or(0.0) * scale * scale).min(view.viewport_pixels() as f32);
-    *frame_pixels += f64::from(pixels);
-    if bound == 0 {
-        return (planned, None);
-    }
-    let threshold = tau / scale;
-    let mut over = [0.0f32; LEVEL_COUNT + 1];
-    for (k, o) in over.iter_mut().enumerate().take(bound) {
-        *o = pixels * sight.over_fraction(p, k, &at, threshold).unwrap_or(1.0);
-    }
-    let candidate = Candidate {
-        slot,
-        over,
-        bound,
-        full,
-        full_triangles: 2.0 * (cx * cz) as f32,
+    let block = Block {
+        level: id.level,
+        col: id.col as usize,
+        row: id.row as usize,
     };
-    (
-        PlannedPatch {
-            predicted_px: scale,
-            ..planned
+    let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;
+    let pending = Pending {
+        block,
+        at,
+        candidate: Candidate {
+            slot,
+            over: [0.0; LEVEL_COUNT + 1],
+            bound,
+            full,
+            patches,
+            full_triangles: 2.0 * (cells[0] * cells[1]) as f32,
+            scale,
         },
-        Some(candidate),
-    )
+    };
+    (planned, Some(pending))
+}
+
+/// A block whose view model is still to be read: where it is seen from,
+/// and its candidate, whose pixels over tau the reading fills in.
+struct Pending {
+    block: Block,
+    at: LatticePoint,
+    candidate: Candidate,
+}
+
+/// The candidates of `pending`, each block's pixels over tau read off the
+/// view model (`tau` pixels, `viewport` pixels at most a block). Every
+/// entry is copied out first, in a loop of independent reads, so the
+/// memory they come from is fetched many at a time. Returns them with
+/// the pixels the model sees of them all.
+fn read_model(
+    sight: &SightTable,
+    pending: &[Pending],
+    tau: f32,
+    viewport: f32,
+) -> (Vec<Candidate>, f64) {
+    let views: Vec<Option<BlockView>> = pending
+        .iter()
+        .map(|p| sight.view(p.block, &p.at, tau / p.candidate.scale))
+        .collect();
+    let mut frame_pixels = 0.0f64;
+    let mut candidates = Vec::with_capacity(pending.len());
+    for (p, view) in pending.iter().zip(&views) {
+        let Some(view) = view else {
+            continue;
+        };
+        let c = &p.candidate;
+        let pixels = (view.area() * c.scale * c.scale).min(viewport);
+        frame_pixels += f64::from(pixels);
+        if c.bound == 0 {
+            continue;
+        }
+        let mut over = [0.0f32; LEVEL_COUNT + 1];
+        for (k, o) in over.iter_mut().enumerate().take(c.bound) {
+            *o = pixels * view.over_fraction(k);
+        }
+        candidates.push(Candidate { over, ..*c });
+    }
+    (candidates, frame_pixels)
 }
 
 /// Each candidate's level: from every one at its coarsest, the step that
@@ -363,7 +505,8 @@ fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
 }
 
 /// The patches whose boxes are not outside the frustum (all of them
-/// without `cull`), in grid order, found by walking the hierarchy.
+/// without `cull`), in grid order, found by walking the hierarchy; and
+/// the nodes visited.
 pub fn patches_in_view(
     terrain: &Terrain,
     hierarchy: &Hierarchy,
@@ -380,17 +523,14 @@ pub fn patches_in_view(
     }];
     while let Some(id) = stack.pop() {
         visited += 1;
-        let node = hierarchy.node(id);
-        let (pc, pr) = hierarchy.patch_range(id);
         if cull {
-            let (lo, hi) = node_footprint(terrain, pc, pr);
-            let min = Vec3::new(lo[0], node.bounds[0], lo[1]);
-            let max = Vec3::new(hi[0], node.bounds[1], hi[1]);
-            let (centre, half) = (0.5 * (min + max), 0.5 * (max - min));
+            let bounds = NodeBox::of(hierarchy, id);
+            let (centre, half) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
             if view.frustum.aabb_outside(centre - view.eye_local, half) {
                 continue;
             }
         }
+        let (pc, pr) = hierarchy.patch_range(id);
         if id.level > 0 {
             stack.extend(hierarchy.children(id));
             continue;

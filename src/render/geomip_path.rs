@@ -13,7 +13,7 @@ use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use super::view::FrameView;
 use super::view_measure::seen_errors;
 use crate::lod::geomip;
-use crate::lod::hierarchy::Hierarchy;
+use crate::lod::hierarchy::{Hierarchy, NodeId};
 use crate::lod::plan::{patches_in_view, plan, PlanInputs};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
@@ -117,10 +117,10 @@ impl GeomipGeometry {
 }
 
 impl GeomipGeometry {
-    /// Levels by distance or error for the patches in view, balanced; they
-    /// become this frame's draws, with their morph factors. Returns the
-    /// largest error the error LOD expects on screen, and the 99th
-    /// percentile where the view measured it.
+    /// Levels by distance or error for the patches in view, balanced, with
+    /// their morph factors: the level choice, which the renderer times.
+    /// `draws` gets the frame's draws where they come with the choice (the
+    /// given levels' and the view measure's).
     pub(super) fn choose(
         &mut self,
         terrain: &Terrain,
@@ -128,7 +128,7 @@ impl GeomipGeometry {
         view: &FrameView,
         settings: &RenderSettings,
         draws: &mut Vec<GeomipDraw>,
-    ) -> Option<(f32, Option<f32>)> {
+    ) -> GeomipChoice {
         let grid = terrain.grid();
         let count = geomip::level_count(grid.cells_per_patch());
         let tau = match settings.lod_metric {
@@ -140,25 +140,27 @@ impl GeomipGeometry {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
             self.set_draws(terrain, settings, &visible, &chosen, draws);
             self.given = Some(chosen);
-            return None;
+            return GeomipChoice::Drawn(None);
         }
         if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
-            return Some(self.choose_by_view_measure(terrain, view, settings, pixels, draws));
+            let predicted = self.choose_by_view_measure(terrain, view, settings, pixels, draws);
+            return GeomipChoice::Drawn(Some(predicted));
         }
         // Every patch starts at the coarsest level, and those in view get
         // theirs; the coarsest constrains no neighbour.
         let mut levels = vec![(count - 1) as u8; grid.patch_count()];
-        let visible: Vec<u32> = match tau {
+        let mut morph = vec![0.0f32; grid.patch_count()];
+        let mut visible = Vec::new();
+        match tau {
             None => {
-                let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+                visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
                 for &p in &visible {
                     let d = patch_distance(terrain, p as usize, view.eye_local);
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
-                visible
             }
-            Some(_) => {
+            Some(pixels) => {
                 let sight = match settings.error_measure {
                     ErrorMeasure::Sight => terrain.sight_table(),
                     _ => None,
@@ -175,46 +177,89 @@ impl GeomipGeometry {
                     },
                 );
                 // Geomip level l has n / 2^l segments a side: the error
-                // table's level index log2(n) - l.
-                for patch in &frame_plan.patches {
-                    let k = usize::from(patch.level).min(count - 1);
-                    levels[patch.index as usize] = (count - 1 - k) as u8;
-                }
-                frame_plan.patches.iter().map(|p| p.index).collect()
-            }
-        };
-        geomip::balance_from(&mut levels, grid, &visible);
-        let mut chosen = geomip::PatchLevels {
-            morph: vec![0.0; levels.len()],
-            levels,
-        };
-        for &p in &visible {
-            let p = p as usize;
-            let level = usize::from(chosen.levels[p]);
-            if level + 1 >= count {
-                continue;
-            }
-            let d = patch_distance(terrain, p, view.eye_local);
-            chosen.morph[p] = match tau {
-                None => geomip::morph_factor(d, settings.lod.min_dist, level),
-                // The fraction of the way from where the bound accepts this
-                // level to where it accepts the next coarser one.
-                Some(pixels) => {
-                    let threshold = |l: usize| {
-                        self.errors.error(p, count - 1 - l) * view.pixels_per_radian
-                            / pixels.max(f32::MIN_POSITIVE)
-                    };
-                    let (from, to) = (threshold(level), threshold(level + 1));
-                    if to <= from {
-                        1.0
+                // table's level index log2(n) - l. A block's patches take
+                // its level, and glide towards the next coarser one as far
+                // as the block has come from where the bound accepts its
+                // level to where it accepts the next (none where the share
+                // chose it).
+                visible.reserve(frame_plan.patches_in_view);
+                for block in &frame_plan.blocks {
+                    let k = usize::from(block.patch_level).min(count - 1);
+                    let level = count - 1 - k;
+                    let glide = if block.chosen || k == 0 {
+                        0.0
                     } else {
-                        crate::lod::saturate((d - from) / (to - from))
+                        let id = NodeId {
+                            level: block.level,
+                            col: block.col >> block.level,
+                            row: block.row >> block.level,
+                        };
+                        let errors = hierarchy.node(id).patch_max;
+                        let d = block_distance(hierarchy, id, view.eye_local);
+                        let at = |k: usize| errors[k] * view.pixels_per_radian / pixels;
+                        // This level is accepted from `at(k)` on, the next
+                        // coarser one from `at(k - 1)`.
+                        let (from, to) = (at(k), at(k - 1));
+                        if to <= from {
+                            1.0
+                        } else {
+                            crate::lod::saturate((d - from) / (to - from))
+                        }
+                    };
+                    for p in block.patches(grid) {
+                        levels[p] = level as u8;
+                        morph[p] = glide;
+                        visible.push(p as u32);
                     }
                 }
-            };
+                visible.sort_unstable();
+            }
         }
+        // Only a patch at least two levels finer than the coarsest can
+        // lower a neighbour.
+        let lowered: Vec<u32> = visible
+            .iter()
+            .copied()
+            .filter(|&p| usize::from(levels[p as usize]) + 2 < count)
+            .collect();
+        geomip::balance_from(&mut levels, grid, &lowered);
+        if tau.is_none() {
+            for &p in &visible {
+                let level = usize::from(levels[p as usize]);
+                if level + 1 < count {
+                    let d = patch_distance(terrain, p as usize, view.eye_local);
+                    morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
+                }
+            }
+        }
+        GeomipChoice::Levels {
+            visible,
+            chosen: geomip::PatchLevels { levels, morph },
+            error_lod: tau.is_some(),
+        }
+    }
+
+    /// The draws of a choice of levels, and the largest error the error
+    /// LOD expects on screen (and its 99th percentile where the view
+    /// measured it).
+    pub(super) fn emit(
+        &self,
+        terrain: &Terrain,
+        view: &FrameView,
+        settings: &RenderSettings,
+        choice: GeomipChoice,
+        draws: &mut Vec<GeomipDraw>,
+    ) -> Option<(f32, Option<f32>)> {
+        let (visible, chosen, error_lod) = match choice {
+            GeomipChoice::Drawn(predicted) => return predicted,
+            GeomipChoice::Levels {
+                visible,
+                chosen,
+                error_lod,
+            } => (visible, chosen, error_lod),
+        };
         self.set_draws(terrain, settings, &visible, &chosen, draws);
-        tau.map(|_| {
+        error_lod.then(|| {
             let max = visible
                 .iter()
                 .map(|&p| {
@@ -235,7 +280,7 @@ impl GeomipGeometry {
 
     /// The error LOD's levels from the view measure's table (every patch,
     /// sample by sample): the patches in the frustum become the draws.
-    pub(super) fn choose_by_view_measure(
+    fn choose_by_view_measure(
         &mut self,
         terrain: &Terrain,
         view: &FrameView,
@@ -315,7 +360,7 @@ impl GeomipGeometry {
     /// The patches `visible` this frame (in grid order), at their `chosen`
     /// levels, become `draws`.
     fn set_draws(
-        &mut self,
+        &self,
         terrain: &Terrain,
         settings: &RenderSettings,
         visible: &[u32],
@@ -353,6 +398,31 @@ impl GeomipGeometry {
             });
         }
     }
+}
+
+/// What the geomip path's level choice made: the levels of the patches in
+/// view, or (given levels, the view measure) the draws themselves, with
+/// what the choice expects.
+pub(super) enum GeomipChoice {
+    Levels {
+        /// The patches in view, in grid order.
+        visible: Vec<u32>,
+        chosen: geomip::PatchLevels,
+        /// Chosen by the error LOD (it reports what it expects).
+        error_lod: bool,
+    },
+    Drawn(Option<(f32, Option<f32>)>),
+}
+
+/// Distance from the eye to node `id`'s box: its footprint, its heights.
+fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
+    let node = hierarchy.node(id);
+    let [lo, hi] = node.footprint;
+    let [y_lo, y_hi] = node.bounds;
+    crate::lod::box_distance(
+        glam::Vec3::new(lo[0], y_lo, lo[1]) - eye,
+        glam::Vec3::new(hi[0], y_hi, hi[1]) - eye,
+    )
 }
 
 /// Distance from `eye_local` to the nearest point of patch `p`'s box.

@@ -518,9 +518,11 @@ impl TerrainRenderer {
                     }
                     let start = Instant::now();
                     let prepared = &mut self.frames[slot].prepared;
-                    let predicted =
+                    let choice =
                         geomip.choose(terrain, hierarchy, view, settings, &mut prepared.geomip);
                     prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+                    let predicted =
+                        geomip.emit(terrain, view, settings, choice, &mut prepared.geomip);
                     prepared.predicted_max_px = predicted.map(|p| p.0);
                     prepared.predicted_p99_px = predicted.and_then(|p| p.1);
                     prepared.patches_in_view = prepared.geomip.len();

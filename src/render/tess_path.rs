@@ -21,11 +21,11 @@ use super::view::FrameView;
 use super::view_measure::seen_errors;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::patch_merge::MergedNode;
-use crate::lod::plan::{plan, FramePlan, PlanInputs};
+use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY};
-use crate::terrain::{ErrorTable, Terrain};
+use crate::terrain::{ErrorTable, PatchGrid, Terrain};
 use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::Buffer;
 use crate::vk::owned::PipelineLayout;
@@ -104,42 +104,31 @@ impl TessGeometry {
             _ => None,
         };
         let lod_view = view.lod_view(Tau::new(pixels).unwrap_or_default());
+        let table = seen.as_ref().map_or(&self.errors, |s| &s.table);
         let frame_plan = plan(
             terrain,
             hierarchy,
             &lod_view,
             &PlanInputs {
-                table: seen.as_ref().map_or(&self.errors, |s| &s.table),
+                table,
                 sight,
                 merge: settings.merge_patches,
                 cull: settings.cull,
             },
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;
-        let merged_indices = choice.write(&frame_plan, &self.errors, terrain)?;
+        let merged_indices = choice.write(&frame_plan, (&self.errors, table), terrain)?;
         exact_draws(terrain, &frame_plan, geomip, exact);
         Ok(PlannedFrame {
             lod_ms,
-            tess_batches: patch_batches(
-                frame_plan
-                    .patches
-                    .iter()
-                    .filter(|p| !p.full_resolution)
-                    .map(|p| p.index),
-                max_patches_per_draw,
-            ),
+            tess_batches: block_batches(&frame_plan, terrain.grid(), max_patches_per_draw),
             merged_batches: patch_batches(0..merged_indices / 4, max_patches_per_draw),
             predicted_max_px: seen
                 .as_ref()
                 .map_or(frame_plan.predicted_max_px, |s| s.predicted_max_px),
             predicted_p99_px: seen.map(|s| s.predicted_p99_px),
             merged_nodes: frame_plan.merged.len(),
-            patches_in_view: frame_plan.patches.len()
-                + frame_plan
-                    .merged
-                    .iter()
-                    .map(|n| (n.span() * n.span()) as usize)
-                    .sum::<usize>(),
+            patches_in_view: frame_plan.patches_in_view,
         })
     }
 }
@@ -154,8 +143,12 @@ fn exact_draws(
 ) {
     let grid = terrain.grid();
     exact.clear();
-    for patch in plan.patches.iter().filter(|p| p.full_resolution) {
-        let p = patch.index as usize;
+    for p in plan
+        .blocks
+        .iter()
+        .filter(|b| b.full_resolution)
+        .flat_map(|b| b.patches(grid))
+    {
         let rect = grid.sample_rect(grid.patch_id(p));
         let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
         exact.push(GeomipDraw {
@@ -201,6 +194,8 @@ pub(super) struct ChoiceBuffers {
     full_bits: Vec<u32>,
     /// The merged nodes whose level bytes the last frame set.
     merged: Vec<MergedNode>,
+    /// The chosen blocks whose level bytes the last frame set.
+    chosen: Vec<PlannedBlock>,
 }
 
 impl ChoiceBuffers {
@@ -216,7 +211,8 @@ impl ChoiceBuffers {
         visibility: &Buffer,
     ) -> Result<Self> {
         let patches = terrain.grid().patch_count();
-        let words = patches.div_ceil(32) + patches.div_ceil(4);
+        // Full-resolution bits, merged levels, chosen levels.
+        let words = patches.div_ceil(32) + 2 * patches.div_ceil(4);
         let choice = device.create_host_buffer(
             &format!("terrain.patch_choice[{slot}]"),
             vk::BufferUsageFlags::STORAGE_BUFFER,
@@ -255,25 +251,27 @@ impl ChoiceBuffers {
             written_rows: Vec::new(),
             full_bits: Vec::new(),
             merged: Vec::new(),
+            chosen: Vec::new(),
         })
     }
 
-    /// Puts the last frame's writes back and writes `plan`: its patches'
-    /// rows where they differ from `bound`, its full-resolution bits, and
-    /// its merged nodes' rows, level bytes and control point indices
-    /// (`indices`, four a patch). Returns the number of merged nodes'
-    /// indices written.
+    /// Puts the last frame's writes back and writes `plan`: the rows of
+    /// its patches whose own table is not `bound` (`table`, measured for
+    /// this view), its merged nodes' rows, its full-resolution bits, its
+    /// merged nodes' level bytes and control point indices, and its chosen
+    /// blocks' level bytes. Returns the number of merged nodes' indices
+    /// written.
     pub(super) fn write(
         &mut self,
         plan: &FramePlan,
-        bound: &ErrorTable,
+        (bound, table): (&ErrorTable, &ErrorTable),
         terrain: &Terrain,
     ) -> Result<u32> {
         let levels = ErrorTable::LEVELS;
         let grid = terrain.grid();
         let cols = grid.patch_cols();
         let patches = grid.patch_count();
-        let bits_words = patches.div_ceil(32);
+        let measured = !std::ptr::eq(bound, table);
         {
             let errors: &mut [f32] = bytemuck::cast_slice_mut(host(&mut self.errors)?);
             for &p in &self.written_rows {
@@ -281,47 +279,62 @@ impl ChoiceBuffers {
                 errors[p * levels..(p + 1) * levels].copy_from_slice(bound.patch(p));
             }
             self.written_rows.clear();
-            for patch in &plan.patches {
-                let p = patch.index as usize;
-                if patch.errors[..] != *bound.patch(p) {
-                    errors[p * levels..(p + 1) * levels].copy_from_slice(&patch.errors);
-                    self.written_rows.push(patch.index);
+            let mut write_row = |p: usize, row: &[f32]| {
+                errors[p * levels..(p + 1) * levels].copy_from_slice(row);
+                self.written_rows.push(p as u32);
+            };
+            if measured {
+                for block in plan.blocks.iter().filter(|b| !b.chosen) {
+                    for p in block.patches(grid) {
+                        write_row(p, table.patch(p));
+                    }
                 }
             }
             for node in &plan.merged {
-                let first = node.row as usize * cols + node.col as usize;
-                errors[first * levels..(first + 1) * levels].copy_from_slice(&node.errors);
-                self.written_rows.push(first as u32);
+                write_row(node.row as usize * cols + node.col as usize, &node.errors);
             }
         }
         let words: &mut [u32] = bytemuck::cast_slice_mut(host(&mut self.choice)?);
-        let (bits, level_words) = words.split_at_mut(bits_words);
-        let level_bytes: &mut [u8] = bytemuck::cast_slice_mut(level_words);
+        let (bits, bytes) = words.split_at_mut(patches.div_ceil(32));
+        let (merged_levels, chosen_levels) = bytes.split_at_mut(patches.div_ceil(4));
+        let merged_levels: &mut [u8] = bytemuck::cast_slice_mut(merged_levels);
+        let chosen_levels: &mut [u8] = bytemuck::cast_slice_mut(chosen_levels);
         for &p in &self.full_bits {
             bits[p as usize / 32] &= !(1 << (p % 32));
         }
         self.full_bits.clear();
-        for patch in plan.patches.iter().filter(|p| p.full_resolution) {
-            let p = patch.index;
-            bits[p as usize / 32] |= 1 << (p % 32);
-            self.full_bits.push(p);
+        for block in plan.blocks.iter().filter(|b| b.full_resolution) {
+            for p in block.patches(grid) {
+                bits[p / 32] |= 1 << (p % 32);
+                self.full_bits.push(p as u32);
+            }
         }
         // The first patch in the low byte of each word: the bytes in
         // memory order on a little-endian host, as the shader reads them.
-        let fill = |bytes: &mut [u8], node: &MergedNode, value: u8| {
-            let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
-            for row in r..r + s {
-                bytes[row * cols + c..row * cols + c + s].fill(value);
+        let fill = |bytes: &mut [u8], (col, row, span): (u32, u32, u32), value: u8| {
+            let (c, r, s) = (col as usize, row as usize, span as usize);
+            let (c1, r1) = ((c + s).min(cols), (r + s).min(grid.patch_rows()));
+            for row in r..r1 {
+                bytes[row * cols + c..row * cols + c1].fill(value);
             }
         };
         for node in &self.merged {
-            fill(level_bytes, node, 0);
+            fill(merged_levels, (node.col, node.row, node.span()), 0);
         }
         for node in &plan.merged {
-            fill(level_bytes, node, node.level as u8);
+            fill(merged_levels, (node.col, node.row, node.span()), node.level as u8);
         }
         self.merged.clear();
         self.merged.extend_from_slice(&plan.merged);
+        for block in &self.chosen {
+            fill(chosen_levels, (block.col, block.row, block.span()), 0);
+        }
+        self.chosen.clear();
+        for block in plan.blocks.iter().filter(|b| b.chosen) {
+            let value = ChosenLevel::of(block.patch_level);
+            fill(chosen_levels, (block.col, block.row, block.span()), value);
+            self.chosen.push(*block);
+        }
         let indices = terrain.indices();
         let corner = |col: usize, row: usize, k: usize| indices[4 * (row * cols + col) + k];
         let merged: &mut [u32] = bytemuck::cast_slice_mut(host(&mut self.merged_indices)?);
@@ -338,6 +351,17 @@ impl ChoiceBuffers {
     }
 }
 
+/// How the choice buffer tells the control shader a level the share
+/// chose: one byte a patch, 0 where the patch's own errors decide, else
+/// the level index plus one. Mirror: `chosen_level` in glsl/terrain.tesc.
+pub(super) struct ChosenLevel;
+
+impl ChosenLevel {
+    pub(super) fn of(level: u8) -> u8 {
+        level + 1
+    }
+}
+
 #[cfg(target_endian = "big")]
 compile_error!("the merged level bytes are written in little-endian order");
 
@@ -346,6 +370,23 @@ fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
     buffer
         .mapped_mut()
         .ok_or_else(|| VkError::Unsupported("error LOD memory is not host-mapped".into()))
+}
+
+/// The tess path's draws of `plan`'s blocks not drawn at full resolution
+/// (see `patch_batches`): each block's rows of patches, in grid order.
+fn block_batches(plan: &FramePlan, grid: &PatchGrid, max_patches: Option<u32>) -> Vec<(u32, u32)> {
+    let cols = grid.patch_cols();
+    let mut runs: Vec<(u32, u32)> = Vec::new();
+    for block in plan.blocks.iter().filter(|b| !b.full_resolution) {
+        let (c, r, s) = (block.col as usize, block.row as usize, block.span() as usize);
+        let (c1, r1) = ((c + s).min(cols), (r + s).min(grid.patch_rows()));
+        runs.extend((r..r1).map(|row| ((row * cols + c) as u32, (c1 - c) as u32)));
+    }
+    runs.sort_unstable();
+    patch_batches(
+        runs.into_iter().flat_map(|(first, n)| first..first + n),
+        max_patches,
+    )
 }
 
 /// The tess path's draws of the patches `drawn` (indices in increasing

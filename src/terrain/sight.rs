@@ -35,8 +35,16 @@
 //! counts its pixels as if seen, and a moved silhouette's pixels are not
 //! counted at all.
 //!
-//! Errors are stored as one byte each, on a log scale below the patch's
-//! largest (`CODES_PER_OCTAVE` to an octave), rounded up.
+//! **Blocks.** The level choice may decide a whole aligned block of 2^m x
+//! 2^m patches at once (m up to `BLOCK_LEVELS`), every patch at the same
+//! level: a block's entry is its patches' pixel areas added up and, at
+//! each share, the largest of their errors, so the share of the block's
+//! pixels over an error is never more than the entry says.
+//!
+//! Errors are stored as one byte each, on a log scale below one scale for
+//! the whole terrain (`CODES_PER_OCTAVE` to an octave), rounded up: the
+//! longest run a ray can have times the steepest fall of the lattice, which
+//! no error exceeds.
 
 use rayon::prelude::*;
 
@@ -68,21 +76,71 @@ pub fn azimuth(a: usize) -> [f32; 2] {
     [phi.cos(), phi.sin()]
 }
 
-/// One patch's entry.
+/// Levels of blocks with an entry: 2x2 up to 2^BLOCK_LEVELS a side.
+pub const BLOCK_LEVELS: u32 = 3;
+
+/// One patch's or block's entry.
 #[derive(Clone, Debug, PartialEq)]
-struct PatchSight {
-    /// The largest stored error: code 0.
-    scale: f32,
+struct Entry {
     /// Pixel area per `K^2 / d^2` from each direction.
     area: [f32; DIRECTIONS],
-    /// [level][direction][fraction] codes.
+    /// [direction][level][fraction] codes: a direction's levels lie
+    /// together, as a frame reads them.
     codes: Vec<u8>,
 }
 
-/// Every full-size patch's view model (see the module documentation).
+/// One level of blocks (level 0: the patches), row-major over
+/// `cols` x `rows` blocks, laid out by direction first: blocks near each
+/// other, which a view sees from nearly the same direction, have their
+/// figures near each other in memory, so a frame reads few pages and
+/// lines.
+#[derive(Clone, Debug, PartialEq)]
+struct EntryLevel {
+    cols: usize,
+    blocks: usize,
+    /// Per block, whether it has an entry.
+    present: Vec<bool>,
+    /// [direction][block] pixel areas per `K^2 / d^2`.
+    area: Vec<f32>,
+    /// [direction][block][level][fraction] codes.
+    codes: Vec<u8>,
+}
+
+impl EntryLevel {
+    /// `cols` x `entries.len() / cols` blocks' entries, packed.
+    fn pack(cols: usize, entries: &[Option<Entry>]) -> Self {
+        let blocks = entries.len();
+        let per = LEVELS * FRACTIONS;
+        let mut area = vec![0.0f32; DIRECTIONS * blocks];
+        let mut codes = vec![ZERO; DIRECTIONS * blocks * per];
+        for (b, entry) in entries.iter().enumerate() {
+            let Some(entry) = entry else { continue };
+            for d in 0..DIRECTIONS {
+                area[d * blocks + b] = entry.area[d];
+                codes[(d * blocks + b) * per..][..per]
+                    .copy_from_slice(&entry.codes[d * per..(d + 1) * per]);
+            }
+        }
+        EntryLevel {
+            cols,
+            blocks,
+            present: entries.iter().map(Option::is_some).collect(),
+            area,
+            codes,
+        }
+    }
+}
+
+/// Every full-size patch's view model, and every block's of whole
+/// full-size patches (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SightTable {
-    patches: Vec<Option<PatchSight>>,
+    /// The error of code 0.
+    scale: f32,
+    /// The error of each code.
+    decoded: [f32; 256],
+    /// Level 0: the patches; level m: blocks of 2^m x 2^m patches.
+    levels: Vec<EntryLevel>,
 }
 
 /// A direction within the lattice: two neighbouring azimuths and two
@@ -141,66 +199,143 @@ impl SightTable {
     /// The table of every patch of `grid` over `map`, whose samples are
     /// `spacing` (dx, dz) apart.
     pub fn compute(map: &Heightmap, grid: &PatchGrid, spacing: (f64, f64)) -> SightTable {
+        let n = grid.cells_per_patch();
+        // No run is longer than the coarsest level's diagonal (the patch's),
+        // no ray falls faster than the lattice's steepest slope, and no
+        // face-on error is more than the terrain's height range.
+        let diagonal = (n as f64 * spacing.0).hypot(n as f64 * spacing.1) as f32;
+        let steepest = SLOPES.iter().fold(0.0f32, |m, t| m.max(t.abs()));
+        let (lo, hi) = map.min_max();
+        let scale = (diagonal * steepest).max(hi - lo);
         let patches = (0..grid.patch_count())
             .into_par_iter()
             .map(|p| {
                 let rect = grid.sample_rect(grid.patch_id(p));
-                let n = grid.cells_per_patch();
                 (rect.cells_x() == n && rect.cells_z() == n)
-                    .then(|| patch_sight(map, rect, spacing))
+                    .then(|| patch_entry(map, rect, spacing, scale))
             })
             .collect();
-        SightTable { patches }
-    }
-
-    /// Whether patch `p` has an entry (it is full-size).
-    pub fn has(&self, p: usize) -> bool {
-        self.patches[p].is_some()
-    }
-
-    /// Patch `p`'s pixel area per `K^2 / d^2` seen from `at`: what it
-    /// covers at distance d is this times `(K / d)^2`. None without an
-    /// entry.
-    pub fn area(&self, p: usize, at: &LatticePoint) -> Option<f32> {
-        let sight = self.patches[p].as_ref()?;
-        Some(at.corners().iter().map(|&(d, w)| w * sight.area[d]).sum())
-    }
-
-    /// The share of patch `p`'s pixels that level index `k` (2^k segments
-    /// a side) puts over `error` (a vertical error, in the heightmap's
-    /// units, at the patch), seen from `at`. None without an entry or for
-    /// a level the table does not hold (full resolution and finer, whose
-    /// error is 0).
-    pub fn over_fraction(&self, p: usize, k: usize, at: &LatticePoint, error: f32) -> Option<f32> {
-        let sight = self.patches[p].as_ref()?;
-        if k >= LEVELS {
-            return None;
+        let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), patches)];
+        let mut rows = grid.patch_rows();
+        for _ in 0..BLOCK_LEVELS {
+            let (below_cols, below) = built.last().expect("level 0");
+            let (cols, below_rows) = (below_cols.div_ceil(2), rows);
+            rows = rows.div_ceil(2);
+            let entries = (0..cols * rows)
+                .map(|b| {
+                    let (c, r) = (b % cols, b / cols);
+                    let child = |dc: usize, dr: usize| {
+                        let (cc, cr) = (2 * c + dc, 2 * r + dr);
+                        (cc < *below_cols && cr < below_rows)
+                            .then(|| below[cr * below_cols + cc].as_ref())
+                            .flatten()
+                    };
+                    let children = [child(0, 0), child(1, 0), child(0, 1), child(1, 1)];
+                    let children: Option<Vec<&Entry>> = children.into_iter().collect();
+                    children.map(|children| block_entry(&children))
+                })
+                .collect();
+            built.push((cols, entries));
         }
-        let code = if error > 0.0 && sight.scale > 0.0 {
-            CODES_PER_OCTAVE * (sight.scale / error).log2()
-        } else if error > 0.0 {
-            f32::INFINITY
-        } else {
-            f32::NEG_INFINITY
-        };
-        let mut fraction = 0.0;
-        for (d, w) in at.corners() {
-            if w <= 0.0 {
-                continue;
+        let levels = built
+            .iter()
+            .map(|(cols, entries)| EntryLevel::pack(*cols, entries))
+            .collect();
+        let decoded = std::array::from_fn(|c| {
+            if c == usize::from(ZERO) {
+                0.0
+            } else {
+                scale * (-(c as f32) / CODES_PER_OCTAVE).exp2()
             }
-            let row = &sight.codes[(k * DIRECTIONS + d) * FRACTIONS..][..FRACTIONS];
-            fraction += w * fraction_over(row, code);
+        });
+        SightTable {
+            scale,
+            decoded,
+            levels,
         }
-        Some(fraction)
+    }
+
+    /// `block`'s level and index there, where it has an entry.
+    fn entry(&self, block: Block) -> Option<(&EntryLevel, usize)> {
+        let level = self.levels.get(block.level as usize)?;
+        let b = block.row * level.cols + block.col;
+        level.present[b].then_some((level, b))
+    }
+
+    /// Whether `block` has an entry (it is whole and its patches
+    /// full-size).
+    pub fn has(&self, block: Block) -> bool {
+        self.entry(block).is_some()
+    }
+
+    /// `block` seen from `at` against a vertical error `error` (in the
+    /// heightmap's units, at the block): the entry's figures at the
+    /// lattice directions around `at`, copied out; None without an entry.
+    /// Copying first lets a frame fetch many blocks' entries at once.
+    pub fn view(&self, block: Block, at: &LatticePoint, error: f32) -> Option<BlockView<'_>> {
+        let (level, b) = self.entry(block)?;
+        let corners = at.corners();
+        let per_direction = LEVELS * FRACTIONS;
+        let at_direction = |d: usize| d * level.blocks + b;
+        Some(BlockView {
+            area: corners.map(|(d, _)| level.area[at_direction(d)]),
+            codes: corners.map(|(d, _)| {
+                level.codes[at_direction(d) * per_direction..][..per_direction]
+                    .try_into()
+                    .expect("a direction's codes")
+            }),
+            weights: corners.map(|(_, w)| w),
+            error,
+            decoded: &self.decoded,
+        })
     }
 }
 
-/// The share over an error of log code `code` of a row of codes at
-/// `FRACTION_EXPONENTS` (non-decreasing: errors fall as the share grows),
+/// A block's entry read from one direction against one error: its
+/// figures at the four lattice directions around it, and their weights.
+#[derive(Clone, Copy, Debug)]
+pub struct BlockView<'a> {
+    area: [f32; 4],
+    codes: [[u8; LEVELS * FRACTIONS]; 4],
+    weights: [f32; 4],
+    /// The error the shares are over.
+    error: f32,
+    decoded: &'a [f32; 256],
+}
+
+impl BlockView<'_> {
+    /// Its pixel area per `K^2 / d^2`: what it covers at distance d is
+    /// this times `(K / d)^2`.
+    pub fn area(&self) -> f32 {
+        self.area.iter().zip(&self.weights).map(|(a, w)| a * w).sum()
+    }
+
+    /// The share of its pixels that drawing each of its patches at level
+    /// index `k` (2^k segments a side) puts over the error: its errors
+    /// interpolated between the lattice's directions (a ray's gap grows
+    /// about in proportion to its fall), then the share between the
+    /// stored ones in log-log. 0 for a level the table does not hold
+    /// (full resolution and finer, whose error is 0).
+    pub fn over_fraction(&self, k: usize) -> f32 {
+        if k >= LEVELS {
+            return 0.0;
+        }
+        let mut row = [0.0f32; FRACTIONS];
+        for (codes, &w) in self.codes.iter().zip(&self.weights) {
+            for (r, &c) in row.iter_mut().zip(&codes[k * FRACTIONS..(k + 1) * FRACTIONS]) {
+                *r += w * self.decoded[usize::from(c)];
+            }
+        }
+        fraction_over(&row, self.error)
+    }
+}
+
+/// The share of pixels over `error` of a row of errors at
+/// `FRACTION_EXPONENTS` (non-increasing: errors fall as the share grows),
 /// interpolated between them in log-log.
-fn fraction_over(row: &[u8], code: f32) -> f32 {
+fn fraction_over(row: &[f32], error: f32) -> f32 {
     // The first stored error at or below the given one.
-    let Some(j) = row.iter().position(|&c| f32::from(c) >= code || c == ZERO) else {
+    let Some(j) = row.iter().position(|&e| e <= error) else {
         return 1.0;
     };
     if j == 0 {
@@ -210,11 +345,11 @@ fn fraction_over(row: &[u8], code: f32) -> f32 {
     if lo == i32::MIN {
         return (hi as f32).exp2();
     }
-    let (c0, c1) = (f32::from(row[j - 1]), f32::from(row[j]));
-    let w = if row[j] == ZERO || c1 <= c0 {
+    let (e0, e1) = (row[j - 1], row[j]);
+    let w = if e1 <= 0.0 || e0 <= e1 {
         1.0
     } else {
-        ((code - c0) / (c1 - c0)).clamp(0.0, 1.0)
+        ((e0 / error).log2() / (e0 / e1).log2()).clamp(0.0, 1.0)
     };
     (lo as f32 + w * (hi - lo) as f32).exp2()
 }
@@ -223,8 +358,32 @@ fn fraction_over(row: &[u8], code: f32) -> f32 {
 const BINS_PER_OCTAVE: f32 = 4.0;
 const BINS: usize = 64;
 
-/// One full-size patch's entry.
-fn patch_sight(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64)) -> PatchSight {
+/// A block of patches or blocks: its level (0 for a patch), and its column
+/// and row among that level's blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Block {
+    pub level: u32,
+    pub col: usize,
+    pub row: usize,
+}
+
+/// A block's entry from its four children's: their areas added, their
+/// errors' largest (their codes' smallest) at each share.
+fn block_entry(children: &[&Entry]) -> Entry {
+    let mut entry = children[0].clone();
+    for child in &children[1..] {
+        for (a, b) in entry.area.iter_mut().zip(&child.area) {
+            *a += b;
+        }
+        for (a, b) in entry.codes.iter_mut().zip(&child.codes) {
+            *a = (*a).min(*b);
+        }
+    }
+    entry
+}
+
+/// One full-size patch's entry, its errors coded below `scale`.
+fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f32) -> Entry {
     let n = rect.cells_x();
     let stride = n + 1;
     let (w, d) = (map.width(), map.depth());
@@ -302,6 +461,7 @@ fn patch_sight(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64)) -> Patch
                 ];
             }
         }
+        let largest = delta.iter().copied().fold(0.0f32, f32::max);
         for a in 0..AZIMUTHS {
             let [ux, uz] = azimuth(a);
             // Per sample: how it faces the ray's direction, and the drawn
@@ -317,25 +477,33 @@ fn patch_sight(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64)) -> Patch
             for (ti, &t) in SLOPES.iter().enumerate() {
                 let dir = a * SLOPES.len() + ti;
                 let out = &mut errors[(k * DIRECTIONS + dir) * FRACTIONS..][..FRACTIONS];
-                // No run is longer than the diagonal.
-                let top = t.abs() * diagonal;
-                if top <= 0.0 {
+                if t == 0.0 {
+                    // Level rays: no vertical gap between their hits.
                     out.fill(0.0);
                     continue;
                 }
+                // No error is more than the larger of the longest run's
+                // gap and the largest face-on error.
+                let top = (t.abs() * diagonal).max(largest);
                 let mut histogram = Histogram::new(top);
                 for &(rise, drawn_rise, e) in &along {
                     let seen = (rise + t).max(0.0);
                     histogram.total += seen;
-                    if seen > 0.0 && e > 0.0 {
-                        let meet = drawn_rise + t;
-                        let run = if meet > 0.0 {
-                            (e / meet).min(diagonal)
-                        } else {
-                            diagonal
-                        };
-                        histogram.add(run * t.abs(), seen);
+                    if seen <= 0.0 || e <= 0.0 {
+                        continue;
                     }
+                    let meet = drawn_rise + t;
+                    if meet > 0.0 {
+                        // The drawn plane carried on along the ray; no
+                        // further than where the gap reaches the face-on
+                        // error, or the diagonal's run where that is more.
+                        let gap = t.abs() * e / meet;
+                        histogram.add(gap.min(e.max(t.abs() * diagonal)), seen);
+                        continue;
+                    }
+                    // The drawn surface falls away as fast as the ray:
+                    // the ray meets it in front, within the diagonal.
+                    histogram.add(t.abs() * diagonal, seen);
                 }
                 histogram.quantiles(out);
             }
@@ -350,10 +518,12 @@ fn patch_sight(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64)) -> Patch
             *e = e.max(finer);
         }
     }
-    let scale = errors.iter().copied().fold(0.0f32, f32::max);
-    let codes = errors
-        .iter()
-        .map(|&e| {
+    // Errors are [level][direction][fraction]; codes [direction][level]
+    // [fraction].
+    let codes = (0..DIRECTIONS * LEVELS * FRACTIONS)
+        .map(|i| {
+            let (d, k, j) = (i / (LEVELS * FRACTIONS), i / FRACTIONS % LEVELS, i % FRACTIONS);
+            let e = errors[(k * DIRECTIONS + d) * FRACTIONS + j];
             if e <= 0.0 || scale <= 0.0 {
                 ZERO
             } else {
@@ -364,7 +534,7 @@ fn patch_sight(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64)) -> Patch
             }
         })
         .collect();
-    PatchSight { scale, area, codes }
+    Entry { area, codes }
 }
 
 /// Weights of errors in bins `1 / BINS_PER_OCTAVE` octave wide below a
