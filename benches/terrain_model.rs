@@ -1,13 +1,22 @@
 //! CPU terrain model on a 4097x4097 heightmap: Y bounds and the error table
 //! (all cores), height_at (one core), and a memcpy of the heightmap's bytes
-//! in the same run so the figures read as ratios to memory bandwidth.
+//! in the same run so the figures read as ratios to memory bandwidth. Then
+//! the error LOD's frame plan on the default scene's bench views, with the
+//! view model and with the bound alone (one core, 1280x720, tau 1 px).
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::DVec2;
+use vkterrain::bench::cameras::named_views;
+use vkterrain::cli::scene_terrain_info;
+use vkterrain::lod::hierarchy::Hierarchy;
+use vkterrain::lod::plan::{plan, PlanInputs};
+use vkterrain::lod::view::Tau;
+use vkterrain::render::FrameView;
+use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
-use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, Terrain, TerrainInfo};
 
 const SIZE: usize = 4097;
 
@@ -103,5 +112,30 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+fn frame_plan(c: &mut Criterion) {
+    let scene = Scene::default_scene();
+    let (info, _) = scene_terrain_info(&scene, false).expect("the default scene loads");
+    let terrain = Terrain::new(info, 0.0).expect("the default scene's terrain");
+    let (table, _) = terrain.error_tables();
+    let sight = terrain.sight_table();
+    let hierarchy = Hierarchy::new(&terrain, table);
+    let mut group = c.benchmark_group("frame_plan");
+    for view in named_views(terrain.info()) {
+        let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
+        for (measure, sight) in [("sight", sight), ("bound", None)] {
+            let inputs = PlanInputs {
+                table,
+                sight,
+                merge: true,
+                cull: true,
+            };
+            group.bench_function(format!("{measure}/{}", view.name), |b| {
+                b.iter(|| black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs)))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, frame_plan);
 criterion_main!(benches);

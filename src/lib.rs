@@ -14,6 +14,8 @@
 //!   table, height queries, frustum and LOD maths). No GPU types.
 //! - [`shader_constants`], [`shader_variants`]: constants and shader
 //!   variants shared with build.rs and GLSL.
+//! - [`cache`], [`output`]: the on-disk cache and atomic file writes,
+//!   which any layer may use.
 //!
 //! `unsafe` is denied everywhere but in [`vk`], by the lint below.
 
@@ -21,6 +23,7 @@
 
 pub mod app;
 pub mod bench;
+pub mod cache;
 pub mod cli;
 pub mod lod;
 pub mod material;

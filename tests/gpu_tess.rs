@@ -632,37 +632,45 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
         let cams = crack_cameras(&terrain);
         let mut small = GpuScene::new(terrain.clone(), 192, 128, false);
         let mut large = GpuScene::new(terrain, 384, 256, false);
-        for (view, cam) in &cams {
-            let mut last = u64::MAX;
-            for pixels in [0.5f32, 2.0, 8.0] {
-                let settings = RenderSettings {
-                    lod_metric: vkterrain::render::LodMetric::Error(pixels),
-                    ..flat_settings(&large.terrain, DistanceMode::Smooth)
-                };
-                let frame = large.render(cam, &settings);
-                let holes = enclosed_background(&frame.readback.rgba, 384, 256, |p| p[0] < 128);
-                assert!(
-                    holes.is_empty(),
-                    "{name}/{view}/{pixels} px: {} holes",
-                    holes.len()
-                );
-                let tris = frame.measurements.statistics.unwrap().clipping_primitives;
-                assert!(
-                    tris <= last,
-                    "{name}/{view}: {pixels} px made {tris} triangles, more than {last}"
-                );
-                last = tris;
-                // Half the pixels each way: the same error budget needs fewer triangles.
-                let smaller = small
-                    .render(cam, &settings)
-                    .measurements
-                    .statistics
-                    .unwrap()
-                    .clipping_primitives;
-                assert!(
-                    smaller <= tris,
-                    "{name}/{view}/{pixels} px: {smaller} at 192x128 vs {tris} at 384x256"
-                );
+        // Both measures' levels follow the screen. Merged nodes are left
+        // out: a node drawn as one patch trades draws for triangles at a
+        // distance that moves with the resolution (tests/patch_merge.rs).
+        for by in [ErrorMeasure::Bound, ErrorMeasure::Sight] {
+            for (view, cam) in &cams {
+                let mut last = u64::MAX;
+                for pixels in [0.5f32, 2.0, 8.0] {
+                    let settings = RenderSettings {
+                        lod_metric: vkterrain::render::LodMetric::Error(pixels),
+                        error_measure: by,
+                        merge_patches: false,
+                        ..flat_settings(&large.terrain, DistanceMode::Smooth)
+                    };
+                    let frame = large.render(cam, &settings);
+                    let holes = enclosed_background(&frame.readback.rgba, 384, 256, |p| p[0] < 128);
+                    assert!(
+                        holes.is_empty(),
+                        "{name}/{view}/{pixels} px/{by:?}: {} holes",
+                        holes.len()
+                    );
+                    let tris = frame.measurements.statistics.unwrap().clipping_primitives;
+                    assert!(
+                        tris <= last,
+                        "{name}/{view}/{by:?}: {pixels} px made {tris} triangles, more than {last}"
+                    );
+                    last = tris;
+                    // Half the pixels each way: the same error budget needs
+                    // fewer triangles.
+                    let smaller = small
+                        .render(cam, &settings)
+                        .measurements
+                        .statistics
+                        .unwrap()
+                        .clipping_primitives;
+                    assert!(
+                        smaller <= tris,
+                        "{name}/{view}/{pixels} px/{by:?}: {smaller} at 192x128 vs {tris} at 384x256"
+                    );
+                }
             }
         }
         small.finish();

@@ -1,24 +1,65 @@
-//! Merged patches on the CPU: which blocks merge, what their sides
-//! compute from both sides, and the errors a node carries.
+//! Merged patches on the CPU: which blocks the frame plan merges, what
+//! their sides compute from both sides, and the errors a node carries.
 
 mod common;
 
 use common::*;
 use glam::{DVec2, Vec3};
+use vkterrain::lod::hierarchy::Hierarchy;
 use vkterrain::lod::patch_merge::{
-    merge_patches, node_across, node_error_factors, node_errors, NodeAcross, PatchMerge,
-    MAX_MERGE_LEVEL,
+    node_across, node_error_factors, node_errors, NodeAcross, PatchMerge, MAX_MERGE_LEVEL,
 };
-use vkterrain::lod::{choose_tess_error, patch_error_factors, Across};
+use vkterrain::lod::plan::{plan, FramePlan, PlanInputs};
+use vkterrain::lod::view::{LodView, Tau};
+use vkterrain::lod::{patch_error_factors, Across};
+use vkterrain::terrain::camera::Frustum;
 use vkterrain::terrain::{PatchId, Terrain, TerrainInfo};
 
 /// Pixels per radian of a 1280-pixel-wide view with a 60 degree field.
 const PPR: f32 = 1108.5;
 
-fn merged(terrain: &Terrain, eye: Vec3, pixels: f32) -> PatchMerge {
+/// The frame plan from `eye` at `pixels`, every patch in view (no
+/// frustum), by the terrain's bound.
+fn planned(terrain: &Terrain, eye: Vec3, pixels: f32) -> FramePlan {
     let table = terrain.error_table();
-    let choice = choose_tess_error(terrain, &table, eye, PPR, pixels);
-    merge_patches(terrain, &table, &choice, eye, PPR, pixels)
+    let hierarchy = Hierarchy::new(terrain, &table);
+    let view = LodView {
+        eye_local: eye,
+        pixels_per_radian: PPR,
+        // Planes that cull nothing.
+        frustum: Frustum {
+            planes: [glam::Vec4::W; 6],
+        },
+        viewport: glam::Vec2::new(1280.0, 720.0),
+        tau: Tau::new(pixels).unwrap(),
+    };
+    plan(
+        terrain,
+        &hierarchy,
+        &view,
+        &PlanInputs {
+            table: &table,
+            sight: None,
+            merge: true,
+            cull: false,
+        },
+    )
+}
+
+/// The plan's merged nodes, and the level of the node holding each patch
+/// (0 for a patch drawn on its own).
+fn merged(terrain: &Terrain, eye: Vec3, pixels: f32) -> PatchMerge {
+    let cols = terrain.grid().patch_cols();
+    let nodes = planned(terrain, eye, pixels).merged;
+    let mut levels = vec![0u8; terrain.grid().patch_count()];
+    for n in &nodes {
+        for r in n.row..n.row + n.span() {
+            for c in n.col..n.col + n.span() {
+                levels[r as usize * cols + c as usize] = n.level as u8;
+            }
+        }
+    }
+    PatchMerge { levels, nodes }
 }
 
 /// The noise map in 8-cell patches: 257x193 samples, 32x24 patches, all
@@ -27,15 +68,6 @@ fn noise_terrain() -> Terrain {
     let info = TerrainInfo::new(noise_map(257, 193, 7), DVec2::splat(10.0), 8, DVec2::ZERO)
         .expect("valid terrain");
     Terrain::new(info, 0.0).expect("valid margin")
-}
-
-#[test]
-fn levels_pack_four_to_a_word_first_patch_lowest() {
-    let merge = PatchMerge {
-        levels: vec![1, 2, 3, 4, 5],
-        nodes: Vec::new(),
-    };
-    assert_eq!(merge.level_words(), vec![0x0403_0201, 0x05]);
 }
 
 #[test]
@@ -118,8 +150,14 @@ fn shared_sides_agree_from_both_sides() {
         (Vec3::new(0.0, 60_000.0, 0.0), 4.0),
         (Vec3::new(-90_000.0, 20_000.0, -20_000.0), 1.0),
     ] {
-        let choice = choose_tess_error(&terrain, &table, eye, PPR, pixels);
-        let merge = merge_patches(&terrain, &table, &choice, eye, PPR, pixels);
+        let frame = planned(&terrain, eye, pixels);
+        let merge = merged(&terrain, eye, pixels);
+        let full_resolution: Vec<usize> = frame
+            .blocks
+            .iter()
+            .filter(|b| b.full_resolution)
+            .flat_map(|b| b.patches(grid).collect::<Vec<_>>())
+            .collect();
         let range = [lo - eye.y, hi - eye.y];
         let levels: std::collections::BTreeSet<u8> = merge.levels.iter().copied().collect();
         if levels.len() >= 3 {
@@ -183,7 +221,7 @@ fn shared_sides_agree_from_both_sides() {
         // A patch drawn on its own next to a node puts one segment there,
         // and its own rule agrees: that edge was within tolerance at one.
         for p in 0..grid.patch_count() {
-            if merge.levels[p] != 0 || choice.is_full_resolution(p) {
+            if merge.levels[p] != 0 || full_resolution.contains(&p) {
                 continue;
             }
             let id = grid.patch_id(p);

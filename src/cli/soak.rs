@@ -10,8 +10,7 @@ use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::flythrough;
 use crate::material::Appearance;
 use crate::render::{
-    offscreen, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings,
-    RendererOptions,
+    offscreen, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions,
 };
 use crate::terrain::Terrain;
 

@@ -90,7 +90,8 @@ impl Hierarchy {
                 .map(|p| {
                     let id = grid.patch_id(p);
                     let rect = grid.sample_rect(id);
-                    let (lo, hi) = node_footprint(terrain, [id.col, id.col + 1], [id.row, id.row + 1]);
+                    let (lo, hi) =
+                        node_footprint(terrain, [id.col, id.col + 1], [id.row, id.row + 1]);
                     Node {
                         bounds: terrain.y_bounds()[p],
                         patch_max: errors(p),

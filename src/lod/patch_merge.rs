@@ -26,14 +26,17 @@
 //! heights (its patches' Y bounds), so the height range bounds the error.
 //! Levels stay non-increasing as k rises, as in the error table.
 //!
-//! **Which nodes.** A patch may be merged when the error LOD would draw it
-//! with one segment on every side and inside (`patch_error_factors`),
-//! neither it nor a neighbour at full resolution, and it has the full cell
-//! count both ways (the far remainders do not). A node is merged when all
-//! four of its children may be and its own inside factor, seen from its
-//! box (its corners' x and z, the terrain's whole height range, what the
-//! control shader knows of it), is at most 2^m: no more segments than its
-//! patches would have had. The largest such nodes are drawn, up to level
+//! **Which nodes** (`lod::plan`, walking `lod::hierarchy` from the top).
+//! A node of whole full-size patches (the far remainders are not) is
+//! merged when its patches' and the surrounding patches' largest
+//! one-segment error is within tolerance from the nearest point of its
+//! footprint grown by a patch, between the terrain's lowest and highest
+//! heights: then every patch in or around it would be drawn with one
+//! segment on every side and inside (`patch_error_factors`), none at full
+//! resolution. And its own inside factor, seen from its box (its corners'
+//! x and z, the terrain's whole height range, what the control shader
+//! knows of it), must be at most 2^m: no more segments than its patches
+//! would have had. The largest such nodes are drawn, up to level
 //! `MAX_MERGE_LEVEL`, where one segment per patch along a side is the
 //! largest factor a control shader may output.
 //!
@@ -46,14 +49,12 @@
 //! the patch outside had one segment by the patches' own rule).
 
 use glam::Vec3;
-use rayon::prelude::*;
 
 use super::factors::{
-    error_tess_factor, patch_box_distance, patch_error_factors, shared_edge_errors, strip_distance,
-    Across, PatchTessFactors, TessErrorChoice,
+    error_tess_factor, patch_box_distance, shared_edge_errors, strip_distance, PatchTessFactors,
 };
-use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
-use crate::terrain::{PatchId, Terrain};
+use crate::terrain::error_table::{PatchErrors, LEVEL_COUNT};
+use crate::terrain::PatchId;
 
 /// The coarsest node: 2^6 x 2^6 patches, whose sides towards other levels
 /// need 64 segments, the largest factor.
@@ -101,15 +102,6 @@ impl PatchMerge {
             levels: vec![0; patch_count],
             nodes: Vec::new(),
         }
-    }
-
-    /// The levels packed four to a word, first patch in the low byte, as
-    /// the control shader reads them.
-    pub fn level_words(&self) -> Vec<u32> {
-        self.levels
-            .chunks(4)
-            .map(|c| c.iter().rev().fold(0u32, |w, &l| w << 8 | u32::from(l)))
-            .collect()
     }
 }
 
@@ -171,192 +163,6 @@ pub fn node_error_factors(
         edges,
         inside: [inside, inside],
     }
-}
-
-/// The corners of the aligned block of `span` x `span` patches from
-/// (`col`, `row`), eye-relative, in control point order.
-fn block_corners(
-    terrain: &Terrain,
-    (col, row): (usize, usize),
-    span: usize,
-    eye: Vec3,
-) -> [Vec3; 4] {
-    let corner =
-        |c: usize, r: usize, k: usize| terrain.patch_corners(PatchId { row: r, col: c })[k] - eye;
-    let (last_c, last_r) = (col + span - 1, row + span - 1);
-    [
-        corner(col, row, 0),
-        corner(last_c, row, 1),
-        corner(col, last_r, 2),
-        corner(last_c, last_r, 3),
-    ]
-}
-
-/// One level of candidate nodes, row-major over the aligned blocks that
-/// fit in the grid.
-struct Candidates {
-    cols: usize,
-    rows: usize,
-    /// The largest error of the block's patches, level by level.
-    patch_max: Vec<PatchErrors>,
-    /// The block's lowest and highest height.
-    bounds: Vec<[f32; 2]>,
-    /// The node the block may be drawn as, where it may be merged; at
-    /// level 0 a block is one patch, and its node the patch itself.
-    nodes: Vec<Option<MergedNode>>,
-}
-
-/// Chooses the frame's merged nodes for the error LOD at `pixel_error`
-/// pixels, seen from `eye_local`: the largest blocks the module's rule
-/// allows. `table` is the errors the control shader reads, `choice` the
-/// frame's full-resolution patches.
-pub fn merge_patches(
-    terrain: &Terrain,
-    table: &ErrorTable,
-    choice: &TessErrorChoice,
-    eye_local: Vec3,
-    pixels_per_radian: f32,
-    pixel_error: f32,
-) -> PatchMerge {
-    let grid = terrain.grid();
-    let (cols, rows) = (grid.patch_cols(), grid.patch_rows());
-    let n = grid.cells_per_patch();
-    let (lo, hi) = terrain.info().min_max();
-    let range = [lo - eye_local.y, hi - eye_local.y];
-    let errors =
-        |p: usize| -> &PatchErrors { table.patch(p).try_into().expect("LEVEL_COUNT levels") };
-    // Level 0: the patches that may be merged.
-    let flat: Vec<Option<MergedNode>> = (0..grid.patch_count())
-        .into_par_iter()
-        .map(|p| {
-            let id = grid.patch_id(p);
-            let rect = grid.sample_rect(id);
-            if rect.cells_x() != n || rect.cells_z() != n || choice.is_full_resolution(p) {
-                return None;
-            }
-            let mut neighbours = [Across::Border; 4];
-            let offsets = [(-1, 0), (0, -1), (1, 0), (0, 1)];
-            for (across, (dc, dr)) in neighbours.iter_mut().zip(offsets) {
-                let (c, r) = (id.col as isize + dc, id.row as isize + dr);
-                if c < 0 || r < 0 || c >= cols as isize || r >= rows as isize {
-                    continue;
-                }
-                let q = r as usize * cols + c as usize;
-                if choice.is_full_resolution(q) {
-                    return None;
-                }
-                *across = Across::Patch(errors(q));
-            }
-            let corners = terrain.patch_corners(id).map(|c| c - eye_local);
-            let [b_lo, b_hi] = terrain.y_bounds()[p];
-            let factors = patch_error_factors(
-                corners,
-                [b_lo - eye_local.y, b_hi - eye_local.y],
-                range,
-                errors(p),
-                neighbours,
-                [n as u32; 2],
-                pixels_per_radian,
-                pixel_error,
-            );
-            let one_segment = factors
-                .edges
-                .iter()
-                .chain(&factors.inside)
-                .all(|&f| f == 1.0);
-            one_segment.then_some(MergedNode {
-                col: id.col as u32,
-                row: id.row as u32,
-                level: 0,
-                errors: *errors(p),
-                predicted_px: choice.predicted_px[p],
-            })
-        })
-        .collect();
-    let mut levels = vec![Candidates {
-        cols,
-        rows,
-        patch_max: (0..grid.patch_count()).map(|p| *errors(p)).collect(),
-        bounds: terrain.y_bounds().to_vec(),
-        nodes: flat,
-    }];
-    for level in 1..=MAX_MERGE_LEVEL {
-        let below = levels.last().expect("level 0");
-        let (c_cols, c_rows) = (below.cols / 2, below.rows / 2);
-        if c_cols == 0 || c_rows == 0 {
-            break;
-        }
-        let span = 1usize << level;
-        let blocks: Vec<(PatchErrors, [f32; 2], Option<MergedNode>)> = (0..c_cols * c_rows)
-            .into_par_iter()
-            .map(|b| {
-                let (bc, br) = (b % c_cols, b / c_cols);
-                let children = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                    .map(|(dc, dr)| (2 * br + dr) * below.cols + 2 * bc + dc);
-                let mut patch_max = [0.0f32; LEVEL_COUNT];
-                let mut bounds = [f32::INFINITY, f32::NEG_INFINITY];
-                for &c in &children {
-                    for (m, e) in patch_max.iter_mut().zip(&below.patch_max[c]) {
-                        *m = m.max(*e);
-                    }
-                    bounds = [
-                        bounds[0].min(below.bounds[c][0]),
-                        bounds[1].max(below.bounds[c][1]),
-                    ];
-                }
-                let node = children
-                    .iter()
-                    .all(|&c| below.nodes[c].is_some())
-                    .then(|| {
-                        let (col, row) = (bc * span, br * span);
-                        let own = node_errors(&patch_max, bounds[1] - bounds[0], level);
-                        let corners = block_corners(terrain, (col, row), span, eye_local);
-                        let distance = patch_box_distance(corners, range);
-                        let inside = error_tess_factor(
-                            &own,
-                            distance,
-                            pixels_per_radian,
-                            pixel_error,
-                            (n as u32) << level,
-                        );
-                        let k = (inside as u32).trailing_zeros() as usize;
-                        (inside <= span as f32).then_some(MergedNode {
-                            col: col as u32,
-                            row: row as u32,
-                            level,
-                            errors: own,
-                            predicted_px: own[k] * pixels_per_radian
-                                / distance.max(f32::MIN_POSITIVE),
-                        })
-                    })
-                    .flatten();
-                (patch_max, bounds, node)
-            })
-            .collect();
-        levels.push(Candidates {
-            cols: c_cols,
-            rows: c_rows,
-            patch_max: blocks.iter().map(|b| b.0).collect(),
-            bounds: blocks.iter().map(|b| b.1).collect(),
-            nodes: blocks.into_iter().map(|b| b.2).collect(),
-        });
-    }
-    // The largest mergeable blocks, coarsest first; a block inside a
-    // chosen one is already taken.
-    let mut merge = PatchMerge::none(grid.patch_count());
-    for candidates in levels.iter().skip(1).rev() {
-        for node in candidates.nodes.iter().flatten() {
-            let (col, row, span) = (node.col as usize, node.row as usize, node.span() as usize);
-            if merge.levels[row * cols + col] != 0 {
-                continue;
-            }
-            for r in row..row + span {
-                merge.levels[r * cols + col..r * cols + col + span].fill(node.level as u8);
-            }
-            merge.nodes.push(*node);
-        }
-    }
-    merge
 }
 
 /// What lies across each side of `node` in `merge` (left, top, right,

@@ -125,7 +125,13 @@ impl PlannedBlock {
 /// its errors, zero from that level on and rejected below it.
 /// Mirror: `chosen_errors` in glsl/terrain.tesc.
 pub fn chosen_errors(level: u8) -> PatchErrors {
-    std::array::from_fn(|k| if k < usize::from(level) { REJECTED } else { 0.0 })
+    std::array::from_fn(|k| {
+        if k < usize::from(level) {
+            REJECTED
+        } else {
+            0.0
+        }
+    })
 }
 
 /// What one frame of the tess path draws.
@@ -225,6 +231,12 @@ pub fn plan(
     let n = grid.cells_per_patch() as u32;
     let eye = view.eye_local;
     let [range_lo, range_hi] = hierarchy.height_range();
+    // A full-size patch's extent along x and z.
+    let spacing = terrain.info().spacing();
+    let patch_size = Vec2::new(
+        (f64::from(n) * spacing.x) as f32,
+        (f64::from(n) * spacing.y) as f32,
+    );
     let mut stack = vec![NodeId {
         level: hierarchy.top(),
         col: 0,
@@ -235,7 +247,10 @@ pub fn plan(
         let node = hierarchy.node(id);
         let bounds = NodeBox::of(hierarchy, id);
         if inputs.cull {
-            let (centre, half) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
+            let (centre, half) = (
+                0.5 * (bounds.min + bounds.max),
+                0.5 * (bounds.max - bounds.min),
+            );
             if view.frustum.aabb_outside(centre - eye, half) {
                 continue;
             }
@@ -244,13 +259,27 @@ pub fn plan(
         if inputs.merge && id.level >= 1 && id.level <= MAX_MERGE_LEVEL && node.whole {
             // Seen from the nearest point of the node's footprint between
             // the terrain's lowest and highest heights: nearer than any of
-            // its patches' boxes and any side's strip.
+            // its patches' boxes and any side's strip. Its one-segment
+            // error covers the patches around it too, each seen from no
+            // nearer than the footprint grown by a patch.
             let d = box_distance(
                 Vec3::new(bounds.min.x, range_lo, bounds.min.z) - eye,
                 Vec3::new(bounds.max.x, range_hi, bounds.max.z) - eye,
             );
+            let ring = box_distance(
+                Vec3::new(
+                    bounds.min.x - patch_size.x,
+                    range_lo,
+                    bounds.min.z - patch_size.y,
+                ) - eye,
+                Vec3::new(
+                    bounds.max.x + patch_size.x,
+                    range_hi,
+                    bounds.max.z + patch_size.y,
+                ) - eye,
+            );
             let scale = view.scale(d);
-            if within_tolerance(node.flat_error, scale, tau) {
+            if within_tolerance(node.flat_error, view.scale(ring), tau) {
                 let own = node_errors(&node.patch_max, node.bounds[1] - node.bounds[0], id.level);
                 let span = 1u32 << id.level;
                 let inside = error_tess_factor(&own, d, view.pixels_per_radian, tau, n << id.level);
@@ -275,16 +304,25 @@ pub fn plan(
             col: id.col as usize,
             row: id.row as usize,
         };
-        let modelled = inputs.sight.filter(|s| id.level <= BLOCK_LEVELS && s.has(block));
-        let decided = match modelled {
-            None => id.level == 0,
-            Some(_) if id.level == 0 => true,
-            Some(_) => {
-                let (near, far) = bounds.distances(eye);
-                let across = (bounds.max - bounds.min).length();
-                near > 0.0 && far <= BLOCK_DEPTH_RATIO * near && across * view.scale(near) <= BLOCK_EXTENT_PX
-            }
+        let modelled = inputs
+            .sight
+            .filter(|s| id.level <= BLOCK_LEVELS && s.has(block));
+        // A block small and shallow on screen is decided at once. Without
+        // the model, only whole blocks whose bound needs no patch at full
+        // resolution: the tessellator still sets each edge's factor itself,
+        // and a full-resolution flag would spread from one patch to all.
+        let compact = || {
+            let (near, far) = bounds.distances(eye);
+            let across = (bounds.max - bounds.min).length();
+            near > 0.0
+                && far <= BLOCK_DEPTH_RATIO * near
+                && across * view.scale(near) <= BLOCK_EXTENT_PX
         };
+        let decided = id.level == 0
+            || match modelled {
+                Some(_) => compact(),
+                None => id.level <= BLOCK_LEVELS && node.whole && compact(),
+            };
         if !decided {
             stack.extend(hierarchy.children(id));
             continue;
@@ -298,6 +336,10 @@ pub fn plan(
             (inputs, modelled),
             slot,
         );
+        if id.level > 0 && modelled.is_none() && planned.full_resolution {
+            stack.extend(hierarchy.children(id));
+            continue;
+        }
         plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
         plan.blocks.push(planned);
         pending.extend(to_read);
@@ -383,14 +425,19 @@ fn plan_block(
         patch_level: bound as u8,
         full_resolution: bound >= full,
         chosen: false,
-        predicted_px: if bound >= full { 0.0 } else { row[bound] * scale },
+        predicted_px: if bound >= full {
+            0.0
+        } else {
+            row[bound] * scale
+        },
     };
     if sight.is_none() || d <= 0.0 {
         return (planned, None);
     }
     // Seen from the block's centre direction, falling as the ray to its
     // box's nearest point falls.
-    let centre = 0.5 * (Vec2::new(bounds.min.x, bounds.min.z) + Vec2::new(bounds.max.x, bounds.max.z))
+    let centre = 0.5
+        * (Vec2::new(bounds.min.x, bounds.min.z) + Vec2::new(bounds.max.x, bounds.max.z))
         - Vec2::new(eye.x, eye.z);
     let below = (bounds.min.y - eye.y).max(eye.y - bounds.max.y).max(0.0);
     let reach = (d * d - below * below).max(0.0).sqrt();
@@ -525,7 +572,10 @@ pub fn patches_in_view(
         visited += 1;
         if cull {
             let bounds = NodeBox::of(hierarchy, id);
-            let (centre, half) = (0.5 * (bounds.min + bounds.max), 0.5 * (bounds.max - bounds.min));
+            let (centre, half) = (
+                0.5 * (bounds.min + bounds.max),
+                0.5 * (bounds.max - bounds.min),
+            );
             if view.frustum.aabb_outside(centre - view.eye_local, half) {
                 continue;
             }

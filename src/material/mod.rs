@@ -3,7 +3,6 @@
 //! baked lightmap. Only what the scene names is loaded. Pure Rust: the
 //! renderer uploads what this builds.
 
-pub mod cache;
 pub mod generate;
 mod mips;
 
@@ -225,7 +224,7 @@ impl Appearance {
                 width: info.cols() as u32,
                 height: info.rows() as u32,
                 layers: 1,
-                levels: vec![cached_lightmap(cache::dir().as_deref(), info, sun)],
+                levels: vec![cached_lightmap(crate::cache::dir().as_deref(), info, sun)],
             }
         });
         Ok(Appearance { material, lightmap })
@@ -258,9 +257,9 @@ pub fn cached_lightmap(
         LIGHTMAP_FINE_STEPS,
     ]
     .map(f64::to_bits);
-    let key = cache::key((heights, info.cols(), info.rows(), numbers));
+    let key = crate::cache::key((heights, info.cols(), info.rows(), numbers));
     let len = info.cols() * info.rows();
-    cache::load_or_compute(dir, "lightmap", key, len, || bake_lightmap(info, sun))
+    crate::cache::load_or_compute(dir, "lightmap", key, len, || bake_lightmap(info, sun))
 }
 
 /// Reads an asset as an image, refusing oversized ones before decoding.

@@ -40,7 +40,7 @@ use super::pipelines::{
     PipelineTarget,
 };
 use super::residency::StreamShape;
-use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
+use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{patch_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
@@ -409,11 +409,13 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// The terrain's error tables; the first call's time is kept for
-    /// `error_table_ms`.
+    /// The terrain's error tables, and its view model (`terrain::sight`)
+    /// where the CPU holds its heights, so no frame waits for them; the
+    /// first call's time is kept for `error_table_ms`.
     fn error_tables<'t>(&mut self, terrain: &'t Terrain) -> &'t (ErrorTable, ErrorTable) {
         let start = std::time::Instant::now();
         let tables = terrain.error_tables();
+        terrain.sight_table();
         if self.error_table_ms == 0.0 {
             self.error_table_ms = start.elapsed().as_secs_f64() * 1e3;
         }
@@ -437,7 +439,8 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// Milliseconds `new` spent computing the per-patch error table.
+    /// Milliseconds `new` spent computing the per-patch error tables and
+    /// the view model (or reading the model from the cache).
     pub fn error_table_ms(&self) -> f64 {
         self.error_table_ms
     }
@@ -509,13 +512,6 @@ impl TerrainRenderer {
                 if let (Some(geomip), Some(hierarchy)) =
                     (self.geomip.as_mut(), self.hierarchy.as_ref())
                 {
-                    if let (LodMetric::Error(_), ErrorMeasure::Sight) =
-                        (settings.lod_metric, settings.error_measure)
-                    {
-                        // Computed once per terrain, before the choice is
-                        // timed.
-                        terrain.sight_table();
-                    }
                     let start = Instant::now();
                     let prepared = &mut self.frames[slot].prepared;
                     let choice =

@@ -322,7 +322,11 @@ impl ChoiceBuffers {
             fill(merged_levels, (node.col, node.row, node.span()), 0);
         }
         for node in &plan.merged {
-            fill(merged_levels, (node.col, node.row, node.span()), node.level as u8);
+            fill(
+                merged_levels,
+                (node.col, node.row, node.span()),
+                node.level as u8,
+            );
         }
         self.merged.clear();
         self.merged.extend_from_slice(&plan.merged);
@@ -378,7 +382,11 @@ fn block_batches(plan: &FramePlan, grid: &PatchGrid, max_patches: Option<u32>) -
     let cols = grid.patch_cols();
     let mut runs: Vec<(u32, u32)> = Vec::new();
     for block in plan.blocks.iter().filter(|b| !b.full_resolution) {
-        let (c, r, s) = (block.col as usize, block.row as usize, block.span() as usize);
+        let (c, r, s) = (
+            block.col as usize,
+            block.row as usize,
+            block.span() as usize,
+        );
         let (c1, r1) = ((c + s).min(cols), (r + s).min(grid.patch_rows()));
         runs.extend((r..r1).map(|row| ((row * cols + c) as u32, (c1 - c) as u32)));
     }

@@ -184,11 +184,28 @@ impl Terrain {
             .get_or_init(|| {
                 let map = self.info.heightmap()?;
                 let spacing = self.info.spacing();
-                Some(std::sync::Arc::new(sight::SightTable::compute(
-                    map,
-                    &self.grid,
-                    (spacing.x, spacing.y),
-                )))
+                let compute = || {
+                    sight::SightTable::compute(map, &self.grid, (spacing.x, spacing.y)).to_bytes()
+                };
+                // Kept on disk by a hash of everything it depends on: the
+                // heights, the spacing and the patch size.
+                let key = crate::cache::key((
+                    sight::MODEL_VERSION,
+                    bytemuck::cast_slice::<f32, u8>(map.heights()),
+                    self.info.cols(),
+                    self.info.rows(),
+                    [spacing.x, spacing.y].map(f64::to_bits),
+                    self.grid.cells_per_patch(),
+                ));
+                let len = sight::SightTable::encoded_len(&self.grid);
+                let bytes = crate::cache::load_or_compute(
+                    crate::cache::dir().as_deref(),
+                    "sight",
+                    key,
+                    len,
+                    compute,
+                );
+                sight::SightTable::from_bytes(&self.grid, &bytes).map(std::sync::Arc::new)
             })
             .as_deref()
     }

@@ -65,6 +65,9 @@ pub const FRACTION_EXPONENTS: [i32; 8] = [i32::MIN, -12, -10, -8, -6, -4, -2, 0]
 const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 /// Levels with an entry: those below the largest patch's cell count.
 pub const LEVELS: usize = LEVEL_COUNT - 1;
+/// Changes whenever what the table holds, or how it is computed, changes:
+/// part of its on-disk cache key.
+pub const MODEL_VERSION: u32 = 1;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -241,6 +244,69 @@ impl SightTable {
             .iter()
             .map(|(cols, entries)| EntryLevel::pack(*cols, entries))
             .collect();
+        SightTable::with_levels(scale, levels)
+    }
+
+    /// The table as bytes, `encoded_len` of them, for the on-disk cache:
+    /// its scale, then per level each block's presence, areas and codes.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        out.extend_from_slice(&self.scale.to_le_bytes());
+        for level in &self.levels {
+            out.extend(level.present.iter().map(|&p| u8::from(p)));
+            for a in &level.area {
+                out.extend_from_slice(&a.to_le_bytes());
+            }
+            out.extend_from_slice(&level.codes);
+        }
+        out
+    }
+
+    /// The length of `to_bytes` for `grid`'s table.
+    pub fn encoded_len(grid: &PatchGrid) -> usize {
+        let per_block = 1 + DIRECTIONS * (4 + LEVELS * FRACTIONS);
+        4 + level_sizes(grid)
+            .iter()
+            .map(|&(cols, rows)| cols * rows * per_block)
+            .sum::<usize>()
+    }
+
+    /// The table `to_bytes` wrote for `grid`; None where the bytes are not
+    /// one (a length the grid's table cannot have).
+    pub fn from_bytes(grid: &PatchGrid, bytes: &[u8]) -> Option<SightTable> {
+        if bytes.len() != Self::encoded_len(grid) {
+            return None;
+        }
+        let scale = f32::from_le_bytes(bytes[..4].try_into().ok()?);
+        let mut at = 4;
+        let mut take = |n: usize| {
+            let slice = &bytes[at..at + n];
+            at += n;
+            slice
+        };
+        let levels = level_sizes(grid)
+            .into_iter()
+            .map(|(cols, rows)| {
+                let blocks = cols * rows;
+                let present = take(blocks).iter().map(|&b| b != 0).collect();
+                let area = take(4 * DIRECTIONS * blocks)
+                    .chunks_exact(4)
+                    .map(|c| f32::from_le_bytes(c.try_into().expect("four bytes")))
+                    .collect();
+                let codes = take(DIRECTIONS * blocks * LEVELS * FRACTIONS).to_vec();
+                EntryLevel {
+                    cols,
+                    blocks,
+                    present,
+                    area,
+                    codes,
+                }
+            })
+            .collect();
+        Some(SightTable::with_levels(scale, levels))
+    }
+
+    fn with_levels(scale: f32, levels: Vec<EntryLevel>) -> SightTable {
         let decoded = std::array::from_fn(|c| {
             if c == usize::from(ZERO) {
                 0.0
@@ -307,7 +373,11 @@ impl BlockView<'_> {
     /// Its pixel area per `K^2 / d^2`: what it covers at distance d is
     /// this times `(K / d)^2`.
     pub fn area(&self) -> f32 {
-        self.area.iter().zip(&self.weights).map(|(a, w)| a * w).sum()
+        self.area
+            .iter()
+            .zip(&self.weights)
+            .map(|(a, w)| a * w)
+            .sum()
     }
 
     /// The share of its pixels that drawing each of its patches at level
@@ -322,7 +392,10 @@ impl BlockView<'_> {
         }
         let mut row = [0.0f32; FRACTIONS];
         for (codes, &w) in self.codes.iter().zip(&self.weights) {
-            for (r, &c) in row.iter_mut().zip(&codes[k * FRACTIONS..(k + 1) * FRACTIONS]) {
+            for (r, &c) in row
+                .iter_mut()
+                .zip(&codes[k * FRACTIONS..(k + 1) * FRACTIONS])
+            {
                 *r += w * self.decoded[usize::from(c)];
             }
         }
@@ -357,6 +430,17 @@ fn fraction_over(row: &[f32], error: f32) -> f32 {
 /// Bins per octave of the errors' histogram, and its octaves.
 const BINS_PER_OCTAVE: f32 = 4.0;
 const BINS: usize = 64;
+
+/// Columns and rows of blocks at each level the table keeps.
+fn level_sizes(grid: &PatchGrid) -> Vec<(usize, usize)> {
+    let (mut cols, mut rows) = (grid.patch_cols(), grid.patch_rows());
+    let mut sizes = vec![(cols, rows)];
+    for _ in 0..BLOCK_LEVELS {
+        (cols, rows) = (cols.div_ceil(2), rows.div_ceil(2));
+        sizes.push((cols, rows));
+    }
+    sizes
+}
 
 /// A block of patches or blocks: its level (0 for a patch), and its column
 /// and row among that level's blocks.
@@ -522,7 +606,11 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     // [fraction].
     let codes = (0..DIRECTIONS * LEVELS * FRACTIONS)
         .map(|i| {
-            let (d, k, j) = (i / (LEVELS * FRACTIONS), i / FRACTIONS % LEVELS, i % FRACTIONS);
+            let (d, k, j) = (
+                i / (LEVELS * FRACTIONS),
+                i / FRACTIONS % LEVELS,
+                i % FRACTIONS,
+            );
             let e = errors[(k * DIRECTIONS + d) * FRACTIONS + j];
             if e <= 0.0 || scale <= 0.0 {
                 ZERO

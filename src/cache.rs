@@ -1,6 +1,7 @@
 //! An on-disk cache for what every launch would otherwise recompute from
 //! unchanged inputs: the lightmap bake (about 0.9 s of the default scene's
-//! 1.8 s to its first picture on a 2-core machine). Entries live in the
+//! 1.8 s to its first picture on a 2-core machine) and the error LOD's view
+//! model (`terrain::sight`, 1.2 s for the default scene). Entries live in the
 //! user's cache directory (`$XDG_CACHE_HOME/vkterrain`, else
 //! `~/.cache/vkterrain`), never in the repository, each named and checked
 //! by a hash of everything its bytes depend on. `VKTERRAIN_CACHE=0` turns

@@ -1,0 +1,250 @@
+//! The real-time frame plan on the CPU: how many nodes it visits, that it
+//! covers what is in view once, that no level is finer than the bound
+//! asks, and the view model's block entries and cache encoding.
+
+mod common;
+
+use common::*;
+use glam::{DVec2, DVec3};
+use vkterrain::lod::hierarchy::Hierarchy;
+use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs};
+use vkterrain::lod::view::{LodView, Tau};
+use vkterrain::render::FrameView;
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::sight::{Block, LatticePoint, SightTable, LEVELS};
+use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
+
+fn view_of(terrain: &Terrain, eye: DVec3, target: DVec3, tau: f32) -> LodView {
+    let camera = Camera {
+        eye,
+        target,
+        fov_y_deg: 55.0,
+    };
+    FrameView::new(terrain, &camera, 1280, 720).lod_view(Tau::new(tau).unwrap())
+}
+
+fn planned(
+    terrain: &Terrain,
+    table: &ErrorTable,
+    sight: Option<&SightTable>,
+    view: &LodView,
+) -> FramePlan {
+    let hierarchy = Hierarchy::new(terrain, table);
+    plan(
+        terrain,
+        &hierarchy,
+        view,
+        &PlanInputs {
+            table,
+            sight,
+            merge: true,
+            cull: true,
+        },
+    )
+}
+
+/// A grid of 512 x 512 patches, as many as a 32769^2 terrain's 64-cell
+/// patches, 32 km across: 1025^2 samples 32 m apart in 2-cell patches,
+/// rolling hills a few hundred metres high with a little roughness. The
+/// plan's walk depends on the grid and the errors, not on what a patch
+/// holds.
+fn wide_grid() -> Terrain {
+    let rough = noise_map(1025, 1025, 11);
+    let map = Heightmap::from_fn(1025, 1025, |r, c| {
+        let (x, z) = (c as f32 / 90.0, r as f32 / 70.0);
+        300.0 * (x.sin() * z.cos()) + 80.0 * (0.37 * x + 1.3 * z).sin() + 0.02 * rough.get(r, c)
+    })
+    .unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(32.0), 2, DVec2::ZERO).unwrap();
+    Terrain::new(info, 0.0).unwrap()
+}
+
+/// From the ground up to far above, looking across and down, the plan of a
+/// 512 x 512 patch grid visits a few thousand nodes, however many patches
+/// it sees: a few hundred when smooth ground merges, and no more than
+/// about one per block of 8 x 8 patches when nothing merges.
+#[test]
+fn the_plan_visits_a_few_thousand_nodes_of_a_512_by_512_patch_grid() {
+    let terrain = wide_grid();
+    let table = terrain.error_table();
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    assert_eq!(terrain.grid().patch_count(), 512 * 512);
+    let (lo, hi) = terrain.info().min_max();
+    let mut most_seen = 0;
+    for height in [2.0, 30.0, 300.0, 3_000.0, 30_000.0] {
+        let eye = DVec3::new(-14_000.0, f64::from(hi) + height, -14_000.0);
+        for target in [
+            DVec3::new(14_000.0, f64::from(lo), 14_000.0),
+            DVec3::new(0.0, f64::from(lo), 0.0),
+            DVec3::new(-13_000.0, f64::from(lo), -13_000.0),
+        ] {
+            let view = view_of(&terrain, eye, target, 1.0);
+            for (merge, most) in [(true, 1_000), (false, 6_000)] {
+                let inputs = PlanInputs {
+                    table: &table,
+                    sight: None,
+                    merge,
+                    cull: true,
+                };
+                let frame = plan(&terrain, &hierarchy, &view, &inputs);
+                assert!(
+                    frame.nodes_visited <= most,
+                    "{height} m up, looking at {target}, merging {merge}: {} nodes visited for {} patches",
+                    frame.nodes_visited,
+                    frame.patches_in_view
+                );
+                most_seen = most_seen.max(frame.patches_in_view);
+            }
+        }
+    }
+    // The views see hundreds of thousands of patches: the walk visits far
+    // fewer nodes than that.
+    assert!(most_seen > 200_000, "{most_seen}");
+}
+
+/// The plan's blocks and merged nodes hold every patch in view exactly
+/// once; the patches outside it they hold are those their blocks reach.
+#[test]
+fn blocks_and_merged_nodes_cover_the_patches_in_view_once() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table();
+    assert!(sight.is_some());
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let grid = terrain.grid();
+    let (_, hi) = terrain.info().min_max();
+    for (eye, tau) in [
+        (DVec3::new(-20_000.0, f64::from(hi) + 200.0, -15_000.0), 1.0),
+        (DVec3::new(0.0, 60_000.0, -40_000.0), 2.0),
+        (DVec3::new(5_000.0, f64::from(hi) + 3_000.0, 0.0), 0.5),
+    ] {
+        let view = view_of(&terrain, eye, DVec3::ZERO, tau);
+        let frame = planned(&terrain, &table, sight, &view);
+        let mut covered = vec![0u32; grid.patch_count()];
+        for block in &frame.blocks {
+            for p in block.patches(grid) {
+                covered[p] += 1;
+            }
+        }
+        let cols = grid.patch_cols();
+        for node in &frame.merged {
+            for r in node.row..node.row + node.span() {
+                for c in node.col..node.col + node.span() {
+                    covered[r as usize * cols + c as usize] += 1;
+                }
+            }
+        }
+        // A patch outside the frustum may ride along in a block or node
+        // that reaches into it; no patch is covered twice, and every patch
+        // in view is covered.
+        let (visible, _) = patches_in_view(&terrain, &hierarchy, &view, true);
+        let mut riders = 0;
+        for (p, &n) in covered.iter().enumerate() {
+            let seen = visible.binary_search(&(p as u32)).is_ok();
+            assert!(n <= 1, "patch {p} from {eye} covered {n} times");
+            assert!(
+                !seen || n == 1,
+                "patch {p} from {eye} in view but not covered"
+            );
+            riders += usize::from(!seen && n == 1);
+        }
+        assert_eq!(frame.patches_in_view, visible.len() + riders);
+        let singles = frame.blocks.iter().filter(|b| b.level == 0).count();
+        assert!(
+            singles > 0 && frame.blocks.len() > singles,
+            "{eye}: blocks of one size only"
+        );
+    }
+}
+
+/// The share of pixels over tau only ever coarsens: no block is drawn finer
+/// than the bound's level from its nearest point, and a block the share
+/// chose is drawn coarser than that.
+#[test]
+fn the_share_only_coarsens_the_bounds_choice() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table();
+    let (_, hi) = terrain.info().min_max();
+    let mut chosen = 0;
+    for tau in [0.5, 1.0, 4.0] {
+        let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
+        let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), tau);
+        let bound = planned(&terrain, &table, None, &view);
+        let shared = planned(&terrain, &table, sight, &view);
+        // Without the model every block is a single patch at the bound's
+        // level; with it, each patch of a block is drawn at most as fine.
+        let level_of = |frame: &FramePlan, p: usize| {
+            frame
+                .blocks
+                .iter()
+                .find(|b| b.patches(terrain.grid()).any(|q| q == p))
+                .map(|b| b.patch_level)
+        };
+        for block in &shared.blocks {
+            chosen += usize::from(block.chosen);
+            for p in block.patches(terrain.grid()) {
+                if let (Some(own), Some(by_bound)) = (level_of(&shared, p), level_of(&bound, p)) {
+                    if block.level == 0 {
+                        assert!(
+                            own <= by_bound,
+                            "patch {p} at tau {tau}: {own} > {by_bound}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    assert!(chosen > 0, "the share coarsened nothing");
+}
+
+/// A block's entry adds its patches' areas and keeps their largest errors:
+/// seen from anywhere, it puts at least as large a share of its pixels
+/// over any error as each of them. The cache's bytes give the same table.
+#[test]
+fn block_entries_bound_their_patches_and_survive_the_cache() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let sight = terrain.sight_table().expect("the DEM is held whole");
+    let grid = terrain.grid();
+    let bytes = sight.to_bytes();
+    assert_eq!(bytes.len(), SightTable::encoded_len(grid));
+    let again = SightTable::from_bytes(grid, &bytes).expect("its own bytes");
+    assert_eq!(&again, sight);
+    assert!(SightTable::from_bytes(grid, &bytes[1..]).is_none());
+
+    let mut compared = 0;
+    for at in [
+        LatticePoint::new(1.0, 0.3, 0.02),
+        LatticePoint::new(-0.4, 1.0, 0.3),
+        LatticePoint::new(0.2, -1.0, 1.5),
+    ] {
+        for (col, row) in [(0usize, 0usize), (2, 4), (4, 2)] {
+            let block = Block { level: 1, col, row };
+            let Some(whole) = sight.view(block, &at, 5.0) else {
+                continue;
+            };
+            let children: Vec<_> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .map(|(dc, dr)| Block {
+                    level: 0,
+                    col: 2 * col + dc,
+                    row: 2 * row + dr,
+                })
+                .iter()
+                .map(|&b| sight.view(b, &at, 5.0).expect("a whole block's patch"))
+                .collect();
+            let area: f32 = children.iter().map(|c| c.area()).sum();
+            assert!((whole.area() - area).abs() <= 1e-3 * area, "{block:?}");
+            for k in 0..LEVELS {
+                for child in &children {
+                    assert!(whole.over_fraction(k) >= child.over_fraction(k) - 1e-6);
+                }
+                // Finer levels never put more over.
+                if k + 1 < LEVELS {
+                    assert!(whole.over_fraction(k + 1) <= whole.over_fraction(k) + 1e-6);
+                }
+            }
+            compared += 1;
+        }
+    }
+    assert!(compared >= 6);
+}
