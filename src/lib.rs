@@ -11,7 +11,7 @@
 //! - [`material`]: a scene's textures, blend maps and lightmap, loaded.
 //! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
-//!   table, height queries, frustum and LOD maths). No GPU types.
+//!   table, the view model, height queries, frustum maths). No GPU types.
 //! - [`shader_constants`], [`shader_variants`]: constants and shader
 //!   variants shared with build.rs and GLSL.
 //! - [`cache`], [`output`]: the on-disk cache and atomic file writes,

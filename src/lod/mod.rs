@@ -4,6 +4,13 @@
 //! - [`factors`]: the tessellation-factor formulas the control shader
 //!   mirrors (distance, error-bounded, the peers' policies).
 //! - [`geomip`]: geomipmapping's levels, stitching and morphing.
+//! - [`view`]: what a frame's choice sees: eye, frustum, pixels per radian,
+//!   tau.
+//! - [`hierarchy`]: the node quadtree over the patch grid, built once per
+//!   terrain, with each node's bounds and largest errors.
+//! - [`plan`]: the real-time error LOD: a frame plan walked down the
+//!   hierarchy, levels from the bound and the terrain's view model, in a
+//!   fraction of a millisecond whatever the terrain's size.
 //! - [`patch_merge`]: merged nodes, blocks of flat patches drawn as one.
 //! - [`view_measure`] and [`viewshed`]: the error a view sees, measured
 //!   sample by sample (`--error-measure view`, for offline stills).
