@@ -1,5 +1,6 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#define FRAME_IN_STORAGE
 #include "terrain_common.glsl"
 #include "occlusion.glsl"
 

@@ -6,7 +6,13 @@
 // Per-frame values. Positions are camera-relative: the terrain's local
 // coordinates minus the eye's, so precision does not depend on where the
 // terrain sits in the world. Mirrors `render::uniforms::FrameUniforms`.
+// The control shader defines FRAME_IN_STORAGE and reads the same block
+// as a read-only storage buffer (`render::frame::frame_bindings` says why).
+#ifdef FRAME_IN_STORAGE
+layout(std140, set = 0, binding = BINDING_FRAME_STORAGE) readonly buffer Frame {
+#else
 layout(std140, set = 0, binding = BINDING_FRAME) uniform Frame {
+#endif
     // Projection times the view's rotation (the eye is the origin).
     mat4 view_proj;
     // Normalised frustum planes in camera-relative coordinates, inside where

@@ -7,6 +7,9 @@
 pub const BINDING_FRAME: u32 = 0;
 /// Descriptor binding of the heightmap (set 0): R32_SFLOAT, read with texelFetch.
 pub const BINDING_HEIGHTMAP: u32 = 1;
+/// The same frame block, read by the control shader as a read-only
+/// storage buffer (see `render::frame::frame_bindings`).
+pub const BINDING_FRAME_STORAGE: u32 = 21;
 
 /// Storage buffer of the per-patch error table (tess path, error LOD).
 pub const BINDING_ERROR_TABLE: u32 = 4;
@@ -131,6 +134,7 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
     vec![
         ("BINDING_FRAME", BINDING_FRAME.to_string()),
         ("BINDING_HEIGHTMAP", BINDING_HEIGHTMAP.to_string()),
+        ("BINDING_FRAME_STORAGE", BINDING_FRAME_STORAGE.to_string()),
         ("BINDING_ERROR_TABLE", BINDING_ERROR_TABLE.to_string()),
         (
             "BINDING_FULL_RESOLUTION",

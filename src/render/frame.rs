@@ -12,8 +12,8 @@ use super::settings::RenderSettings;
 use super::tess_path::ChoiceBuffers;
 use super::uniforms::FrameUniforms;
 use crate::shader_constants::{
-    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FULL_RESOLUTION, BINDING_HEIGHTMAP, BINDING_PAGES,
-    BINDING_PAGE_TABLE, BINDING_VISIBILITY,
+    BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION,
+    BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_VISIBILITY,
 };
 use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
 use crate::vk::memory::{Buffer, Image};
@@ -80,7 +80,7 @@ pub(super) fn build_frames(
     for (i, set) in sets.iter().enumerate() {
         let uniforms = device.create_host_buffer(
             &format!("terrain.frame_uniforms[{i}]"),
-            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::STORAGE_BUFFER,
             bytemuck::bytes_of(&FrameUniforms::default()),
         )?;
         let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
@@ -161,11 +161,24 @@ impl DescriptorPlan {
         };
         if tess {
             // The control shader's: the error table, the full-resolution
-            // bits and the occlusion state.
+            // bits, the occlusion state, and the frame block again as a
+            // read-only storage buffer. A driver may specialise a shader
+            // on the uniform-buffer values its branches test: lavapipe
+            // (Mesa 22.3) does so whenever that removes half a shader's
+            // code, again at every bind, and keeps each compile until the
+            // device goes. The control shader's LOD-metric branches are
+            // most of its code, so it was compiled once more every
+            // tessellated frame, about 1 MB of resident memory a frame
+            // (benches/notes.md, section 9). Storage-buffer values are
+            // not specialised on. The other stages keep the uniform
+            // buffer: bound as a storage buffer in every stage, lavapipe
+            // drew textured scenes with their textures blurred away
+            // (the material tests' golden images and triplanar scale).
             for binding in [
                 BINDING_ERROR_TABLE,
                 BINDING_FULL_RESOLUTION,
                 BINDING_VISIBILITY,
+                BINDING_FRAME_STORAGE,
             ] {
                 plan.bindings.push((
                     binding,
@@ -174,7 +187,7 @@ impl DescriptorPlan {
                 ));
             }
             plan.pool_sizes
-                .push((vk::DescriptorType::STORAGE_BUFFER, 3));
+                .push((vk::DescriptorType::STORAGE_BUFFER, 4));
         }
         let vertex_stages = stages & !vk::ShaderStageFlags::FRAGMENT;
         for binding in appearance.bindings(vertex_stages) {

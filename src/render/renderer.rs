@@ -424,7 +424,8 @@ impl TerrainRenderer {
 
     /// Per frame slot, the tess path's choice buffers (starting as
     /// `table`), and the slot's set pointed at them and the occlusion
-    /// state (the bindings of the tess path's control shader).
+    /// state and its own frame block (the bindings of the tess path's
+    /// control shader).
     fn add_error_lod_buffers(&mut self, terrain: &Terrain, table: &ErrorTable) -> Result<()> {
         for (i, frame) in self.frames.iter_mut().enumerate() {
             frame.choice = Some(ChoiceBuffers::new(
@@ -432,7 +433,7 @@ impl TerrainRenderer {
                 i,
                 terrain,
                 table,
-                frame.set,
+                (frame.set, &frame.uniforms),
                 &self.occlusion.visibility,
             )?);
         }

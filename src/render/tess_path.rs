@@ -24,7 +24,9 @@ use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
-use crate::shader_constants::{BINDING_ERROR_TABLE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY};
+use crate::shader_constants::{
+    BINDING_ERROR_TABLE, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY,
+};
 use crate::terrain::{ErrorTable, PatchGrid, Terrain};
 use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::Buffer;
@@ -207,7 +209,7 @@ impl ChoiceBuffers {
         slot: usize,
         terrain: &Terrain,
         bound: &ErrorTable,
-        set: DescriptorSet,
+        (set, frame): (DescriptorSet, &Buffer),
         visibility: &Buffer,
     ) -> Result<Self> {
         let patches = terrain.grid().patch_count();
@@ -234,6 +236,7 @@ impl ChoiceBuffers {
             (BINDING_ERROR_TABLE, &errors),
             (BINDING_FULL_RESOLUTION, &choice),
             (BINDING_VISIBILITY, visibility),
+            (BINDING_FRAME_STORAGE, frame),
         ] {
             let size = buffer.desc.size;
             device.write_buffer(
