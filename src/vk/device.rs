@@ -35,6 +35,9 @@ pub struct Capabilities {
     pub max_image_array_layers: u32,
     /// maxSamplerAnisotropy (meaningful with `sampler_anisotropy`).
     pub max_sampler_anisotropy: f32,
+    /// subPixelPrecisionBits: the rasteriser snaps vertex positions to
+    /// 1/2^bits of a pixel.
+    pub sub_pixel_precision_bits: u32,
     /// Samples per pixel that colour and depth attachments both support,
     /// of 1, 2, 4 and 8, ascending.
     pub sample_counts: Vec<u32>,
@@ -299,6 +302,7 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
                 max_sampler_anisotropy: props.limits.max_sampler_anisotropy,
+                sub_pixel_precision_bits: props.limits.sub_pixel_precision_bits,
                 sample_counts: sample_counts(
                     props.limits.framebuffer_color_sample_counts
                         & props.limits.framebuffer_depth_sample_counts,

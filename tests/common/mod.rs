@@ -70,7 +70,6 @@ pub fn cliff_map(width: usize, depth: usize, height: f32) -> Heightmap {
     .expect("valid size")
 }
 
-/// Writes bytes to a fresh file named `name` in a temporary directory.
 /// Capabilities of a made-up device, for policies tested without one:
 /// everything optional present, 1 or 4 samples per pixel.
 pub fn test_capabilities() -> vkterrain::vk::Capabilities {
@@ -90,11 +89,13 @@ pub fn test_capabilities() -> vkterrain::vk::Capabilities {
         max_image_dimension_2d: 4096,
         max_image_array_layers: 256,
         max_sampler_anisotropy: 16.0,
+        sub_pixel_precision_bits: 8,
         sample_counts: vec![1, 4],
         occlusion_sample_counts: vec![1, 4],
     }
 }
 
+/// Writes bytes to a fresh file named `name` in a temporary directory.
 pub fn temp_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
     let path = dir.path().join(name);
     std::fs::write(&path, bytes).expect("temp file written");
@@ -142,4 +143,63 @@ pub fn succeeded(out: &std::process::Output) -> String {
 pub fn json_file(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("the JSON file is written"))
         .expect("the file is JSON")
+}
+
+/// What a device's rasteriser and depth buffer resolve: the inputs of
+/// `surface_height_tolerance`.
+#[derive(Clone, Copy, Debug)]
+pub struct RasterPrecision {
+    /// subPixelPrecisionBits.
+    pub sub_pixel_bits: u32,
+    /// Significand bits of the depth format (24 for D32_SFLOAT).
+    pub depth_significand_bits: u32,
+}
+
+/// How far apart in height a surface drawn on the GPU and the same
+/// surface evaluated on the CPU may lie at a pixel, from the device's
+/// precision alone, for a view `distance` metres from the surface whose
+/// pixels span `pixel_metres` on ground rising at most `max_slope`:
+/// - the rasteriser snaps each vertex to 1/2^bits of a pixel along x and
+///   y, so the surface seen at a pixel centre moves sideways by at most
+///   sqrt(2)/2 of that step, `pixel_metres` times it in metres, and its
+///   height there by `max_slope` times that;
+/// - depth is stored in a float, and positions are computed in f32
+///   relative to the eye: the point rebuilt from a pixel's depth is off
+///   along its ray by a few units of the last significand bit of its
+///   distance (8 allowed).
+pub fn surface_height_tolerance(
+    precision: RasterPrecision,
+    pixel_metres: f64,
+    max_slope: f64,
+    distance: f64,
+) -> f64 {
+    let snap = std::f64::consts::FRAC_1_SQRT_2
+        * (-f64::from(precision.sub_pixel_bits)).exp2()
+        * pixel_metres
+        * max_slope;
+    let depth = 8.0 * (-f64::from(precision.depth_significand_bits)).exp2() * distance;
+    snap + depth
+}
+
+/// The steepest rise of a terrain's triangles, per metre: over every cell,
+/// the gradient of its samples' differences along x and z.
+pub fn max_slope(info: &TerrainInfo) -> f64 {
+    let spacing = info.spacing();
+    let at = |r: usize, c: usize| {
+        let p = info.sample_position(r, c);
+        f64::from(
+            info.height_at(p.x, p.y)
+                .expect("a sample is on the terrain"),
+        )
+    };
+    let mut steepest = 0.0f64;
+    for r in 0..info.rows() - 1 {
+        for c in 0..info.cols() - 1 {
+            let (a, b, cc, d) = (at(r, c), at(r, c + 1), at(r + 1, c), at(r + 1, c + 1));
+            let sx = (b - a).abs().max((d - cc).abs()) / spacing.x;
+            let sz = (cc - a).abs().max((d - b).abs()) / spacing.y;
+            steepest = steepest.max(sx.hypot(sz));
+        }
+    }
+    steepest
 }
