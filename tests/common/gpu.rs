@@ -39,6 +39,25 @@ pub fn skip_gpu() -> bool {
 /// ranks best here.
 pub const GOLDEN_DEVICE: &str = "llvmpipe";
 
+/// Opens the device golden images are compared on, saying why a test needs
+/// it when it is missing: every other GPU test runs on whatever device
+/// VKTERRAIN_DEVICE names.
+pub fn open_golden_gpu() -> Gpu {
+    Gpu::open(&GpuOptions {
+        validate: true,
+        device: Some(GOLDEN_DEVICE.to_string()),
+        ..GpuOptions::default()
+    })
+    .unwrap_or_else(|e| {
+        panic!(
+            "this test compares against images rendered by lavapipe ({GOLDEN_DEVICE}), or \
+             relies on what lavapipe can and cannot draw, so it needs that device whatever \
+             VKTERRAIN_DEVICE says: {e} (scripts/install-deps installs it; \
+             VKTERRAIN_SKIP_GPU=1 skips GPU tests)"
+        )
+    })
+}
+
 /// Opens the GPU for a test: validation on, the device named by
 /// `device` or VKTERRAIN_DEVICE (otherwise the best one).
 pub fn open_gpu(device: Option<&str>) -> Gpu {
@@ -102,7 +121,7 @@ impl GpuScene {
         (width, height): (u32, u32),
         samples: u32,
     ) -> Self {
-        let gpu = open_gpu(Some(GOLDEN_DEVICE));
+        let gpu = open_golden_gpu();
         Self::on(gpu, terrain, appearance, (width, height, false, samples))
     }
 
