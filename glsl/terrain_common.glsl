@@ -7,7 +7,7 @@
 // coordinates minus the eye's, so precision does not depend on where the
 // terrain sits in the world. Mirrors `render::uniforms::FrameUniforms`.
 // The control shader defines FRAME_IN_STORAGE and reads the same block
-// as a read-only storage buffer (`render::frame::frame_bindings` says why).
+// as a read-only storage buffer (`render::frame::DescriptorPlan::new` says why).
 #ifdef FRAME_IN_STORAGE
 layout(std140, set = 0, binding = BINDING_FRAME_STORAGE) readonly buffer Frame {
 #else

@@ -8,7 +8,7 @@ pub const BINDING_FRAME: u32 = 0;
 /// Descriptor binding of the heightmap (set 0): R32_SFLOAT, read with texelFetch.
 pub const BINDING_HEIGHTMAP: u32 = 1;
 /// The same frame block, read by the control shader as a read-only
-/// storage buffer (see `render::frame::frame_bindings`).
+/// storage buffer (see `render::frame::DescriptorPlan::new`).
 pub const BINDING_FRAME_STORAGE: u32 = 21;
 
 /// Storage buffer of the per-patch error table (tess path, error LOD).

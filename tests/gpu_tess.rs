@@ -1365,11 +1365,9 @@ fn reference_height(info: &TerrainInfo, x: f64, z: f64) -> Option<f64> {
     }
     let (c, r) = ((g.x as usize).min(cols - 2), (g.y as usize).min(rows - 2));
     let (u, v) = (g.x - c as f64, g.y - r as f64);
-    let at = |r: usize, c: usize| {
-        let p = info.sample_position(r, c);
-        info.height_at(p.x, p.y).map(f64::from)
-    };
-    let (a, b, cc, d) = (at(r, c)?, at(r, c + 1)?, at(r + 1, c)?, at(r + 1, c + 1)?);
+    let heights = info.heightmap().expect("the heights are in memory");
+    let at = |r: usize, c: usize| f64::from(heights.get(r, c));
+    let (a, b, cc, d) = (at(r, c), at(r, c + 1), at(r + 1, c), at(r + 1, c + 1));
     Some(if u + v <= 1.0 {
         a + u * (b - a) + v * (cc - a)
     } else {
