@@ -8,11 +8,13 @@
 // The error LOD's factors are whole numbers (powers of two, or an edge's
 // cell count towards a full-resolution neighbour), tessellated with equal
 // spacing so the surface is the one the error table bounds; the distance
-// LOD glides with fractional even spacing.
+// LOD glides with fractional even spacing. u runs along +x and v along +z,
+// so the domain's clockwise order is the counter-clockwise front face the
+// pipelines cull against, as the brute and geomip paths wind theirs.
 #ifdef EQUAL_SPACING
-layout(quads, equal_spacing, ccw) in;
+layout(quads, equal_spacing, cw) in;
 #else
-layout(quads, fractional_even_spacing, ccw) in;
+layout(quads, fractional_even_spacing, cw) in;
 #endif
 
 layout(location = 1) in vec2 in_grid[];

@@ -279,6 +279,9 @@ fn row(
         frame_ms: Some(gpu + 0.1),
         triangles: Some(tris),
         tes_invocations: Some(tris / 2),
+        // Finer rows shade more of each pixel's hidden ground.
+        fragment_invocations: Some(2048 + tris / 100),
+        covered_pixels: Some(1024),
         gpu_memory_bytes: 1 << 20,
         predicted_max_px: tau.map(|t| f64::from(t) * 1.5),
         predicted_p99_px: tau.map(f64::from),

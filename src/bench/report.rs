@@ -91,7 +91,7 @@ pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
          lod_ms,lod_ms_max,frame_ms,\
-         triangles,tes_invocations,gpu_memory_bytes,predicted_max_px,predicted_p99_px,max_px,p99_px,mean_px,error_pixels,\
+         triangles,tes_invocations,fragment_invocations,covered_pixels,gpu_memory_bytes,predicted_max_px,predicted_p99_px,max_px,p99_px,mean_px,error_pixels,\
          mismatched_pixels,occlusion,patches_occluded,patches_drawn_hidden,culling_gpu_ms,\
          differing_pixels\n",
     );
@@ -115,6 +115,8 @@ pub fn csv(rows: &[Row]) -> String {
             opt(r.frame_ms.map(|v| format!("{v:.3}"))),
             opt(r.triangles),
             opt(r.tes_invocations),
+            opt(r.fragment_invocations),
+            opt(r.covered_pixels),
             r.gpu_memory_bytes.to_string(),
             opt(r.predicted_max_px.map(|v| format!("{v:.4}"))),
             opt(r.predicted_p99_px.map(|v| format!("{v:.4}"))),
@@ -597,19 +599,20 @@ fn results_section(w: &mut String, rows: &[Row]) {
         );
         let _ = writeln!(
             w,
-            "| config | triangles | TES invocations | GPU ms | CPU ms | level choice ms (largest) | frame ms | GPU MiB | predicted max px | max px | p99 px | mean px | mismatched |"
+            "| config | triangles | TES invocations | overdraw | GPU ms | CPU ms | level choice ms (largest) | frame ms | GPU MiB | predicted max px | max px | p99 px | mean px | mismatched |"
         );
         let _ = writeln!(
             w,
-            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+            "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
         );
         for r in group {
             let _ = writeln!(
                 w,
-                "| {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
+                "| {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
                 r.config,
                 opt(r.triangles),
                 opt(r.tes_invocations),
+                overdraw(r).map_or("n/a".into(), |v| format!("{v:.2}")),
                 r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
                 r.cpu_ms,
                 match (r.lod_ms, r.lod_ms_max) {
@@ -627,6 +630,14 @@ fn results_section(w: &mut String, rows: &[Row]) {
             );
         }
         let _ = writeln!(w);
+    }
+}
+
+/// Fragment shader invocations per pixel the terrain covers.
+pub fn overdraw(r: &Row) -> Option<f64> {
+    match (r.fragment_invocations, r.covered_pixels) {
+        (Some(f), Some(c)) if c > 0 => Some(f as f64 / c as f64),
+        _ => None,
     }
 }
 
@@ -659,7 +670,9 @@ warm-up frames and each view's first frame included, so a choice that only a sti
 could reuse is not hidden. `frame_ms` is the median over the timed frames of CPU plus GPU \
 time: what a frame costs a user. `triangles` are clipping primitives and \
 `tes_invocations` tessellation evaluation invocations, from pipeline statistics (the mean per \
-frame over the flythrough). `gpu_memory_bytes` is the device memory of the renderer of the \
+frame over the flythrough). `overdraw` is `fragment_invocations` (fragment shader invocations, \
+from the same statistics) over `covered_pixels` (the pixels the terrain covers in the row's \
+own render): 1 where every covered pixel is shaded once. `gpu_memory_bytes` is the device memory of the renderer of the \
 row's path (heightmap, buffers, uniforms) plus the render target.\n\n\
 **Oracle.** For each camera frame, the geomip geometry is drawn with every patch at one uniform \
 level, for each level in turn, and measured against brute. Each pixel's error is charged to \

@@ -364,6 +364,14 @@ pub struct Row {
     /// without pipeline statistics.
     pub triangles: Option<u64>,
     pub tes_invocations: Option<u64>,
+    /// Fragment shader invocations per frame (mean over the flythrough);
+    /// null without pipeline statistics.
+    #[serde(default)]
+    pub fragment_invocations: Option<u64>,
+    /// Pixels the terrain covers (mean per frame): with
+    /// `fragment_invocations`, the path's overdraw.
+    #[serde(default)]
+    pub covered_pixels: Option<u64>,
     /// Device memory of this path's renderer plus the render target.
     pub gpu_memory_bytes: u64,
     /// The largest error the LOD choice expected on screen, over the
@@ -419,6 +427,8 @@ struct Gathered {
     frame_ms: Vec<f64>,
     triangles: Vec<u64>,
     tes_invocations: Vec<u64>,
+    fragment_invocations: Vec<u64>,
+    covered_pixels: Vec<u64>,
     predicted_max_px: Option<f64>,
     predicted_p99_px: Option<f64>,
     errors: ErrorHistogram,
@@ -588,6 +598,9 @@ impl<'a> Bench<'a> {
         if let Some(s) = frame.measurements.statistics {
             gathered.triangles.push(s.clipping_primitives);
             gathered.tes_invocations.push(s.tes_invocations);
+            gathered.fragment_invocations.push(s.fragment_invocations);
+            let covered = frame.readback.depth.iter().filter(|&&d| d > 0.0).count();
+            gathered.covered_pixels.push(covered as u64);
         }
         if let Some(o) = frame.measurements.occlusion {
             gathered
@@ -872,6 +885,8 @@ impl<'a> Bench<'a> {
                     frame_ms: median(&mut g.frame_ms),
                     triangles: mean_count(&g.triangles),
                     tes_invocations: mean_count(&g.tes_invocations),
+                    fragment_invocations: mean_count(&g.fragment_invocations),
+                    covered_pixels: mean_count(&g.covered_pixels),
                     gpu_memory_bytes: bytes,
                     predicted_max_px: g.predicted_max_px,
                     predicted_p99_px: g.predicted_p99_px,

@@ -11,6 +11,7 @@
 //! - [`plan`]: the real-time error LOD: a frame plan walked down the
 //!   hierarchy, levels from the bound and the terrain's view model, in a
 //!   fraction of a millisecond whatever the terrain's size.
+//! - [`order`]: front-to-back draw order of the chosen patches.
 //! - [`patch_merge`]: merged nodes, blocks of flat patches drawn as one.
 //! - [`view_measure`] and [`viewshed`]: the error a view sees, measured
 //!   sample by sample (`--error-measure view`, for offline stills).
@@ -18,6 +19,7 @@
 pub mod factors;
 pub mod geomip;
 pub mod hierarchy;
+pub mod order;
 pub mod patch_merge;
 pub mod plan;
 pub mod view;

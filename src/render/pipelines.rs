@@ -144,6 +144,7 @@ fn create_pipeline(
         topology,
         patch_control_points,
         polygon_mode,
+        cull_back_faces: true,
         color_format,
         depth_format: DEPTH_FORMAT,
         // Reversed Z: nearer is larger.
@@ -208,6 +209,7 @@ pub(super) fn create_culled_pipeline(
         } else {
             vk::PolygonMode::FILL
         },
+        cull_back_faces: false,
         color_format: target.color_format,
         depth_format: DEPTH_FORMAT,
         depth_compare: vk::CompareOp::ALWAYS,
@@ -243,6 +245,7 @@ pub(super) fn create_sky_pipeline(
         topology: vk::PrimitiveTopology::TRIANGLE_LIST,
         patch_control_points: 0,
         polygon_mode: vk::PolygonMode::FILL,
+        cull_back_faces: false,
         color_format,
         depth_format: DEPTH_FORMAT,
         depth_compare: vk::CompareOp::GREATER_OR_EQUAL,

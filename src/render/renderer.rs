@@ -42,11 +42,12 @@ use super::pipelines::{
 use super::residency::StreamShape;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
-use super::tess_path::{patch_batches, ChoiceBuffers, TessGeometry};
+use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
 use crate::lod::geomip;
 use crate::lod::hierarchy::Hierarchy;
+use crate::lod::order::DrawOrder;
 use crate::lod::plan::patches_in_view;
 use crate::lod::view::Tau;
 use crate::material::Appearance;
@@ -523,6 +524,8 @@ impl TerrainRenderer {
                     prepared.predicted_max_px = predicted.map(|p| p.0);
                     prepared.predicted_p99_px = predicted.and_then(|p| p.1);
                     prepared.patches_in_view = prepared.geomip.len();
+                    let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
+                    prepared.geomip.sort_by_cached_key(|d| order.key(d.patch));
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
@@ -539,7 +542,8 @@ impl TerrainRenderer {
                 let frame = &mut self.frames[slot];
                 frame.prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
                 frame.prepared.patches_in_view = visible.len();
-                frame.tess_batches = patch_batches(visible, self.max_patches_per_draw);
+                let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
+                frame.tess_batches = run_batches(order.runs(visible), self.max_patches_per_draw);
             }
             (RenderPath::Brute, _) => {
                 self.frames[slot].prepared.patches_in_view = terrain.grid().patch_count()

@@ -20,6 +20,7 @@ use super::settings::{ErrorMeasure, RenderPath, RenderSettings};
 use super::view::FrameView;
 use super::view_measure::seen_errors;
 use crate::lod::hierarchy::Hierarchy;
+use crate::lod::order::DrawOrder;
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock};
 use crate::lod::view::Tau;
@@ -27,7 +28,7 @@ use crate::lod::view_measure::Diagonal;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY,
 };
-use crate::terrain::{ErrorTable, PatchGrid, Terrain};
+use crate::terrain::{ErrorTable, Terrain};
 use crate::vk::descriptors::DescriptorSet;
 use crate::vk::memory::Buffer;
 use crate::vk::owned::PipelineLayout;
@@ -120,10 +121,12 @@ impl TessGeometry {
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;
         let merged_indices = choice.write(&frame_plan, (&self.errors, table), terrain)?;
+        let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
         exact_draws(terrain, &frame_plan, geomip, exact);
+        exact.sort_by_cached_key(|d| order.key(d.patch));
         Ok(PlannedFrame {
             lod_ms,
-            tess_batches: block_batches(&frame_plan, terrain.grid(), max_patches_per_draw),
+            tess_batches: block_batches(&frame_plan, &order, max_patches_per_draw),
             merged_batches: patch_batches(0..merged_indices / 4, max_patches_per_draw),
             predicted_max_px: seen
                 .as_ref()
@@ -380,48 +383,52 @@ fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
 }
 
 /// The tess path's draws of `plan`'s blocks not drawn at full resolution
-/// (see `patch_batches`): each block's rows of patches, in grid order.
-fn block_batches(plan: &FramePlan, grid: &PatchGrid, max_patches: Option<u32>) -> Vec<(u32, u32)> {
-    let cols = grid.patch_cols();
-    let mut runs: Vec<(u32, u32)> = Vec::new();
-    for block in plan.blocks.iter().filter(|b| !b.full_resolution) {
-        let (c, r, s) = (
-            block.col as usize,
-            block.row as usize,
-            block.span() as usize,
-        );
-        let (c1, r1) = ((c + s).min(cols), (r + s).min(grid.patch_rows()));
-        runs.extend((r..r1).map(|row| ((row * cols + c) as u32, (c1 - c) as u32)));
-    }
-    runs.sort_unstable();
-    patch_batches(
-        runs.into_iter().flat_map(|(first, n)| first..first + n),
-        max_patches,
-    )
+/// (see `run_batches`), nearest first (`DrawOrder`).
+fn block_batches(plan: &FramePlan, order: &DrawOrder, max_patches: Option<u32>) -> Vec<(u32, u32)> {
+    let grid = order.grid();
+    let mut patches: Vec<u32> = plan
+        .blocks
+        .iter()
+        .filter(|b| !b.full_resolution)
+        .flat_map(|b| b.patches(grid))
+        .map(|p| p as u32)
+        .collect();
+    patches.sort_unstable();
+    run_batches(order.runs(patches), max_patches)
 }
 
 /// The tess path's draws of the patches `drawn` (indices in increasing
-/// order), as (first index, index count) with four indices a patch: one
-/// draw per run of consecutive patches, split into draws of at most
-/// `max_patches` (see `Workarounds::max_patches_per_draw`). Patches left
-/// out never reach the control shader.
+/// order), one draw per run of consecutive patches (see `run_batches`).
 pub(super) fn patch_batches(
     drawn: impl IntoIterator<Item = u32>,
     max_patches: Option<u32>,
 ) -> Vec<(u32, u32)> {
+    run_batches(drawn.into_iter().map(|p| (p, 1)), max_patches)
+}
+
+/// Draws of `runs` of consecutive patches (first, count), in their order,
+/// as (first index, index count) with four indices a patch: a run that
+/// continues the one before joins its draw, and draws are split into at
+/// most `max_patches` (see `Workarounds::max_patches_per_draw`). Patches
+/// left out never reach the control shader.
+pub(super) fn run_batches(
+    runs: impl IntoIterator<Item = (u32, u32)>,
+    max_patches: Option<u32>,
+) -> Vec<(u32, u32)> {
     let max_patches = max_patches.unwrap_or(u32::MAX).max(1);
-    let mut batches = Vec::new();
-    let mut run: Option<(u32, u32)> = None;
-    for p in drawn {
-        run = match run {
-            Some((first, n)) if first + n == p && n < max_patches => Some((first, n + 1)),
-            run => {
-                batches.extend(run);
-                Some((p, 1))
-            }
-        };
+    let mut batches: Vec<(u32, u32)> = Vec::new();
+    for (mut first, mut n) in runs {
+        if let Some(last) = batches.last_mut().filter(|l| l.0 + l.1 == first) {
+            let joined = n.min(max_patches - last.1);
+            last.1 += joined;
+            (first, n) = (first + joined, n - joined);
+        }
+        while n > 0 {
+            let taken = n.min(max_patches);
+            batches.push((first, taken));
+            (first, n) = (first + taken, n - taken);
+        }
     }
-    batches.extend(run);
     batches
         .into_iter()
         .map(|(first, n)| (first * 4, n * 4))
@@ -430,7 +437,7 @@ pub(super) fn patch_batches(
 
 #[cfg(test)]
 mod tests {
-    use super::patch_batches;
+    use super::{patch_batches, run_batches};
 
     fn batches(drawn: &str, max: Option<u32>) -> Vec<(u32, u32)> {
         let indices = drawn
@@ -454,5 +461,16 @@ mod tests {
         );
         let all = batches(&"#".repeat(17), Some(8));
         assert_eq!(all, vec![(0, 32), (32, 32), (64, 4)]);
+    }
+
+    #[test]
+    fn ordered_runs_keep_their_order_and_join_only_what_continues() {
+        // Runs nearest first: 4..6 continues 2..4, 0..2 does not.
+        let runs = [(2, 2), (4, 2), (0, 2), (9, 5)];
+        assert_eq!(run_batches(runs, None), vec![(8, 16), (0, 8), (36, 20)]);
+        assert_eq!(
+            run_batches(runs, Some(3)),
+            vec![(8, 12), (20, 4), (0, 8), (36, 12), (48, 8)]
+        );
     }
 }

@@ -19,6 +19,9 @@ pub struct GraphicsPipelineDesc<'a> {
     /// Control points per patch; 0 for pipelines without tessellation.
     pub patch_control_points: u32,
     pub polygon_mode: vk::PolygonMode,
+    /// Whether triangles facing away from the eye (clockwise on screen)
+    /// are dropped before rasterisation.
+    pub cull_back_faces: bool,
     pub color_format: vk::Format,
     pub depth_format: vk::Format,
     pub depth_compare: vk::CompareOp,
@@ -64,7 +67,7 @@ impl Device {
     }
 
     /// A graphics pipeline with dynamic viewport and scissor, no blending,
-    /// a depth test, and no face culling.
+    /// a depth test, and back faces culled where `desc` asks.
     pub fn create_graphics_pipeline(&self, desc: &GraphicsPipelineDesc) -> Result<Pipeline> {
         let mut modules = Vec::with_capacity(desc.stages.len());
         for (stage, spirv) in desc.stages {
@@ -125,7 +128,10 @@ impl Device {
             .scissor_count(1);
         let raster = vk::PipelineRasterizationStateCreateInfo::default()
             .polygon_mode(desc.polygon_mode)
-            .cull_mode(vk::CullModeFlags::NONE)
+            .cull_mode(match desc.cull_back_faces {
+                true => vk::CullModeFlags::BACK,
+                false => vk::CullModeFlags::NONE,
+            })
             .front_face(vk::FrontFace::COUNTER_CLOCKWISE)
             .line_width(1.0);
         let multisample =

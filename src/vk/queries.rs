@@ -18,13 +18,17 @@ pub struct PipelineStatistics {
     pub clipping_invocations: u64,
     /// Primitives the clipper output: the triangles that were rasterised.
     pub clipping_primitives: u64,
+    /// Fragment shader invocations: every pixel shaded, overdraw included
+    /// (a device may count pixels the depth test then drops).
+    pub fragment_invocations: u64,
 }
 
 /// The flags in the order Vulkan writes their results (by bit position).
-const STATISTICS: [vk::QueryPipelineStatisticFlags; 5] = [
+const STATISTICS: [vk::QueryPipelineStatisticFlags; 6] = [
     vk::QueryPipelineStatisticFlags::VERTEX_SHADER_INVOCATIONS,
     vk::QueryPipelineStatisticFlags::CLIPPING_INVOCATIONS,
     vk::QueryPipelineStatisticFlags::CLIPPING_PRIMITIVES,
+    vk::QueryPipelineStatisticFlags::FRAGMENT_SHADER_INVOCATIONS,
     vk::QueryPipelineStatisticFlags::TESSELLATION_CONTROL_SHADER_PATCHES,
     vk::QueryPipelineStatisticFlags::TESSELLATION_EVALUATION_SHADER_INVOCATIONS,
 ];
@@ -211,13 +215,14 @@ impl FrameQueries {
                 *s += v;
             }
         }
-        let [vs, clip_in, clip_out, tcs, tes] = sum;
+        let [vs, clip_in, clip_out, fragments, tcs, tes] = sum;
         Ok(Some(PipelineStatistics {
             vertex_invocations: vs,
             tcs_patches: tcs,
             tes_invocations: tes,
             clipping_invocations: clip_in,
             clipping_primitives: clip_out,
+            fragment_invocations: fragments,
         }))
     }
 }

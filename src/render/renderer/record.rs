@@ -156,6 +156,23 @@ impl TerrainRenderer {
                 };
                 let indirect = self.indirect_draws(slot, phase)?;
                 let pipeline = pipelines.select(settings.wireframe)?;
+                // The full-resolution patches lie nearest the eye: drawn
+                // first, they hide what is behind them before it is shaded
+                // (see `lod::order`). They are listed after the batches.
+                if matches!(settings.lod_metric, LodMetric::Error(_))
+                    && !frame.prepared.exact.is_empty()
+                {
+                    let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
+                    let batches = frame.tess_batches.len() as u64;
+                    let exact = indirect.map(|(commands, base)| (commands, base + batches));
+                    geomip.draw(
+                        rec,
+                        frame.set,
+                        settings.wireframe,
+                        &frame.prepared.exact,
+                        exact,
+                    )?;
+                }
                 self.draw_patches(rec, frame, (tess, pipeline), phase, indirect);
                 // Merged nodes go in the first pass, untested for occlusion.
                 if let (Some(choice), OCCLUSION_PHASE_ALL | OCCLUSION_PHASE_FIRST) =
@@ -167,21 +184,6 @@ impl TerrainRenderer {
                             rec.draw_indexed(first, count);
                         }
                     }
-                }
-                if matches!(settings.lod_metric, LodMetric::Error(_))
-                    && !frame.prepared.exact.is_empty()
-                {
-                    let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
-                    // Listed after the batches.
-                    let batches = frame.tess_batches.len() as u64;
-                    let exact = indirect.map(|(commands, base)| (commands, base + batches));
-                    geomip.draw(
-                        rec,
-                        frame.set,
-                        settings.wireframe,
-                        &frame.prepared.exact,
-                        exact,
-                    )?;
                 }
             }
             RenderPath::Geomip => {
