@@ -11,7 +11,7 @@ use crate::lod::geomip;
 use crate::lod::{PeerLod, PeerPolicy};
 use crate::render::{
     ErrorMeasure, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
-    Shading, TerrainRenderer,
+    Shading, TerrainRenderer, TimedFrame,
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceLod, Terrain};
@@ -551,8 +551,30 @@ impl<'a> Bench<'a> {
             .render(&mut target.renderer, terrain, camera, &settings)?)
     }
 
+    /// Draws `config` from `camera` and waits for it, reading nothing
+    /// back (a frame as a render loop draws it).
+    fn time(
+        &mut self,
+        camera: &Camera,
+        config: &Config,
+        levels: Option<&[u8]>,
+    ) -> anyhow::Result<TimedFrame> {
+        let terrain = self.terrain;
+        let settings = config.settings(self.scene_lod);
+        let target = renderer_for(&mut self.renderers, config);
+        if settings.path == RenderPath::Geomip {
+            target.renderer.set_geomip_levels(terrain, levels)?;
+        }
+        Ok(self
+            .headless
+            .time(&mut target.renderer, terrain, camera, &settings)?)
+    }
+
     /// Renders `config` `repeats` times from `camera`; timings of samples
-    /// past the warm-up go into `gathered`, counts of the last render too.
+    /// past the warm-up go into `gathered`. With more than one repeat the
+    /// timed frames run back to back, nothing read back or measured
+    /// between them, and one more frame is drawn and read back for the
+    /// error and the counts; a single repeat is timed and read back at once.
     #[allow(clippy::too_many_arguments)]
     fn render_gathered(
         &mut self,
@@ -565,36 +587,37 @@ impl<'a> Bench<'a> {
         progress: &mut dyn Progress,
         message: &str,
     ) -> anyhow::Result<HeadlessFrame> {
-        let mut last = None;
-        for r in 0..repeats {
-            let frame = self.render(camera, config, levels)?;
-            progress.advance(message);
-            let renderer = &renderer_for(&mut self.renderers, config).renderer;
-            for (px, into) in [
-                (renderer.predicted_max_px(), &mut gathered.predicted_max_px),
-                (renderer.predicted_p99_px(), &mut gathered.predicted_p99_px),
-            ] {
-                if let Some(px) = px {
-                    let px = f64::from(px);
-                    *into = Some(into.map_or(px, |m| m.max(px)));
-                }
+        let mut timed = Vec::with_capacity(repeats);
+        if repeats > 1 {
+            for _ in 0..repeats {
+                timed.push(self.time(camera, config, levels)?);
+                self.gather_choice(config, timed.last().and_then(|f| f.lod_ms), gathered);
+                progress.advance(message);
             }
-            if let Some(ms) = frame.lod_ms {
-                gathered.lod_ms_max = Some(gathered.lod_ms_max.map_or(ms, |m| m.max(ms)));
-            }
-            if first_sample + r >= self.warm_up {
-                gathered.gpu_ms.extend(frame.measurements.gpu_ms);
-                gathered.cpu_ms.push(frame.cpu_ms);
-                gathered.lod_ms.extend(frame.lod_ms);
-                gathered
-                    .frame_ms
-                    .extend(frame.measurements.gpu_ms.map(|gpu| gpu + frame.cpu_ms));
-                let culling = frame.measurements.occlusion.and_then(|o| o.culling_ms);
-                gathered.culling_ms.extend(culling);
-            }
-            last = Some(frame);
         }
-        let frame = last.expect("at least one repeat");
+        let frame = self.render(camera, config, levels)?;
+        self.gather_choice(config, frame.lod_ms, gathered);
+        progress.advance(message);
+        if repeats == 1 {
+            timed.push(TimedFrame {
+                measurements: frame.measurements,
+                cpu_ms: frame.cpu_ms,
+                lod_ms: frame.lod_ms,
+            });
+        }
+        for (r, t) in timed.iter().enumerate() {
+            if first_sample + r < self.warm_up {
+                continue;
+            }
+            gathered.gpu_ms.extend(t.measurements.gpu_ms);
+            gathered.cpu_ms.push(t.cpu_ms);
+            gathered.lod_ms.extend(t.lod_ms);
+            gathered
+                .frame_ms
+                .extend(t.measurements.gpu_ms.map(|gpu| gpu + t.cpu_ms));
+            let culling = t.measurements.occlusion.and_then(|o| o.culling_ms);
+            gathered.culling_ms.extend(culling);
+        }
         if let Some(s) = frame.measurements.statistics {
             gathered.triangles.push(s.clipping_primitives);
             gathered.tes_invocations.push(s.tes_invocations);
@@ -608,6 +631,23 @@ impl<'a> Bench<'a> {
                 .push(u64::from(o.patches_occluded));
         }
         Ok(frame)
+    }
+
+    /// What the level choice of `config`'s last frame expected, and took.
+    fn gather_choice(&mut self, config: &Config, lod_ms: Option<f64>, gathered: &mut Gathered) {
+        let renderer = &renderer_for(&mut self.renderers, config).renderer;
+        for (px, into) in [
+            (renderer.predicted_max_px(), &mut gathered.predicted_max_px),
+            (renderer.predicted_p99_px(), &mut gathered.predicted_p99_px),
+        ] {
+            if let Some(px) = px {
+                let px = f64::from(px);
+                *into = Some(into.map_or(px, |m| m.max(px)));
+            }
+        }
+        if let Some(ms) = lod_ms {
+            gathered.lod_ms_max = Some(gathered.lod_ms_max.map_or(ms, |m| m.max(ms)));
+        }
     }
 
     /// Renders the oracle's uniform levels from `camera` and picks, for
@@ -843,8 +883,11 @@ impl<'a> Bench<'a> {
             .filter(|c| matches!(c, Config::Oracle(_)))
             .count() as u64;
         let occluded = configs.iter().filter(|c| c.occlusion()).count() as u64;
+        // With more than one repeat, each configuration draws one more
+        // frame, read back for its error.
         let per_frame = |repeats: u64| {
-            repeats * configs.len() as u64 + if oracles > 0 { level_count } else { 0 }
+            let draws = if repeats > 1 { repeats + 1 } else { repeats };
+            draws * configs.len() as u64 + if oracles > 0 { level_count } else { 0 }
         };
         // Occluded rows render a fixed view once more (its cut frame).
         progress.start(

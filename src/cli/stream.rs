@@ -98,6 +98,10 @@ pub struct StreamReport {
     pub evicted_pages: u64,
     pub max_pop_px: f32,
     pub max_missing_px: f32,
+    /// The median of the frames' GPU times, and the load they were taken
+    /// under (`bench::report::GPU_CLOCK_NOTE`).
+    pub gpu_ms: Option<f64>,
+    pub gpu_timing: &'static str,
     pub error_max_px: Option<f64>,
     /// The largest of the frames' p99 errors.
     pub error_p99_px: Option<f64>,
@@ -266,6 +270,10 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
                 .iter()
                 .map(|f| f.stream.missing_px)
                 .fold(0.0, f32::max),
+            gpu_ms: crate::bench::run::median(
+                &mut frames.iter().filter_map(|f| f.gpu_ms).collect::<Vec<_>>(),
+            ),
+            gpu_timing: crate::bench::report::GPU_CLOCK_NOTE,
             error_max_px: max_f64(&mut frames.iter().filter_map(|f| f.error_max_px)),
             error_p99_px: max_f64(&mut frames.iter().filter_map(|f| f.error_p99_px)),
             validation_enabled: false,
@@ -302,8 +310,9 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
     writeln!(
         out,
         "{} frames on {}: {} holes, {} pages uploaded ({} bytes, at most {} a frame), {} evicted, \
-         CPU at most {:.1} ms a frame, level choice {} ms (median, at most {} ms), largest pop \
-         {:.2} px{error}, {} validation messages{}",
+         CPU at most {:.1} ms a frame, GPU {} ms (median, one frame in flight at a time, so at \
+         whatever clock that load keeps), level choice {} ms (median, at most {} ms), largest pop {:.2} px{error}, {} \
+         validation messages{}",
         report.frames,
         report.device,
         report.holes,
@@ -312,6 +321,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         report.max_upload_bytes,
         report.evicted_pages,
         report.max_cpu_ms,
+        report.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
         report.lod_ms.map_or("n/a".into(), |v| format!("{v:.3}")),
         report
             .max_lod_ms

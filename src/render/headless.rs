@@ -84,7 +84,8 @@ impl Headless {
         })
     }
 
-    /// Renders `terrain` from `camera` and waits for the result.
+    /// Renders `terrain` from `camera`, waits for the result and reads
+    /// the image back.
     pub fn render(
         &mut self,
         renderer: &mut TerrainRenderer,
@@ -92,6 +93,39 @@ impl Headless {
         camera: &Camera,
         settings: &RenderSettings,
     ) -> Result<HeadlessFrame> {
+        let (timed, view) = self.draw(renderer, terrain, camera, settings, true)?;
+        // Counted for the frame's statistics, after its time is taken.
+        let patches_in_frustum = view.patches_in_frustum(terrain);
+        Ok(HeadlessFrame {
+            readback: self.target.read()?,
+            measurements: timed.measurements,
+            cpu_ms: timed.cpu_ms,
+            lod_ms: timed.lod_ms,
+            view,
+            patches_in_frustum,
+        })
+    }
+
+    /// Renders `terrain` from `camera` and waits for it, reading nothing
+    /// back: a frame as a render loop draws it, for timing.
+    pub fn time(
+        &mut self,
+        renderer: &mut TerrainRenderer,
+        terrain: &Terrain,
+        camera: &Camera,
+        settings: &RenderSettings,
+    ) -> Result<TimedFrame> {
+        Ok(self.draw(renderer, terrain, camera, settings, false)?.0)
+    }
+
+    fn draw(
+        &mut self,
+        renderer: &mut TerrainRenderer,
+        terrain: &Terrain,
+        camera: &Camera,
+        settings: &RenderSettings,
+        read_back: bool,
+    ) -> Result<(TimedFrame, FrameView)> {
         let views = self.target.views();
         let view = FrameView::new(terrain, camera, views.extent.width, views.extent.height);
         // The one slot's last frame has completed: `render` waits for it.
@@ -103,20 +137,27 @@ impl Headless {
         let rec = self.commands.begin(0)?;
         self.target.record_begin(&rec);
         renderer.record(&rec, 0, &views)?;
-        self.target.record_readback(&rec);
+        if read_back {
+            self.target.record_readback(&rec);
+        }
         let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         rec.submit_and_wait()?;
-        // Counted for the frame's statistics, after its time is taken.
-        let patches_in_frustum = view.patches_in_frustum(terrain);
-        Ok(HeadlessFrame {
-            readback: self.target.read()?,
+        let timed = TimedFrame {
             measurements: renderer.measurements(0)?,
             cpu_ms,
             lod_ms: renderer.lod_ms(),
-            view,
-            patches_in_frustum,
-        })
+        };
+        Ok((timed, view))
     }
+}
+
+/// What a frame drawn for timing measured.
+pub struct TimedFrame {
+    pub measurements: FrameMeasurements,
+    /// CPU time to prepare and record the frame (not waiting for the GPU).
+    pub cpu_ms: f64,
+    /// Of that, the level choice's (`TerrainRenderer::lod_ms`).
+    pub lod_ms: Option<f64>,
 }
 
 impl Drop for Headless {

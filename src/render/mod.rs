@@ -18,7 +18,7 @@ pub mod uniforms;
 pub mod view;
 mod view_measure;
 
-pub use headless::{offscreen, Headless, HeadlessFrame};
+pub use headless::{offscreen, Headless, HeadlessFrame, TimedFrame};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 pub use settings::{
     sample_count, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading,

@@ -281,13 +281,17 @@ impl OffscreenTarget {
     /// Makes both images attachments; earlier contents are discarded.
     pub fn record_begin(&self, rec: &Recorder) {
         use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
-        // A previous frame's copies (and reads of depth by the occlusion
-        // pyramid) must finish before we overwrite.
+        // A previous frame's copies, reads of depth by the occlusion
+        // pyramid, and (for a frame drawn without a readback) attachment
+        // writes must finish before we overwrite.
         rec.transition_images(&Transition::to_attachments(
             self.color.raw(),
-            (S::COPY, A::NONE),
+            (
+                S::COPY | S::COLOR_ATTACHMENT_OUTPUT,
+                A::COLOR_ATTACHMENT_WRITE,
+            ),
             self.depth.raw(),
-            (S::COPY | S::COMPUTE_SHADER, A::NONE),
+            (S::COPY | DEPTH_USED.0, DEPTH_USED.1),
         ));
         if let Some(ms) = &self.multisampled {
             ms.record_begin(rec);
