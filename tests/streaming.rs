@@ -139,6 +139,122 @@ fn with_room_for_every_tile_the_image_is_the_resident_renderers() {
     streamed.finish();
 }
 
+/// Low along the terrain and back again, then a cut to a view from
+/// above: tiles leave a small pool and come back.
+fn low_pass() -> Vec<Camera> {
+    let mut path: Vec<Camera> = (0..=16)
+        .chain((0..=16).rev())
+        .map(|i| {
+            let x = -220.0 + 27.5 * f64::from(i);
+            camera([x, 70.0, -150.0], [x + 40.0, 10.0, 0.0], 60.0)
+        })
+        .collect();
+    path.push(camera([0.0, 520.0, 0.0], [0.0, 0.0, 0.0], 60.0));
+    path
+}
+
+/// The frame's background pixels enclosed by terrain.
+fn holes(frame: &vkterrain::render::HeadlessFrame) -> usize {
+    let (w, h) = (frame.readback.width, frame.readback.height);
+    enclosed_background(&frame.readback.rgba, w as usize, h as usize, |p| p[0] < 128).len()
+}
+
+/// Under a budget that holds 40 of the pool's 284 streamed pages (the
+/// smallest pool holds 36: 9 for each of the 4 levels finer than the
+/// base), the pool takes what is left and the flythrough draws without holes,
+/// its missing pages' error reported per frame and counted in the LOD's
+/// predicted error; the budget with room for every page misses less. A
+/// budget below the smallest layout is refused, and the refusal names a
+/// budget that works.
+#[test]
+fn a_budget_smaller_than_the_pool_degrades_and_names_its_floor() {
+    if skip_gpu() {
+        return;
+    }
+    use vkterrain::render::streaming::MIN_HEADROOM_BYTES;
+    const KEPT: u32 = 40;
+    let dir = tempfile::tempdir().unwrap();
+    let map = hills();
+    let path = imported(&map, dir.path());
+    let size = (320, 200);
+    let stream = StreamConfig {
+        upload_bytes_per_frame: 2 * 4 * u64::from((TILE + 1) * (TILE + 1)),
+        ..config(path.clone(), None)
+    };
+    let flat = settings(RenderPath::Tess, Shading::Flat);
+    // Without a budget, to learn what the whole pool takes; then a budget
+    // with room for `KEPT` of its streamed layers.
+    let budget = {
+        let mut scene =
+            GpuScene::streamed_within(streamed_terrain(&map), stream.clone(), size, u64::MAX)
+                .expect("no budget to speak of");
+        let in_use = scene.gpu().device.memory_in_use();
+        scene.render(&low_pass()[0], &flat);
+        let stats = scene.renderer().stream_stats().unwrap();
+        let pool = |layers: u32| {
+            let device = &scene.gpu().device;
+            device.layer_pool_bytes(TILE + 1, stats.base_pages + layers)
+        };
+        let cut = pool(stats.layers) - pool(KEPT);
+        let full_layers = stats.layers;
+        scene.finish();
+        (in_use + MIN_HEADROOM_BYTES - cut, full_layers)
+    };
+    let (budget, full_layers) = budget;
+    let mut missing = Vec::new();
+    for (name, budget) in [("kept", budget), ("whole", u64::MAX)] {
+        let mut scene =
+            GpuScene::streamed_within(streamed_terrain(&map), stream.clone(), size, budget)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+        scene.wait_for_residency(false);
+        let mut total = 0.0;
+        for (i, cam) in low_pass().iter().enumerate() {
+            let frame = scene.render(cam, &flat);
+            let stats = scene.renderer().stream_stats().unwrap();
+            assert_eq!(holes(&frame), 0, "{name}, frame {i}: holes ({stats:?})");
+            let predicted = scene.renderer().predicted_max_px().unwrap();
+            assert!(
+                predicted >= stats.missing_px,
+                "{name}, frame {i}: predicted {predicted} px, missing {}",
+                stats.missing_px
+            );
+            total += stats.missing_px;
+            if name == "kept" {
+                assert!(
+                    stats.layers <= KEPT + 1 && stats.layers >= KEPT,
+                    "{} of {full_layers} layers",
+                    stats.layers
+                );
+            }
+        }
+        if name == "kept" {
+            assert!(scene.renderer().stream_evictions().unwrap() > 0);
+        }
+        missing.push(total);
+        scene.finish();
+    }
+    eprintln!(
+        "missing px summed over the pass: {KEPT} layers {} whole {}",
+        missing[0], missing[1]
+    );
+    assert!(missing[0] > missing[1], "{missing:?}");
+    // Below the smallest layout: refused, naming a budget that works.
+    let refused = GpuScene::streamed_within(streamed_terrain(&map), stream.clone(), size, 2 << 20)
+        .err()
+        .expect("2 MiB is refused")
+        .to_string();
+    let named: u64 = refused
+        .split("--gpu-memory-budget ")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no budget named: {refused}"));
+    assert!(refused.contains("needs at least"), "{refused}");
+    let scene = GpuScene::streamed_within(streamed_terrain(&map), stream, size, named << 20)
+        .unwrap_or_else(|e| panic!("the named {named} MiB: {e}"));
+    scene.finish();
+}
+
 #[test]
 fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
     if skip_gpu() {

@@ -34,6 +34,12 @@ pub struct StreamCmd {
     #[arg(long, value_name = "N", default_value_t = 600)]
     pub frames: usize,
 
+    /// Samples per pixel of the render target: 1, 2, 4 or 8, as the device
+    /// allows. The target's memory counts against --gpu-memory-budget
+    /// before the page pool takes what is left.
+    #[arg(long, value_name = "N", default_value_t = 1, value_parser = super::args::parse_samples)]
+    pub samples: u32,
+
     /// Largest projected error of the error LOD, in pixels.
     #[arg(long, value_name = "PX", default_value_t = 1.0)]
     pub pixel_error: f32,
@@ -77,6 +83,8 @@ pub struct StreamReport {
     pub device: String,
     pub width: u32,
     pub height: u32,
+    /// Samples per pixel of the render target.
+    pub samples: u32,
     pub samples_across: usize,
     pub samples_down: usize,
     pub tile_cells: u32,
@@ -164,8 +172,11 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
     };
     let budget = cmd.features.gpu_memory_budget;
     let (mut report, validation) = cmd.features.with_gpu(cmd.validate, |gpu| {
+        let samples =
+            crate::render::sample_count(Some(cmd.samples), &gpu.device.caps, &mut Vec::new())?;
         let options = RendererOptions {
             stream: Some(stream.clone()),
+            samples,
             ..RendererOptions::single_sample(vec![RenderPath::Tess])
         };
         let (mut renderer, mut headless) =
@@ -236,6 +247,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             device: gpu.device.caps.device_name.clone(),
             width: size.0,
             height: size.1,
+            samples: cmd.samples,
             samples_across: terrain.info().cols(),
             samples_down: terrain.info().rows(),
             tile_cells: shape.tile_cells,

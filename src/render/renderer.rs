@@ -41,7 +41,7 @@ use super::pipelines::{
 };
 use super::residency::StreamShape;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
-use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
+use super::streaming::{headroom, smallest_budget, NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
@@ -180,6 +180,11 @@ impl TerrainRenderer {
     /// Like `new`, drawn with a scene's material layers and lightmap. The
     /// terrain's Y bounds must already allow for the material's
     /// displacement (`Appearance::y_margin`).
+    ///
+    /// A streamed terrain takes what the memory budget leaves: a coarser
+    /// base level and fewer pool layers where it must. Under a budget too
+    /// small for its smallest layout, the error names the smallest budget
+    /// that works, measured by building that layout with the budget lifted.
     pub fn with_appearance(
         gpu: &Gpu,
         terrain: &Terrain,
@@ -188,6 +193,79 @@ impl TerrainRenderer {
         frames_in_flight: u32,
         options: &RendererOptions,
     ) -> Result<Self> {
+        let device = &gpu.device;
+        let before = device.memory_in_use();
+        let mut options = options.clone();
+        loop {
+            let built = Self::build_within_budget(
+                gpu,
+                terrain,
+                appearance,
+                color_format,
+                frames_in_flight,
+                &options,
+            );
+            match (built, &options.stream) {
+                (Ok(Built::Renderer(renderer)), _) => return Ok(*renderer),
+                (Ok(Built::Rebase(config)), _) => options.stream = Some(config),
+                (Err(VkError::OverBudget { budget, .. }), Some(config)) => {
+                    let tiled = open_streamed(terrain.info(), config)?;
+                    let smallest_config = config.smallest(&tiled, terrain.info().cells_per_patch());
+                    let smallest_shape = smallest_config.shape(&tiled);
+                    let smallest_layers = smallest_config.layers.unwrap_or(0);
+                    let smallest = RendererOptions {
+                        stream: Some(smallest_config),
+                        ..options.clone()
+                    };
+                    device.set_memory_budget(None);
+                    let measured = Self::build_within_budget(
+                        gpu,
+                        terrain,
+                        appearance,
+                        color_format,
+                        frames_in_flight,
+                        &smallest,
+                    )
+                    .map(|built| {
+                        let bytes = device.memory_in_use() - before;
+                        drop(built);
+                        bytes
+                    });
+                    device.set_memory_budget(Some(budget));
+                    let needed = measured?;
+                    let least = smallest_budget(before, needed);
+                    return Err(VkError::Stream(format!(
+                        "{}: a GPU memory budget of {} MiB is too small to stream it here; it \
+                         needs at least {} MiB (--gpu-memory-budget {}): {} MiB in use before \
+                         the renderer (the render targets), {} MiB for the renderer with its \
+                         smallest layout (base level {}, {} pool layers, a page of staging a \
+                         frame), and {} MiB of headroom",
+                        config.path.display(),
+                        budget >> 20,
+                        least.div_ceil(1 << 20),
+                        least.div_ceil(1 << 20),
+                        before.div_ceil(1 << 20),
+                        needed.div_ceil(1 << 20),
+                        smallest_shape.base_level,
+                        smallest_layers,
+                        headroom(least).div_ceil(1 << 20),
+                    )));
+                }
+                (Err(e), _) => return Err(e),
+            }
+        }
+    }
+
+    /// A renderer of `options`, or (streaming) the configuration to build
+    /// instead where the memory budget asks for a coarser base level.
+    fn build_within_budget(
+        gpu: &Gpu,
+        terrain: &Terrain,
+        appearance: &Appearance,
+        color_format: vk::Format,
+        frames_in_flight: u32,
+        options: &RendererOptions,
+    ) -> Result<Built> {
         let device = &gpu.device;
         check_device(device, terrain, options)?;
         let samples = sample_count_flag(options.samples);
@@ -273,14 +351,20 @@ impl TerrainRenderer {
             renderer.ensure(terrain, path, options.wireframe)?;
         }
         if let (Some(config), Some(tiled)) = (&options.stream, tiled) {
-            let streamer = Streamer::new(device, info, config, tiled, renderer.frames.len())?;
+            let frames = renderer.frames.len();
+            let memory = Streamer::plan(device, (config, info.cells_per_patch()), &tiled, frames)?;
+            if memory.shape.base_level != config.shape(&tiled).base_level {
+                // The shaders are specialised on the base level.
+                return Ok(Built::Rebase(config.with_base(&memory.shape)));
+            }
+            let streamer = Streamer::new(device, info, (config, memory), tiled, frames)?;
             for (slot, frame) in renderer.frames.iter().enumerate() {
                 streamer.write_bindings(frame.set, slot, &renderer.sampler);
             }
             renderer.streamer = Some(streamer);
             renderer._no_stream = None;
         }
-        Ok(renderer)
+        Ok(Built::Renderer(Box::new(renderer)))
     }
 
     /// What streaming did in the last prepared frame; None for a terrain
@@ -549,6 +633,13 @@ impl TerrainRenderer {
                 self.frames[slot].prepared.patches_in_view = terrain.grid().patch_count()
             }
         }
+        // A streamed tile drawn from a coarser page than its level needs
+        // is off by up to that page's error besides the level's.
+        if let Some(streamer) = &self.streamer {
+            let missing = streamer.stats().missing_px;
+            let prepared = &mut self.frames[slot].prepared;
+            prepared.predicted_max_px = prepared.predicted_max_px.map(|px| px + missing);
+        }
         Ok(())
     }
 
@@ -771,6 +862,14 @@ fn open_streamed(info: &TerrainInfo, config: &StreamConfig) -> Result<Arc<TiledH
             .map(Arc::new)
             .map_err(|e| VkError::Stream(e.to_string())),
     }
+}
+
+/// What `TerrainRenderer::build` made.
+enum Built {
+    Renderer(Box<TerrainRenderer>),
+    /// A streamed terrain's configuration with the coarser base level the
+    /// memory budget leaves room for.
+    Rebase(StreamConfig),
 }
 
 /// Brute draws 6 vertices per cell, counted by a signed index in GLSL.

@@ -49,12 +49,136 @@ pub const DEFAULT_UPLOAD_BYTES_PER_FRAME: u64 = 8 << 20;
 /// Threads reading pages, by default.
 pub const DEFAULT_LOADER_THREADS: usize = 2;
 /// Under a memory budget, what the pool leaves free for what is allocated
-/// after it (the occlusion pyramid, pipelines built later, a resized
-/// window's targets): this fraction of the budget, and at least
+/// after it (the occlusion pyramid: 2.6 MiB at 1920x1080, 10.5 MiB at
+/// 3840x2160): this fraction of the budget, and at least
 /// `MIN_HEADROOM_BYTES`. Render targets made before the renderer are
 /// already counted.
-pub const HEADROOM_FRACTION: u64 = 16;
-pub const MIN_HEADROOM_BYTES: u64 = 16 << 20;
+pub const HEADROOM_FRACTION: u64 = 32;
+pub const MIN_HEADROOM_BYTES: u64 = 4 << 20;
+/// Pool layers a stream needs at the least for each level finer than its
+/// base: the 3x3 pages around the eye.
+pub const MIN_POOL_LAYERS_PER_LEVEL: u32 = 9;
+
+/// What a streamed terrain holds on the GPU: the base level (in `shape`),
+/// the pool's layers for streamed pages, and each frame slot's staging.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StreamMemory {
+    pub shape: StreamShape,
+    /// Pool layers for streamed pages, besides the base level's.
+    pub layers: u32,
+    /// Bytes of each frame slot's staging buffer.
+    pub staging_bytes: u64,
+}
+
+/// The coarsest base level a budget may give a stream of `preferred`'s
+/// shape: none coarser than a patch of `cells_per_patch` cells (or than
+/// `preferred`'s, where that is coarser), since a terrain's Y bounds allow
+/// only for its configured base level beyond a patch
+/// (`Terrain::widen_y_bounds_to_blocks`), and none coarser than a tile.
+pub fn coarsest_base(preferred: &StreamShape, cells_per_patch: u32) -> u32 {
+    preferred
+        .base_level
+        .max(cells_per_patch.trailing_zeros())
+        .min(preferred.tile_cells.trailing_zeros())
+        .max(preferred.base_level)
+}
+
+/// Lays a stream out in `room` bytes (None: no budget), for `frames`
+/// frame slots on a device of `device_layers` array layers, where a pool
+/// of n layers takes `pool_bytes(n)`, with a base level at most
+/// `coarsest` (`coarsest_base`). It keeps `preferred`'s base level
+/// where that leaves the pool `MIN_POOL_LAYERS_PER_LEVEL` layers for each
+/// finer level, and otherwise takes the finest coarser base that does; the
+/// pool takes what the base and staging leave, up to `wanted` layers
+/// (default: every streamed page). Staging keeps `upload_bytes` a slot
+/// where that is at most an eighth of the room, and shrinks to one page a
+/// slot. Where no base level fits, returns the fewest bytes that would
+/// (None: no base level fits the device's layers).
+pub fn plan_stream_memory(
+    preferred: StreamShape,
+    (wanted, upload_bytes): (Option<u32>, u64),
+    frames: usize,
+    (device_layers, pool_bytes): (u32, &dyn Fn(u32) -> u64),
+    (room, coarsest): (Option<u64>, u32),
+) -> std::result::Result<StreamMemory, Option<u64>> {
+    let side = u64::from(preferred.page_side());
+    let page = 4 * side * side;
+    let frames = frames.max(1) as u64;
+    let full_staging = upload_bytes.max(page);
+    let mut least_room: Option<u64> = None;
+    for base_level in preferred.base_level..=coarsest {
+        let shape = StreamShape {
+            base_level,
+            ..preferred
+        };
+        let base_pages = shape.base_pages();
+        if base_pages >= device_layers {
+            continue;
+        }
+        let streamed = shape.page_total().min(u32::MAX as usize) as u32;
+        let most = wanted
+            .unwrap_or(streamed)
+            .min(streamed)
+            .min(device_layers - base_pages);
+        let fewest = (MIN_POOL_LAYERS_PER_LEVEL * base_level).min(most);
+        let least = pool_bytes(base_pages + fewest) + frames * page;
+        least_room = Some(least_room.map_or(least, |r| r.min(least)));
+        let Some(room) = room else {
+            return Ok(StreamMemory {
+                shape,
+                layers: most,
+                staging_bytes: full_staging,
+            });
+        };
+        if least > room {
+            continue;
+        }
+        let mut staging = full_staging.min((room / 8 / frames / page).max(1) * page);
+        if pool_bytes(base_pages + fewest) + frames * staging > room {
+            staging = page;
+        }
+        // The most layers whose pool fits beside the staging.
+        let fits = |n: u32| pool_bytes(base_pages + n) + frames * staging <= room;
+        let (mut lo, mut hi) = (fewest, most);
+        while lo < hi {
+            let mid = hi - (hi - lo) / 2;
+            if fits(mid) {
+                lo = mid;
+            } else {
+                hi = mid - 1;
+            }
+        }
+        return Ok(StreamMemory {
+            shape,
+            layers: lo,
+            staging_bytes: staging,
+        });
+    }
+    Err(least_room)
+}
+
+/// What a memory budget keeps free for allocations made after the pool.
+pub fn headroom(budget: u64) -> u64 {
+    (budget / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES)
+}
+
+/// The smallest budget that leaves `room` bytes past `in_use` and the
+/// headroom it keeps.
+pub fn smallest_budget(in_use: u64, room: u64) -> u64 {
+    let need = in_use + room;
+    let fits = |b: u64| b >= need + headroom(b);
+    let small = need + MIN_HEADROOM_BYTES;
+    if headroom(small) == MIN_HEADROOM_BYTES {
+        return small;
+    }
+    // b - floor(b / F) >= need: from the real solution, down while the
+    // floor still lets a smaller budget through.
+    let mut b = (need * HEADROOM_FRACTION).div_ceil(HEADROOM_FRACTION - 1);
+    while fits(b - 1) {
+        b -= 1;
+    }
+    b
+}
 
 /// Where a streamed terrain comes from and how it streams.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -79,6 +203,37 @@ impl StreamConfig {
             upload_bytes_per_frame: DEFAULT_UPLOAD_BYTES_PER_FRAME,
             loader_threads: DEFAULT_LOADER_THREADS,
             layers: None,
+        }
+    }
+
+    /// This configuration with `shape`'s base level, a coarser one than
+    /// it chooses itself.
+    pub fn with_base(&self, shape: &StreamShape) -> Self {
+        let (w, h) = shape.base_size();
+        StreamConfig {
+            base_max_side: w.max(h),
+            ..self.clone()
+        }
+    }
+
+    /// The smallest layout of `tiled` under this configuration: the base
+    /// level (this one's or coarser) whose pages and
+    /// `MIN_POOL_LAYERS_PER_LEVEL` pool layers for each finer level are
+    /// fewest, and one page of staging a frame.
+    pub fn smallest(&self, tiled: &TiledHeightmap, cells_per_patch: u32) -> Self {
+        let preferred = self.shape(tiled);
+        let layers = |level: u32| MIN_POOL_LAYERS_PER_LEVEL * level;
+        let shape = (preferred.base_level..=coarsest_base(&preferred, cells_per_patch))
+            .map(|base_level| StreamShape {
+                base_level,
+                ..preferred
+            })
+            .min_by_key(|s| s.base_pages() + layers(s.base_level))
+            .unwrap_or(preferred);
+        StreamConfig {
+            layers: Some(layers(shape.base_level)),
+            upload_bytes_per_frame: 0,
+            ..self.with_base(&shape)
         }
     }
 
@@ -209,14 +364,61 @@ pub struct Streamer {
 }
 
 impl Streamer {
+    /// How `tiled` (`config.path`) fits on `device` beside what is already
+    /// allocated, for `frames` frames in flight: its base level, pool and
+    /// staging (`plan_stream_memory`) under the memory budget. Where
+    /// nothing fits the budget, an `OverBudget` error for the stream's
+    /// smallest layout.
+    pub fn plan(
+        device: &Device,
+        (config, cells_per_patch): (&StreamConfig, u32),
+        tiled: &TiledHeightmap,
+        frames: usize,
+    ) -> Result<StreamMemory> {
+        let device_layers = device
+            .caps
+            .max_image_array_layers
+            .min(1 << PAGE_LEVEL_SHIFT);
+        let in_use = device.memory_in_use();
+        let budget = device.memory_budget();
+        let room = budget.map(|b| b.saturating_sub(in_use + headroom(b)));
+        let preferred = config.shape(tiled);
+        let side = preferred.page_side();
+        plan_stream_memory(
+            preferred,
+            (config.layers, config.upload_bytes_per_frame),
+            frames,
+            (device_layers, &|n| device.layer_pool_bytes(side, n)),
+            (room, coarsest_base(&preferred, cells_per_patch)),
+        )
+        .map_err(|least| match (budget, least) {
+            (Some(budget), Some(least)) => VkError::OverBudget {
+                name: "terrain.stream (its smallest layout)".into(),
+                requested: least + headroom(budget),
+                in_use,
+                budget,
+            },
+            _ => VkError::Stream(format!(
+                "{}: its coarsest base level takes {} pages of {side}x{side} samples, and the \
+                 device allows {device_layers} layers in all; import it with larger tiles (--tile)",
+                config.path.display(),
+                StreamShape {
+                    base_level: coarsest_base(&preferred, cells_per_patch),
+                    ..preferred
+                }
+                .base_pages(),
+            )),
+        })
+    }
+
     /// Streams `tiled` (`config.path`, opened) for a terrain whose CPU
-    /// model is `info`: makes a pool as large as the configuration and the
-    /// device's memory budget allow and uploads the base level into it, for
-    /// `frames` frames in flight.
+    /// model is `info`, laid out as `memory` (`Streamer::plan`): makes the
+    /// pool and uploads the base level into it, for `frames` frames in
+    /// flight.
     pub fn new(
         device: &Device,
         info: &TerrainInfo,
-        config: &StreamConfig,
+        (config, memory): (&StreamConfig, StreamMemory),
         tiled: Arc<TiledHeightmap>,
         frames: usize,
     ) -> Result<Self> {
@@ -230,7 +432,7 @@ impl Streamer {
                 info.rows()
             )));
         }
-        let shape = config.shape(&tiled);
+        let shape = memory.shape;
         let levels = shape.base_level + 1;
         let mut tile_errors = Vec::with_capacity(shape.tile_total() * levels as usize);
         let mut tile_boxes = Vec::with_capacity(shape.tile_total());
@@ -272,8 +474,7 @@ impl Streamer {
             boxes.push((0.5 * (lo + hi), 0.5 * (hi - lo)));
         }
         let side = shape.page_side();
-        let layer_bytes = 4 * u64::from(side) * u64::from(side);
-        let staging_bytes = config.upload_bytes_per_frame.max(layer_bytes);
+        let staging_bytes = memory.staging_bytes;
         let pages = shape.page_total();
         let mut staging = Vec::new();
         let mut tables = Vec::new();
@@ -290,39 +491,7 @@ impl Streamer {
                 bytemuck::cast_slice(&vec![0u32; shape.tile_total()]),
             )?);
         }
-        // The pool's layers: the base pages, and as many streamed ones as
-        // the configuration, the device and the memory budget allow.
-        let base_pages = shape.base_pages();
-        let device_layers = device
-            .caps
-            .max_image_array_layers
-            .min(1 << PAGE_LEVEL_SHIFT);
-        if base_pages >= device_layers {
-            return Err(VkError::Stream(format!(
-                "{}: its base level takes {base_pages} pages of {side}x{side} samples, and the \
-                 device allows {device_layers} layers in all; import it with larger tiles (--tile)",
-                config.path.display()
-            )));
-        }
-        let mut room = device_layers;
-        if let Some(budget) = device.memory_budget() {
-            let headroom = (budget / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES);
-            let free = budget.saturating_sub(device.memory_in_use() + headroom);
-            room = room.min((free / layer_bytes).min(u64::from(u32::MAX)) as u32);
-        }
-        let wanted = config.layers.unwrap_or(pages as u32).min(pages as u32);
-        let layers = wanted.min(room.saturating_sub(base_pages));
-        if layers == 0 && pages > 0 {
-            return Err(VkError::Stream(format!(
-                "no room for the base level's {base_pages} pages of {} and one more, \
-                 {side}x{side} samples each, under the GPU memory budget \
-                 (--gpu-memory-budget) once {} MiB of headroom are held",
-                config.path.display(),
-                device
-                    .memory_budget()
-                    .map_or(0, |b| (b / HEADROOM_FRACTION).max(MIN_HEADROOM_BYTES) >> 20)
-            )));
-        }
+        let (base_pages, layers) = (shape.base_pages(), memory.layers);
         let pool = device.create_layer_pool("terrain.stream.pages", side, base_pages + layers)?;
         upload_base(device, &tiled, &shape, &pool, &mut staging[0])?;
         let residency = Residency::new(pages, layers);
@@ -729,4 +898,79 @@ fn upload_base(
         first = last;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 16385^2 terrain in 256-cell tiles with a base of at most 2049
+    /// samples a side (level 3: 8x8 pages), 64-cell patches, pools of
+    /// 257^2 f32 layers.
+    fn preferred() -> StreamShape {
+        StreamShape::new(16385, 16385, 256, 2049)
+    }
+
+    const PAGE: u64 = 4 * 257 * 257;
+
+    fn plan(
+        room: Option<u64>,
+        device_layers: u32,
+    ) -> std::result::Result<StreamMemory, Option<u64>> {
+        let coarsest = coarsest_base(&preferred(), 64);
+        plan_stream_memory(
+            preferred(),
+            (None, 8 << 20),
+            1,
+            (device_layers, &|n| u64::from(n) * PAGE),
+            (room, coarsest),
+        )
+    }
+
+    #[test]
+    fn the_pool_takes_what_the_budget_leaves_and_the_base_coarsens_last() {
+        assert_eq!(preferred().base_level, 3);
+        assert_eq!(coarsest_base(&preferred(), 64), 6);
+        // No budget: the configured base, a layer for every streamed page
+        // the device allows.
+        let free = plan(None, 2048).unwrap();
+        assert_eq!((free.shape.base_level, free.layers), (3, 2048 - 64));
+        assert_eq!(free.staging_bytes, 8 << 20);
+        // Room to spare: the same base, the pool filling what staging leaves.
+        let roomy = plan(Some(300 << 20), 2048).unwrap();
+        assert_eq!(roomy.shape.base_level, 3);
+        assert_eq!(roomy.staging_bytes, 8 << 20);
+        assert_eq!(
+            u64::from(roomy.layers),
+            ((300 << 20) - (8 << 20)) / PAGE - 64
+        );
+        // 14 MiB, 55 pages: level 3 needs 64 base pages, 27 pool layers
+        // and a staging page; level 4 needs 16, 36 and 1, and takes the
+        // rest for its pool.
+        let tight = plan(Some(14 << 20), 2048).unwrap();
+        assert_eq!(tight.shape.base_level, 4);
+        assert_eq!(tight.staging_bytes, PAGE);
+        assert_eq!(u64::from(tight.layers), (14 << 20) / PAGE - 16 - 1);
+        assert!(u64::from(16 + tight.layers + 1) * PAGE <= 14 << 20);
+        // Too little for any base: the fewest bytes, at level 5 (4 base
+        // pages, 45 pool layers, a staging page).
+        assert_eq!(plan(Some(1 << 20), 2048), Err(Some(50 * PAGE)));
+        // A device of few layers takes the first base it can hold.
+        let few = plan(None, 10).unwrap();
+        assert_eq!((few.shape.base_level, few.layers), (5, 6));
+        assert_eq!(plan(None, 1), Err(None));
+    }
+
+    #[test]
+    fn the_smallest_budget_leaves_the_room_and_its_headroom() {
+        for (in_use, room) in [(0, 0), (95 << 20, 24 << 20), (400 << 20, 300 << 20)] {
+            let b = smallest_budget(in_use, room);
+            assert!(b >= in_use + room + headroom(b), "{in_use} {room}: {b}");
+            let less = b - 1;
+            assert!(
+                less < in_use + room + headroom(less),
+                "{in_use} {room}: {b}"
+            );
+        }
+    }
 }

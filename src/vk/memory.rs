@@ -259,21 +259,7 @@ impl Device {
         view_type: vk::ImageViewType,
         name: &str,
     ) -> Result<Image> {
-        let info = vk::ImageCreateInfo::default()
-            .image_type(vk::ImageType::TYPE_2D)
-            .format(desc.format)
-            .extent(vk::Extent3D {
-                width: desc.extent.width,
-                height: desc.extent.height,
-                depth: 1,
-            })
-            .mip_levels(levels)
-            .array_layers(layers)
-            .samples(desc.samples)
-            .tiling(vk::ImageTiling::OPTIMAL)
-            .usage(desc.usage)
-            .sharing_mode(vk::SharingMode::EXCLUSIVE)
-            .initial_layout(vk::ImageLayout::UNDEFINED);
+        let info = image_info(&desc, levels, layers);
         // SAFETY: valid create info.
         let raw = unsafe { self.ash().create_image(&info, None) }.context("creating an image")?;
         let raw = Owned::new(self, raw, name);
@@ -580,16 +566,7 @@ impl Device {
     /// contents start undefined.
     pub fn create_layer_pool(&self, name: &str, side: u32, layers: u32) -> Result<Image> {
         let image = self.create_image_array(
-            ImageDesc {
-                extent: vk::Extent2D {
-                    width: side,
-                    height: side,
-                },
-                format: vk::Format::R32_SFLOAT,
-                usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
-                aspect: vk::ImageAspectFlags::COLOR,
-                samples: vk::SampleCountFlags::TYPE_1,
-            },
+            layer_pool_desc(side),
             1,
             layers,
             vk::ImageViewType::TYPE_2D_ARRAY,
@@ -604,6 +581,57 @@ impl Device {
             }]);
         })?;
         Ok(image)
+    }
+}
+
+/// A layer pool's layers: `side` x `side` f32 samples, sampled and
+/// copied into.
+fn layer_pool_desc(side: u32) -> ImageDesc {
+    ImageDesc {
+        extent: vk::Extent2D {
+            width: side,
+            height: side,
+        },
+        format: vk::Format::R32_SFLOAT,
+        usage: vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST,
+        aspect: vk::ImageAspectFlags::COLOR,
+        samples: vk::SampleCountFlags::TYPE_1,
+    }
+}
+
+/// The create info of a 2D image of `desc` with `levels` mip levels and
+/// `layers` array layers.
+fn image_info(desc: &ImageDesc, levels: u32, layers: u32) -> vk::ImageCreateInfo<'static> {
+    vk::ImageCreateInfo::default()
+        .image_type(vk::ImageType::TYPE_2D)
+        .format(desc.format)
+        .extent(vk::Extent3D {
+            width: desc.extent.width,
+            height: desc.extent.height,
+            depth: 1,
+        })
+        .mip_levels(levels)
+        .array_layers(layers)
+        .samples(desc.samples)
+        .tiling(vk::ImageTiling::OPTIMAL)
+        .usage(desc.usage)
+        .sharing_mode(vk::SharingMode::EXCLUSIVE)
+        .initial_layout(vk::ImageLayout::UNDEFINED)
+}
+
+impl Device {
+    /// Bytes of memory a layer pool of `layers` layers of `side` x `side`
+    /// samples takes (`create_layer_pool`), without making it.
+    pub fn layer_pool_bytes(&self, side: u32, layers: u32) -> u64 {
+        let info = image_info(&layer_pool_desc(side), 1, layers.max(1));
+        let query = vk::DeviceImageMemoryRequirements::default().create_info(&info);
+        let mut requirements = vk::MemoryRequirements2::default();
+        // SAFETY: a valid create info; Vulkan 1.3 is required of the device.
+        unsafe {
+            self.ash()
+                .get_device_image_memory_requirements(&query, &mut requirements)
+        };
+        requirements.memory_requirements.size
     }
 }
 

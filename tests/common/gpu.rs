@@ -163,6 +163,35 @@ impl GpuScene {
         )
     }
 
+    /// As `streamed`, under a GPU memory budget of `budget` bytes: the
+    /// renderer's error where it refuses the budget.
+    pub fn streamed_within(
+        terrain: Terrain,
+        stream: StreamConfig,
+        (width, height): (u32, u32),
+        budget: u64,
+    ) -> Result<Self, vkterrain::vk::VkError> {
+        let options = RendererOptions {
+            stream: Some(stream),
+            ..RendererOptions::single_sample(vec![RenderPath::Tess])
+        };
+        let gpu = open_gpu(None);
+        gpu.device.set_memory_budget(Some(budget));
+        let (renderer, headless) = offscreen(
+            &gpu,
+            &terrain,
+            &Appearance::default(),
+            &options,
+            (width, height),
+        )?;
+        Ok(GpuScene {
+            gpu: Some(gpu),
+            terrain,
+            renderer: Some(renderer),
+            headless: Some(headless),
+        })
+    }
+
     fn with_options(
         gpu: Gpu,
         terrain: Terrain,
