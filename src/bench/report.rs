@@ -364,6 +364,7 @@ pub fn markdown(results: &Results, notes: &str, pareto_link: &str) -> String {
     targets_section(w, rows);
     predicted_section(w, rows);
     occlusion_section(w, rows);
+    overdraw_section(w, rows);
     if !notes.trim().is_empty() {
         let _ = writeln!(w, "{}\n", notes.trim());
     }
@@ -512,6 +513,64 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
 
 /// Each error mode at tau = 1 px with occlusion culling beside without it,
 /// and the oracle's triangles.
+/// Fragment shader invocations per covered pixel of brute and the error
+/// modes at 1 px, each against brute's.
+fn overdraw_section(w: &mut String, rows: &[Row]) {
+    if !rows.iter().any(|r| overdraw(r).is_some()) {
+        return;
+    }
+    let _ = writeln!(
+        w,
+        "## Per-pixel cost
+"
+    );
+    let _ = writeln!(
+        w,
+        "Fragment shader invocations per pixel the terrain covers (`overdraw`), from pipeline \
+         statistics, for brute and the error modes at tau = 1 px, and each path's figure over \
+         brute's (the target is at most 1.2x). Every path culls faces turned away from the eye \
+         and draws its patches nearest first. What the counter counts is the device's: a GPU \
+         counts the fragments it shades, while lavapipe counts 16 for every 4x4 block of pixels a \
+         triangle touches, before the depth test, so there the figure follows the triangles' \
+         number and size more than what is shaded.\n"
+    );
+    let _ = writeln!(
+        w,
+        "| scene | device | camera | brute | tess error | tess + occlusion | geomip error | geomip + occlusion |"
+    );
+    let _ = writeln!(w, "|---|---|---|---:|---:|---:|---:|---:|");
+    for ((scene, device, camera), group) in groups(rows) {
+        let Some(brute) = group
+            .iter()
+            .find(|r| r.path == RowPath::Brute)
+            .and_then(|r| overdraw(r))
+        else {
+            continue;
+        };
+        let cell = |path: RowPath, occlusion: bool| {
+            group
+                .iter()
+                .find(|r| {
+                    r.path == path
+                        && r.lod == Some(RowLod::Error)
+                        && r.tau == Some(1.0)
+                        && r.occlusion == occlusion
+                })
+                .and_then(|r| overdraw(r))
+                .map_or("n/a".into(), |o| format!("{o:.2} ({:.2}x)", o / brute))
+        };
+        let _ = writeln!(
+            w,
+            "| {scene} | {device} | {camera} | {brute:.2} | {} | {} | {} | {} |",
+            cell(RowPath::Tess, false),
+            cell(RowPath::Tess, true),
+            cell(RowPath::Geomip, false),
+            cell(RowPath::Geomip, true),
+        );
+    }
+    let _ = writeln!(w);
+}
+
 fn occlusion_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(
         w,
