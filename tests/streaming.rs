@@ -171,7 +171,7 @@ fn a_budget_smaller_than_the_pool_degrades_and_names_its_floor() {
     if skip_gpu() {
         return;
     }
-    use vkterrain::render::streaming::MIN_HEADROOM_BYTES;
+    use vkterrain::render::stream_budget::MIN_HEADROOM_BYTES;
     const KEPT: u32 = 40;
     let dir = tempfile::tempdir().unwrap();
     let map = hills();

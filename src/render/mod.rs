@@ -12,6 +12,7 @@ pub mod renderer;
 pub mod residency;
 pub mod settings;
 pub mod shaders;
+pub mod stream_budget;
 pub mod streaming;
 mod tess_path;
 pub mod uniforms;

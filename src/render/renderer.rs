@@ -41,7 +41,7 @@ use super::pipelines::{
 };
 use super::residency::StreamShape;
 use super::settings::{LodMetric, RenderPath, RenderSettings};
-use super::streaming::{headroom, smallest_budget, NoStream, StreamConfig, StreamStats, Streamer};
+use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
@@ -59,6 +59,7 @@ use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::vk::queries::PipelineStatistics;
 use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
+mod budget;
 mod record;
 
 /// What a renderer builds up front. A frame asking for anything else
@@ -209,47 +210,13 @@ impl TerrainRenderer {
                 (Ok(Built::Renderer(renderer)), _) => return Ok(*renderer),
                 (Ok(Built::Rebase(config)), _) => options.stream = Some(config),
                 (Err(VkError::OverBudget { budget, .. }), Some(config)) => {
-                    let tiled = open_streamed(terrain.info(), config)?;
-                    let smallest_config = config.smallest(&tiled, terrain.info().cells_per_patch());
-                    let smallest_shape = smallest_config.shape(&tiled);
-                    let smallest_layers = smallest_config.layers.unwrap_or(0);
-                    let smallest = RendererOptions {
-                        stream: Some(smallest_config),
-                        ..options.clone()
-                    };
-                    device.set_memory_budget(None);
-                    let measured = Self::build_within_budget(
-                        gpu,
-                        terrain,
-                        appearance,
-                        color_format,
-                        frames_in_flight,
-                        &smallest,
-                    )
-                    .map(|built| {
-                        let bytes = device.memory_in_use() - before;
-                        drop(built);
-                        bytes
-                    });
-                    device.set_memory_budget(Some(budget));
-                    let needed = measured?;
-                    let least = smallest_budget(before, needed);
-                    return Err(VkError::Stream(format!(
-                        "{}: a GPU memory budget of {} MiB is too small to stream it here; it \
-                         needs at least {} MiB (--gpu-memory-budget {}): {} MiB in use before \
-                         the renderer (the render targets), {} MiB for the renderer with its \
-                         smallest layout (base level {}, {} pool layers, a page of staging a \
-                         frame), and {} MiB of headroom",
-                        config.path.display(),
-                        budget >> 20,
-                        least.div_ceil(1 << 20),
-                        least.div_ceil(1 << 20),
-                        before.div_ceil(1 << 20),
-                        needed.div_ceil(1 << 20),
-                        smallest_shape.base_level,
-                        smallest_layers,
-                        headroom(least).div_ceil(1 << 20),
-                    )));
+                    let built = (gpu, terrain, appearance, color_format, frames_in_flight);
+                    return Err(Self::refuse_budget(
+                        built,
+                        &options,
+                        config,
+                        (before, budget),
+                    ));
                 }
                 (Err(e), _) => return Err(e),
             }
