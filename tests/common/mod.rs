@@ -181,6 +181,46 @@ pub fn surface_height_tolerance(
     snap + depth
 }
 
+/// How far apart in height two renders of the same surface may lie at a
+/// pixel whose ray, from `eye` with `pixels_per_radian`, meets the surface
+/// at `point`, from the device's precision alone. Each render snaps its
+/// vertices to 1/2^bits of a pixel, which moves the surface across the
+/// ray by at most sqrt(2)/2 of that step, `s = step * distance / K` in
+/// metres; a surface moved `s` across a ray it meets at angle theta moves
+/// the hit `s / tan(theta)` along the ray, and its height `|ray.y|` times
+/// that. Both renders move, and each rebuilds the point from a float
+/// depth (8 units of the last bit of the distance, as in
+/// `surface_height_tolerance`). `normal` is the surface's unit normal
+/// there; where the ray grazes the surface (theta near 0, a silhouette)
+/// the bound grows without limit, as the error can.
+pub fn pair_height_tolerance(
+    precision: RasterPrecision,
+    (eye, pixels_per_radian): (glam::DVec3, f64),
+    point: glam::DVec3,
+    normal: glam::DVec3,
+) -> f64 {
+    let to = point - eye;
+    let distance = to.length();
+    let ray = to / distance;
+    let across =
+        std::f64::consts::FRAC_1_SQRT_2 * (-f64::from(precision.sub_pixel_bits)).exp2() * distance
+            / pixels_per_radian;
+    let sin = normal.dot(ray).abs().max(1e-9);
+    let cos = (1.0 - sin * sin).max(0.0).sqrt();
+    let depth = 8.0 * (-f64::from(precision.depth_significand_bits)).exp2() * distance;
+    2.0 * (across * cos / sin + depth) * ray.y.abs()
+}
+
+/// The unit normal of `info`'s surface (as `height_at` splits it) at world
+/// (x, z), from the heights a hundredth of a cell either side.
+pub fn surface_normal(info: &TerrainInfo, x: f64, z: f64) -> Option<glam::DVec3> {
+    let (dx, dz) = (0.01 * info.spacing().x, 0.01 * info.spacing().y);
+    let h = |x: f64, z: f64| info.height_at(x, z).map(f64::from);
+    let gx = (h(x + dx, z)? - h(x - dx, z)?) / (2.0 * dx);
+    let gz = (h(x, z + dz)? - h(x, z - dz)?) / (2.0 * dz);
+    Some(glam::DVec3::new(-gx, 1.0, -gz).normalize())
+}
+
 /// The steepest rise of a terrain's triangles, per metre: over every cell,
 /// the gradient of its samples' differences along x and z.
 pub fn max_slope(info: &TerrainInfo) -> f64 {
