@@ -251,3 +251,27 @@ fn the_depth_pyramid_is_the_first_pass_depth_reduced_exactly() {
     );
     scene.finish();
 }
+
+/// A target made after another is destroyed is told apart from it, though
+/// the driver may give its depth view the old one's handle: the occlusion
+/// pass keys its descriptors on the image's serial number.
+#[test]
+fn a_new_target_is_never_taken_for_a_destroyed_one() {
+    if skip_gpu() {
+        return;
+    }
+    let gpu = open_gpu(None);
+    let mut seen = Vec::new();
+    for samples in [1, 1, 4, 4, 1] {
+        let target =
+            vkterrain::vk::target::OffscreenTarget::new(&gpu.device, 64, 48, samples).unwrap();
+        let id = target.views().depth_identity();
+        assert!(
+            !seen.contains(&id),
+            "depth image {id} seen before: {seen:?}"
+        );
+        seen.push(id);
+    }
+    let report = gpu.shutdown();
+    assert_eq!(report.count, 0, "{:?}", report.messages);
+}

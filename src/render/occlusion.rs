@@ -174,8 +174,8 @@ struct CullingSlot {
     count: Buffer,
     /// The pyramid and the depth extent it was sized for.
     pyramid: Option<(Buffer, vk::Extent2D)>,
-    /// The depth view the set reads.
-    depth: Option<vk::ImageView>,
+    /// The depth image the set reads (`TargetViews::depth_identity`).
+    depth: Option<u64>,
     /// The patches of each listed draw, and their indirect commands: the
     /// first pass's, then (from command `list_capacity` on) the second's.
     draw_patches: Buffer,
@@ -237,9 +237,9 @@ impl Occlusion {
     ) -> Result<()> {
         let culling = self.culling.as_mut().ok_or_else(not_built)?;
         let s = &mut culling.slots[slot];
-        if s.depth != Some(target.depth_view()) {
+        if s.depth != Some(target.depth_identity()) {
             device.write_target_depth(s.set, BINDING_HIZ_DEPTH, target, sampler);
-            s.depth = Some(target.depth_view());
+            s.depth = Some(target.depth_identity());
         }
         if s.pyramid.as_ref().map(|(_, e)| *e) != Some(target.extent) {
             let texels: u32 = pyramid_levels(target.extent.width, target.extent.height)

@@ -104,11 +104,22 @@ pub struct Image {
     raw: Owned<vk::Image>,
     _memory: Memory,
     pub desc: ImageDesc,
+    serial: u64,
 }
+
+/// The next image's serial number.
+static NEXT_IMAGE_SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl Image {
     pub(super) fn raw(&self) -> vk::Image {
         self.raw.raw()
+    }
+
+    /// A number no other image of this process has had: unlike a Vulkan
+    /// handle, which a driver may hand to a new image once this one is
+    /// destroyed, it tells the image apart from every later one.
+    pub(super) fn serial(&self) -> u64 {
+        self.serial
     }
 
     pub(super) fn view(&self) -> vk::ImageView {
@@ -287,6 +298,7 @@ impl Device {
             raw,
             _memory: memory,
             desc,
+            serial: NEXT_IMAGE_SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         })
     }
 

@@ -361,6 +361,7 @@ impl Swapchain {
                 samples: vk::SampleCountFlags::TYPE_1,
                 depth_view: depth.view(),
                 depth_image: depth.raw(),
+                depth_serial: depth.serial(),
                 depth_readable: depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
                 color_resolve: None,
                 depth_resolve: None,

@@ -30,6 +30,8 @@ pub struct TargetViews {
     pub(super) depth_view: vk::ImageView,
     /// The image of `depth_view` (the one drawn into).
     pub(super) depth_image: vk::Image,
+    /// That image's serial number (`Image::serial`).
+    pub(super) depth_serial: u64,
     /// Whether shaders can read `depth_view` (occlusion culling).
     pub depth_readable: bool,
     pub(super) color_resolve: Option<vk::ImageView>,
@@ -37,10 +39,12 @@ pub struct TargetViews {
 }
 
 impl TargetViews {
-    /// The depth view drawn into: a target whose depth is another view
-    /// needs its descriptors written again.
-    pub fn depth_view(&self) -> vk::ImageView {
-        self.depth_view
+    /// Which depth image is drawn into: a target whose depth is another
+    /// image needs its descriptors written again. A serial number, not the
+    /// view's handle, which a driver may reuse for a new view once the old
+    /// one is destroyed.
+    pub fn depth_identity(&self) -> u64 {
+        self.depth_serial
     }
 }
 
@@ -121,6 +125,7 @@ impl Multisampled {
             color_view: self.color.view(),
             depth_view: self.depth.view(),
             depth_image: self.depth.raw(),
+            depth_serial: self.depth.serial(),
             depth_readable: self.depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
             color_resolve: Some(color),
             depth_resolve: depth,
@@ -271,6 +276,7 @@ impl OffscreenTarget {
                 samples: vk::SampleCountFlags::TYPE_1,
                 depth_view: self.depth.view(),
                 depth_image: self.depth.raw(),
+                depth_serial: self.depth.serial(),
                 depth_readable: self.depth.desc.usage.contains(vk::ImageUsageFlags::SAMPLED),
                 color_resolve: None,
                 depth_resolve: None,
