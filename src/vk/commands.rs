@@ -384,16 +384,26 @@ impl<'a> Recorder<'a> {
     }
 
     pub fn bind_graphics(&self, pipeline: &Pipeline, layout: &PipelineLayout, set: DescriptorSet) {
-        // SAFETY: pipeline, layout and set are compatible objects of this device.
+        self.bind(vk::PipelineBindPoint::GRAPHICS, pipeline, layout, set);
+    }
+
+    /// Binds `pipeline` and `set` (at set 0 of `layout`) at `point`.
+    fn bind(
+        &self,
+        point: vk::PipelineBindPoint,
+        pipeline: &Pipeline,
+        layout: &PipelineLayout,
+        set: DescriptorSet,
+    ) {
+        // SAFETY: pipeline, layout and set are compatible objects of this
+        // device, the pipeline made for `point`.
         unsafe {
-            self.device.ash().cmd_bind_pipeline(
-                self.cmd,
-                vk::PipelineBindPoint::GRAPHICS,
-                pipeline.raw(),
-            );
+            self.device
+                .ash()
+                .cmd_bind_pipeline(self.cmd, point, pipeline.raw());
             self.device.ash().cmd_bind_descriptor_sets(
                 self.cmd,
-                vk::PipelineBindPoint::GRAPHICS,
+                point,
                 layout.raw(),
                 0,
                 &[set.0],
@@ -472,22 +482,7 @@ impl<'a> Recorder<'a> {
     }
 
     pub fn bind_compute(&self, pipeline: &Pipeline, layout: &PipelineLayout, set: DescriptorSet) {
-        // SAFETY: pipeline, layout and set are compatible objects of this device.
-        unsafe {
-            self.device.ash().cmd_bind_pipeline(
-                self.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                pipeline.raw(),
-            );
-            self.device.ash().cmd_bind_descriptor_sets(
-                self.cmd,
-                vk::PipelineBindPoint::COMPUTE,
-                layout.raw(),
-                0,
-                &[set.0],
-                &[],
-            );
-        }
+        self.bind(vk::PipelineBindPoint::COMPUTE, pipeline, layout, set);
     }
 
     /// Runs `groups` workgroups of the bound compute pipeline.
