@@ -54,7 +54,7 @@ fn each_covered_pixel_is_shaded_about_once() {
         };
         let frame = scene.render(&cam, &settings);
         let stats = frame.measurements.statistics.expect("pipeline statistics");
-        let covered = frame.readback.depth.iter().filter(|&&d| d > 0.0).count() as f64;
+        let covered = frame.covered_pixels() as f64;
         let per_pixel = stats.fragment_invocations as f64 / covered;
         eprintln!(
             "{name}: {} invocations over {covered} covered pixels ({per_pixel:.3}), {} triangles",

@@ -274,17 +274,7 @@ fn a_tight_pool_evicts_and_restreams_without_holes_or_cracks() {
     scene.wait_for_residency(false);
     let flat = settings(RenderPath::Tess, Shading::Flat);
     let (mut uploads, mut most_resident) = (0, 0);
-    // Low along the terrain and back again, then a cut to a view from
-    // above: tiles leave the pool and come back.
-    let mut path: Vec<Camera> = (0..=16)
-        .chain((0..=16).rev())
-        .map(|i| {
-            let x = -220.0 + 27.5 * f64::from(i);
-            camera([x, 70.0, -150.0], [x + 40.0, 10.0, 0.0], 60.0)
-        })
-        .collect();
-    path.push(camera([0.0, 520.0, 0.0], [0.0, 0.0, 0.0], 60.0));
-    for (i, cam) in path.iter().enumerate() {
+    for (i, cam) in low_pass().iter().enumerate() {
         let frame = scene.render(cam, &flat);
         let stats = scene.renderer().stream_stats().unwrap();
         uploads += stats.uploaded_pages;

@@ -215,6 +215,17 @@ pub fn first_seen<T, K: PartialEq>(rows: &[T], key: impl Fn(&T) -> K) -> Vec<K> 
 type GroupKey = (String, String, String);
 
 /// Each group of rows, in first-seen order, with its key.
+/// `path`'s error-mode row at tau = 1 px of a group, with or without
+/// occlusion culling.
+fn error_row_at_1px<'a>(group: &[&'a Row], path: RowPath, occlusion: bool) -> Option<&'a Row> {
+    group.iter().copied().find(|r| {
+        r.path == path
+            && r.lod == Some(RowLod::Error)
+            && r.tau == Some(1.0)
+            && r.occlusion == occlusion
+    })
+}
+
 fn groups(rows: &[Row]) -> Vec<(GroupKey, Vec<&Row>)> {
     first_seen(rows, |r| {
         (r.scene.clone(), r.device.clone(), r.camera.clone())
@@ -482,24 +493,16 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
     let _ = writeln!(w, "|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
         let cell = |path: RowPath| {
-            group
-                .iter()
-                .find(|r| {
-                    r.path == path
-                        && r.lod == Some(RowLod::Error)
-                        && r.tau == Some(1.0)
-                        && !r.occlusion
-                })
-                .map_or("n/a".to_string(), |r| {
-                    let px = |p: Option<f64>| p.map_or("n/a".into(), |p| format!("{p:.2}"));
-                    format!(
-                        "{} / {:.3} / {} / {:.2}",
-                        px(r.predicted_p99_px),
-                        r.p99_px,
-                        px(r.predicted_max_px),
-                        r.max_px,
-                    )
-                })
+            error_row_at_1px(&group, path, false).map_or("n/a".to_string(), |r| {
+                let px = |p: Option<f64>| p.map_or("n/a".into(), |p| format!("{p:.2}"));
+                format!(
+                    "{} / {:.3} / {} / {:.2}",
+                    px(r.predicted_p99_px),
+                    r.p99_px,
+                    px(r.predicted_max_px),
+                    r.max_px,
+                )
+            })
         };
         let _ = writeln!(
             w,
@@ -548,15 +551,8 @@ fn overdraw_section(w: &mut String, rows: &[Row]) {
             continue;
         };
         let cell = |path: RowPath, occlusion: bool| {
-            group
-                .iter()
-                .find(|r| {
-                    r.path == path
-                        && r.lod == Some(RowLod::Error)
-                        && r.tau == Some(1.0)
-                        && r.occlusion == occlusion
-                })
-                .and_then(|r| overdraw(r))
+            error_row_at_1px(&group, path, occlusion)
+                .and_then(overdraw)
                 .map_or("n/a".into(), |o| format!("{o:.2} ({:.2}x)", o / brute))
         };
         let _ = writeln!(
@@ -604,14 +600,7 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
             .filter_map(|r| r.triangles)
             .min();
         for path in [RowPath::Tess, RowPath::Geomip] {
-            let find = |occlusion: bool| {
-                group.iter().find(|r| {
-                    r.path == path
-                        && r.lod == Some(RowLod::Error)
-                        && r.tau == Some(1.0)
-                        && r.occlusion == occlusion
-                })
-            };
+            let find = |occlusion: bool| error_row_at_1px(&group, path, occlusion);
             let (Some(off), Some(on)) = (find(false), find(true)) else {
                 continue;
             };

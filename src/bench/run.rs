@@ -534,21 +534,16 @@ impl<'a> Bench<'a> {
         Ok(bench)
     }
 
+    /// Renders `config` from `camera`, waits for it and reads it back.
     fn render(
         &mut self,
         camera: &Camera,
         config: &Config,
         levels: Option<&[u8]>,
     ) -> anyhow::Result<HeadlessFrame> {
-        let terrain = self.terrain;
-        let settings = config.settings(self.scene_lod);
-        let target = renderer_for(&mut self.renderers, config);
-        if settings.path == RenderPath::Geomip {
-            target.renderer.set_geomip_levels(terrain, levels)?;
-        }
-        Ok(self
-            .headless
-            .render(&mut target.renderer, terrain, camera, &settings)?)
+        self.draw(config, levels, |headless, renderer, terrain, settings| {
+            headless.render(renderer, terrain, camera, settings)
+        })
     }
 
     /// Draws `config` from `camera` and waits for it, reading nothing
@@ -559,15 +554,36 @@ impl<'a> Bench<'a> {
         config: &Config,
         levels: Option<&[u8]>,
     ) -> anyhow::Result<TimedFrame> {
+        self.draw(config, levels, |headless, renderer, terrain, settings| {
+            headless.time(renderer, terrain, camera, settings)
+        })
+    }
+
+    /// `frame` with `config`'s renderer, its geomip levels set to `levels`
+    /// (the oracle's), and its settings.
+    fn draw<T>(
+        &mut self,
+        config: &Config,
+        levels: Option<&[u8]>,
+        frame: impl FnOnce(
+            &mut Headless,
+            &mut TerrainRenderer,
+            &Terrain,
+            &RenderSettings,
+        ) -> crate::vk::Result<T>,
+    ) -> anyhow::Result<T> {
         let terrain = self.terrain;
         let settings = config.settings(self.scene_lod);
         let target = renderer_for(&mut self.renderers, config);
         if settings.path == RenderPath::Geomip {
             target.renderer.set_geomip_levels(terrain, levels)?;
         }
-        Ok(self
-            .headless
-            .time(&mut target.renderer, terrain, camera, &settings)?)
+        Ok(frame(
+            &mut self.headless,
+            &mut target.renderer,
+            terrain,
+            &settings,
+        )?)
     }
 
     /// Renders `config` `repeats` times from `camera`; timings of samples
@@ -622,7 +638,7 @@ impl<'a> Bench<'a> {
             gathered.triangles.push(s.clipping_primitives);
             gathered.tes_invocations.push(s.tes_invocations);
             gathered.fragment_invocations.push(s.fragment_invocations);
-            let covered = frame.readback.depth.iter().filter(|&&d| d > 0.0).count();
+            let covered = frame.covered_pixels();
             gathered.covered_pixels.push(covered as u64);
         }
         if let Some(o) = frame.measurements.occlusion {

@@ -26,6 +26,12 @@ pub struct HeadlessFrame {
 }
 
 impl HeadlessFrame {
+    /// Pixels that show terrain (depth above 0, the far plane in reversed
+    /// Z).
+    pub fn covered_pixels(&self) -> usize {
+        self.readback.depth.iter().filter(|&&d| d > 0.0).count()
+    }
+
     /// The colour image (sRGB, as stored).
     pub fn rgba_image(&self) -> image::RgbaImage {
         image::RgbaImage::from_raw(

@@ -60,6 +60,7 @@ use crate::vk::queries::PipelineStatistics;
 use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
 mod budget;
+use budget::BuildInputs;
 mod record;
 
 /// What a renderer builds up front. A frame asking for anything else
@@ -194,25 +195,16 @@ impl TerrainRenderer {
         frames_in_flight: u32,
         options: &RendererOptions,
     ) -> Result<Self> {
-        let device = &gpu.device;
-        let before = device.memory_in_use();
+        let inputs = (gpu, terrain, appearance, color_format, frames_in_flight);
+        let before = gpu.device.memory_in_use();
         let mut options = options.clone();
         loop {
-            let built = Self::build_within_budget(
-                gpu,
-                terrain,
-                appearance,
-                color_format,
-                frames_in_flight,
-                &options,
-            );
-            match (built, &options.stream) {
+            match (Self::build_within_budget(inputs, &options), &options.stream) {
                 (Ok(Built::Renderer(renderer)), _) => return Ok(*renderer),
                 (Ok(Built::Rebase(config)), _) => options.stream = Some(config),
                 (Err(VkError::OverBudget { budget, .. }), Some(config)) => {
-                    let built = (gpu, terrain, appearance, color_format, frames_in_flight);
                     return Err(Self::refuse_budget(
-                        built,
+                        inputs,
                         &options,
                         config,
                         (before, budget),
@@ -226,11 +218,7 @@ impl TerrainRenderer {
     /// A renderer of `options`, or (streaming) the configuration to build
     /// instead where the memory budget asks for a coarser base level.
     fn build_within_budget(
-        gpu: &Gpu,
-        terrain: &Terrain,
-        appearance: &Appearance,
-        color_format: vk::Format,
-        frames_in_flight: u32,
+        (gpu, terrain, appearance, color_format, frames_in_flight): BuildInputs,
         options: &RendererOptions,
     ) -> Result<Built> {
         let device = &gpu.device;

@@ -33,9 +33,8 @@ pub struct StreamMemory {
 /// only for its configured base level beyond a patch
 /// (`Terrain::widen_y_bounds_to_blocks`), and none coarser than a tile.
 pub fn coarsest_base(preferred: &StreamShape, cells_per_patch: u32) -> u32 {
-    preferred
-        .base_level
-        .max(cells_per_patch.trailing_zeros())
+    cells_per_patch
+        .trailing_zeros()
         .min(preferred.tile_cells.trailing_zeros())
         .max(preferred.base_level)
 }

@@ -19,11 +19,12 @@ impl TerrainRenderer {
     /// before the renderer, too small to stream `config` with `options`:
     /// it names the smallest budget that builds.
     pub(super) fn refuse_budget(
-        (gpu, terrain, appearance, color_format, frames_in_flight): BuildInputs,
+        inputs: BuildInputs,
         options: &RendererOptions,
         config: &StreamConfig,
         (before, budget): (u64, u64),
     ) -> VkError {
+        let (gpu, terrain, ..) = inputs;
         let device = &gpu.device;
         let tiled = match super::open_streamed(terrain.info(), config) {
             Ok(tiled) => tiled,
@@ -36,14 +37,7 @@ impl TerrainRenderer {
             ..options.clone()
         };
         device.set_memory_budget(None);
-        let built = Self::build_within_budget(
-            gpu,
-            terrain,
-            appearance,
-            color_format,
-            frames_in_flight,
-            &options,
-        );
+        let built = Self::build_within_budget(inputs, &options);
         let measured = match built {
             Ok(Built::Renderer(renderer)) => {
                 let bytes = device.memory_in_use() - before;
