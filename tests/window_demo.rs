@@ -137,3 +137,85 @@ fn a_storm_of_resizes_and_minimises_stays_clean() {
     let sizes = stdout.lines().find(|l| l.contains("sizes ")).unwrap();
     assert!(sizes.trim_end().ends_with("-> 320x200"), "{sizes}");
 }
+
+/// A streamed terrain under a memory budget: a window resized larger than
+/// any before plans its renderer again beside the larger targets, so the
+/// pool gives up what they take, and the run stays within the budget.
+/// The budget is the smallest the renderer names for the storm's largest
+/// window (640x400, twice the starting size): every size the storm
+/// requests fits it, but a pool laid out beside the starting 320x200
+/// targets leaves no room for the larger ones (on lavapipe 13 MiB; before the
+/// renderer was planned again, the same storm failed at 12, 13 and 14 MiB).
+#[test]
+fn a_window_resized_larger_under_a_budget_plans_its_pool_again() {
+    if skip_gpu() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = dir.path().join("hills.vkt");
+    let generated = Command::new(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(["generate", "--size", "513", "--tile", "32", "--out"])
+        .arg(&terrain)
+        .output()
+        .unwrap();
+    assert!(
+        generated.status.success(),
+        "{}",
+        String::from_utf8_lossy(&generated.stderr)
+    );
+    let terrain = terrain.to_str().unwrap();
+    // The smallest budget at the storm's largest size, from the refusal
+    // of a budget that holds its targets but not the renderer.
+    let probe = Command::new("xvfb-run")
+        .args(["-a", "-s", "-screen 0 1600x1200x24"])
+        .arg(env!("CARGO_BIN_EXE_vkterrain"))
+        .args(["demo", "--flat", "--heightmap", terrain])
+        .args([
+            "--width", "640", "--height", "400", "--frames", "1", "--exit",
+        ])
+        .args(["--gpu-memory-budget", "9"])
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .unwrap();
+    let refusal = String::from_utf8_lossy(&probe.stderr).into_owned();
+    assert!(!probe.status.success(), "9 MiB was not refused");
+    let smallest: u64 = refusal
+        .split("(--gpu-memory-budget ")
+        .nth(1)
+        .and_then(|s| s.split(')').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("the refusal names no smallest budget: {refusal}"));
+    assert!(smallest > 9, "{refusal}");
+
+    let budget = smallest.to_string();
+    let stdout = demo_under_xvfb(
+        &[
+            "--validate",
+            "--flat",
+            "--heightmap",
+            terrain,
+            "--gpu-memory-budget",
+            &budget,
+            "--width",
+            "320",
+            "--height",
+            "200",
+            "--frames",
+            "50",
+            "--resize-storm",
+            "40",
+            "--exit",
+        ],
+        50,
+    );
+    let replans: u32 = stdout
+        .split("renderer planned again ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("the run reports its replans");
+    // The storm's sizes set a new largest window several times.
+    assert!(replans >= 2, "{stdout}");
+    let sizes = stdout.lines().find(|l| l.contains("sizes ")).unwrap();
+    assert!(sizes.contains("640x399"), "{sizes}");
+}

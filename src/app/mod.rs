@@ -97,6 +97,11 @@ pub struct DemoSummary {
     pub swapchains_built: u32,
     /// Distinct swapchain sizes seen, in order.
     pub sizes: Vec<(u32, u32)>,
+    /// Times the renderer was planned again for a window larger than any
+    /// before, under a memory budget.
+    pub replans: u32,
+    /// GPU memory allocated at the end, before anything was freed.
+    pub memory_in_use: u64,
 }
 
 /// Opens the window and runs until it closes or the scripted frames are done.
@@ -140,7 +145,13 @@ struct Graphics {
     image_available: Vec<Semaphore>,
     /// Where a screenshot is copied (one swapchain size).
     screenshot_buffer: Option<Buffer>,
-    renderer: TerrainRenderer,
+    /// None only while it is built again (`Running::replan`).
+    renderer: Option<TerrainRenderer>,
+    /// The largest window, in pixels, the renderer's layout was planned
+    /// beside. Under a memory budget a streamed terrain's pool takes what
+    /// the targets leave, so larger targets are made only after the
+    /// renderer is planned again.
+    planned_pixels: u64,
     swapchain: Option<Swapchain>,
     surface: Arc<Surface>,
     gpu: Gpu,
@@ -183,6 +194,8 @@ struct Stats {
     screenshots: u32,
     swapchains_built: u32,
     sizes: Vec<(u32, u32)>,
+    /// Times the renderer was planned again for a larger window.
+    replans: u32,
     /// Resize-storm requests made so far.
     storm_step: u64,
 }
@@ -298,7 +311,8 @@ impl Graphics {
                 commands,
                 image_available,
                 screenshot_buffer: None,
-                renderer,
+                renderer: Some(renderer),
+                planned_pixels: pixels(swapchain.extent),
                 swapchain: Some(swapchain),
                 surface,
                 gpu,
@@ -331,26 +345,42 @@ impl Graphics {
             None,
         )
         .context("building the swapchain")?;
-        let renderer = TerrainRenderer::with_appearance(
-            gpu,
-            &options.terrain,
-            &options.appearance,
-            swapchain.format.format,
-            FRAMES_IN_FLIGHT as u32,
-            &RendererOptions {
-                paths: paths(&device.caps),
-                // Line pipelines are cheap to have ready for F2.
-                wireframe: device.caps.fill_mode_non_solid,
-                samples,
-                stream: options.stream.clone(),
-            },
-        )
-        .context("preparing the terrain for the GPU")?;
+        let renderer = Self::build_renderer(gpu, options, swapchain.format.format, samples)?;
         let image_available = (0..FRAMES_IN_FLIGHT)
             .map(|i| device.create_semaphore(&format!("demo.image_available[{i}]")))
             .collect::<crate::vk::Result<Vec<_>>>()?;
         let commands = device.create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?;
         Ok((surface, swapchain, renderer, image_available, commands))
+    }
+
+    /// The renderer, laid out within what the budget leaves beside the
+    /// memory already in use (the swapchain's targets).
+    fn build_renderer(
+        gpu: &Gpu,
+        options: &DemoOptions,
+        format: vk::Format,
+        samples: u32,
+    ) -> Result<TerrainRenderer> {
+        let caps = &gpu.device.caps;
+        TerrainRenderer::with_appearance(
+            gpu,
+            &options.terrain,
+            &options.appearance,
+            format,
+            FRAMES_IN_FLIGHT as u32,
+            &RendererOptions {
+                paths: paths(caps),
+                // Line pipelines are cheap to have ready for F2.
+                wireframe: caps.fill_mode_non_solid,
+                samples,
+                stream: options.stream.clone(),
+            },
+        )
+        .context("preparing the terrain for the GPU")
+    }
+
+    fn renderer(&self) -> &TerrainRenderer {
+        self.renderer.as_ref().expect("built but while replanning")
     }
 
     /// Drops every object in field order, then the device, and reports
@@ -361,6 +391,7 @@ impl Graphics {
             image_available,
             screenshot_buffer,
             renderer,
+            planned_pixels: _,
             swapchain,
             surface,
             gpu,
@@ -456,6 +487,7 @@ impl Running {
                 screenshots: 0,
                 swapchains_built: 0,
                 sizes: Vec::new(),
+                replans: 0,
                 storm_step: 0,
             },
             tau: match settings.lod_metric {
@@ -476,9 +508,15 @@ impl Running {
     }
 
     /// Rebuilds the swapchain for the window's current size; a zero-sized
-    /// (minimised) window leaves none, and drawing pauses.
+    /// (minimised) window leaves none, and drawing pauses. A window larger
+    /// than any the renderer was planned beside, under a memory budget,
+    /// plans the renderer again (`replan`).
     fn rebuild_swapchain(&mut self, options: &DemoOptions) -> Result<()> {
         let size = self.window.inner_size();
+        let extent = vk::Extent2D {
+            width: size.width,
+            height: size.height,
+        };
         let graphics = &mut self.graphics;
         let old = graphics.swapchain.take();
         if size.width == 0 || size.height == 0 {
@@ -486,22 +524,35 @@ impl Running {
             drop(old);
             return Ok(());
         }
+        let replan = needs_replan(graphics, extent);
+        let samples = graphics.renderer().samples();
+        let old = if replan {
+            // The old targets and the renderer go before the new targets
+            // are made, so the budget sees neither.
+            drop(old);
+            graphics.gpu.device.wait_idle()?;
+            graphics.renderer = None;
+            None
+        } else {
+            old
+        };
         let swapchain = Swapchain::new(
             &graphics.gpu.device,
             &graphics.surface,
-            vk::Extent2D {
-                width: size.width,
-                height: size.height,
-            },
+            extent,
             options.present_mode,
-            graphics.renderer.samples(),
+            samples,
             old,
         )
         .context("building the swapchain")?;
-        if graphics.renderer.color_format() != swapchain.format.format {
+        if replan {
+            self.replan(options, &swapchain, samples)?;
+        }
+        let graphics = &mut self.graphics;
+        if graphics.renderer().color_format() != swapchain.format.format {
             bail!(
                 "the swapchain changed format from {:?} to {:?}",
-                graphics.renderer.color_format(),
+                graphics.renderer().color_format(),
                 swapchain.format.format
             );
         }
@@ -512,6 +563,31 @@ impl Running {
         }
         graphics.swapchain = Some(swapchain);
         self.rebuild = false;
+        Ok(())
+    }
+
+    /// Builds the renderer again beside `swapchain`'s targets, by the rule
+    /// it was first built by: its pool takes what the budget leaves, and a
+    /// budget below its smallest layout is refused, naming the smallest
+    /// that works. The frames' command slots start afresh, since the old
+    /// renderer's queries are gone.
+    fn replan(&mut self, options: &DemoOptions, swapchain: &Swapchain, samples: u32) -> Result<()> {
+        let graphics = &mut self.graphics;
+        let renderer =
+            Graphics::build_renderer(&graphics.gpu, options, swapchain.format.format, samples)
+                .with_context(|| {
+                    format!(
+                        "planning the renderer again for a {}x{} window",
+                        swapchain.extent.width, swapchain.extent.height
+                    )
+                })?;
+        graphics.commands = graphics
+            .gpu
+            .device
+            .create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?;
+        graphics.renderer = Some(renderer);
+        graphics.planned_pixels = pixels(swapchain.extent);
+        self.stats.replans += 1;
         Ok(())
     }
 
@@ -575,7 +651,7 @@ impl Running {
             }
             KeyCode::F7 => {
                 self.settings.occlusion = !self.settings.occlusion;
-                if self.settings.occlusion && !self.graphics.renderer.can_cull_occluded() {
+                if self.settings.occlusion && !self.graphics.renderer().can_cull_occluded() {
                     log::warn!(
                         "occlusion culling is unavailable: the device cannot sample its depth attachments"
                     );
@@ -752,8 +828,12 @@ impl Running {
         let device = &graphics.gpu.device;
         // This slot's uniforms, queries and command buffer were last used
         // two frames ago; wait for that frame before touching them.
+        let renderer = graphics
+            .renderer
+            .as_mut()
+            .expect("built again before drawing");
         if graphics.commands.wait(slot)? {
-            self.stats.last = graphics.renderer.measurements(slot)?;
+            self.stats.last = renderer.measurements(slot)?;
         }
         let swapchain = graphics.swapchain.as_ref().expect("checked by the caller");
         let (index, suboptimal) = match swapchain.acquire(&graphics.image_available[slot])? {
@@ -774,11 +854,9 @@ impl Running {
             view = view.with_frustum_of(frozen);
         }
         let start = Instant::now();
-        graphics
-            .renderer
-            .prepare(slot, &options.terrain, &view, &self.settings)?;
-        self.stats.lod_ms = graphics.renderer.lod_ms();
-        self.stats.patches_drawn = graphics.renderer.patches_in_view();
+        renderer.prepare(slot, &options.terrain, &view, &self.settings)?;
+        self.stats.lod_ms = renderer.lod_ms();
+        self.stats.patches_drawn = renderer.patches_in_view();
 
         if capture && !swapchain.readable {
             bail!("this swapchain's images cannot be read back for a screenshot");
@@ -798,7 +876,7 @@ impl Running {
         let views = swapchain.views(index);
         let rec = graphics.commands.begin(slot)?;
         swapchain.record_begin(&rec, index);
-        graphics.renderer.record(&rec, slot, &views)?;
+        renderer.record(&rec, slot, &views)?;
         swapchain.record_present(&rec, index, capture_into);
         self.stats.cpu_ms = start.elapsed().as_secs_f64() * 1e3;
         rec.submit_frame(
@@ -886,6 +964,7 @@ impl Running {
             graphics, stats, ..
         } = self;
         let device = graphics.gpu.device.caps.device_name.clone();
+        let memory_in_use = graphics.gpu.device.memory_in_use();
         let validation = graphics.shutdown();
         DemoSummary {
             frames: stats.frame,
@@ -895,6 +974,8 @@ impl Running {
             device,
             swapchains_built: stats.swapchains_built,
             sizes: stats.sizes,
+            replans: stats.replans,
+            memory_in_use,
         }
     }
 }
@@ -906,6 +987,24 @@ pub fn with_validation(error: anyhow::Error, report: &ValidationReport) -> anyho
         Ok(()) => error,
         Err(validation) => error.context(validation.to_string()),
     }
+}
+
+/// An extent's pixels.
+fn pixels(extent: vk::Extent2D) -> u64 {
+    u64::from(extent.width) * u64::from(extent.height)
+}
+
+/// Whether targets of `extent` call for the renderer to be planned again:
+/// a streamed terrain's pool under a memory budget was sized beside
+/// smaller ones. Smaller targets leave it as it is: the pool stays within
+/// the budget, and a window dragged about does not rebuild it each time.
+fn needs_replan(graphics: &Graphics, extent: vk::Extent2D) -> bool {
+    graphics.gpu.device.memory_budget().is_some()
+        && graphics
+            .renderer
+            .as_ref()
+            .is_some_and(|r| r.stream_shape().is_some())
+        && pixels(extent) > graphics.planned_pixels
 }
 
 /// Flying speed: crossing the terrain takes about 40 seconds.

@@ -138,6 +138,12 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
         summary.swapchains_built,
         sizes.join(" -> ")
     )?;
+    writeln!(
+        out,
+        "renderer planned again {} times for a larger window; GPU memory in use at the end: {:.1} MiB",
+        summary.replans,
+        summary.memory_in_use as f64 / (1u64 << 20) as f64
+    )?;
     if let Some(path) = &cmd.screenshot {
         writeln!(out, "wrote {}", path.display())?;
     }

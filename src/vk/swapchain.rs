@@ -182,6 +182,33 @@ enum Attachments {
     Multisampled(Multisampled),
 }
 
+impl Attachments {
+    /// The targets of a swapchain of `extent` and `format` drawn with
+    /// `samples` samples per pixel.
+    fn new(
+        device: &Device,
+        extent: vk::Extent2D,
+        format: vk::Format,
+        samples: u32,
+    ) -> Result<Self> {
+        Ok(
+            match Multisampled::new(device, extent, format, samples, "swapchain")? {
+                Some(ms) => Attachments::Multisampled(ms),
+                None => Attachments::Depth(device.create_image(
+                    ImageDesc {
+                        extent,
+                        format: DEPTH_FORMAT,
+                        usage: depth_usage(device, 1),
+                        aspect: vk::ImageAspectFlags::DEPTH,
+                        samples: vk::SampleCountFlags::TYPE_1,
+                    },
+                    "swapchain.depth",
+                )?),
+            },
+        )
+    }
+}
+
 /// A swapchain with a view and a semaphore per image, and the depth image
 /// (or multisampled colour and depth images) its frames in flight share.
 /// Dropping it waits for the device to go idle first.
@@ -244,25 +271,21 @@ impl Swapchain {
             .present_mode(present_mode)
             .clipped(true)
             .old_swapchain(old.as_ref().map_or(vk::SwapchainKHR::null(), |o| o.raw));
-        let attachments =
-            match Multisampled::new(device, extent, format.format, samples, "swapchain")? {
-                Some(ms) => Attachments::Multisampled(ms),
-                None => Attachments::Depth(device.create_image(
-                    ImageDesc {
-                        extent,
-                        format: DEPTH_FORMAT,
-                        usage: depth_usage(device, 1),
-                        aspect: vk::ImageAspectFlags::DEPTH,
-                        samples: vk::SampleCountFlags::TYPE_1,
-                    },
-                    "swapchain.depth",
-                )?),
-            };
         // SAFETY: the swapchain holds the surface; the old swapchain is
         // retired here and dropped below (its Drop waits for idle).
         let created = unsafe { loader.create_swapchain(&info, None) };
+        // The old targets go before the new ones are made, so a memory
+        // budget never has to hold both sizes at once.
         drop(old);
         let raw = created.context("creating the swapchain")?;
+        let attachments = match Attachments::new(device, extent, format.format, samples) {
+            Ok(attachments) => attachments,
+            Err(e) => {
+                // SAFETY: just created, and nothing uses it yet.
+                unsafe { loader.destroy_swapchain(raw, None) };
+                return Err(e);
+            }
+        };
         device.set_name(raw, "swapchain");
         // Owned from here: a failure below destroys it.
         let mut swapchain = Swapchain {
