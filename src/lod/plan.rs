@@ -23,9 +23,13 @@
 //! tau is the bound's choice, and no block is drawn finer. The frame may
 //! let a share of its terrain's pixels exceed tau (`EXCEED_SHARE`): each
 //! block's pixels over tau at each coarser level are read off the view
-//! model from the direction the block is seen, and the share is spent
-//! greedily on the blocks and levels that save the most triangles for it
-//! (the same exchange as the view measure's, on the model's figures).
+//! model from the direction the block is seen (its rays falling to its
+//! mean height), and the share is spent greedily on the blocks and levels
+//! that save the most triangles for it (the same exchange as the view
+//! measure's, on the model's figures). A patch much deeper than it is
+//! near (one near the eye) is read in parts, each from its own nearest
+//! point and direction, the parts outside the frustum left out
+//! (`model_parts`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
 //! own errors as before.
@@ -226,6 +230,8 @@ pub fn plan(
 ) -> FramePlan {
     let mut plan = FramePlan::default();
     let mut pending = Vec::new();
+    // The parts of every pending block, in order (`model_parts`).
+    let mut parts = Vec::new();
     let tau = view.tau.px();
     let grid = terrain.grid();
     let n = grid.cells_per_patch() as u32;
@@ -335,6 +341,7 @@ pub fn plan(
             view,
             (inputs, modelled),
             slot,
+            &mut parts,
         );
         if id.level > 0 && modelled.is_none() && planned.full_resolution {
             stack.extend(hierarchy.children(id));
@@ -345,7 +352,12 @@ pub fn plan(
         pending.extend(to_read);
     }
     let (candidates, frame_pixels) = match inputs.sight {
-        Some(sight) => read_model(sight, &pending, tau, view.viewport_pixels() as f32),
+        Some(sight) => read_model(
+            sight,
+            (&pending, &parts),
+            tau,
+            view.viewport_pixels() as f32,
+        ),
         None => (Vec::new(), 0.0),
     };
     if !candidates.is_empty() {
@@ -386,6 +398,7 @@ fn plan_block(
     view: &LodView,
     (inputs, sight): (&PlanInputs, Option<&SightTable>),
     slot: usize,
+    parts: &mut Vec<Part>,
 ) -> (PlannedBlock, Option<Pending>) {
     let grid = terrain.grid();
     let eye = view.eye_local;
@@ -431,31 +444,20 @@ fn plan_block(
             row[bound] * scale
         },
     };
-    if sight.is_none() || d <= 0.0 {
+    let Some(sight) = sight.filter(|_| d > 0.0) else {
         return (planned, None);
-    }
-    // Seen from the block's centre direction, falling as the ray to its
-    // box's nearest point falls.
-    let centre = 0.5
-        * (Vec2::new(bounds.min.x, bounds.min.z) + Vec2::new(bounds.max.x, bounds.max.z))
-        - Vec2::new(eye.x, eye.z);
-    let below = (bounds.min.y - eye.y).max(eye.y - bounds.max.y).max(0.0);
-    let reach = (d * d - below * below).max(0.0).sqrt();
-    let fall = if reach > 0.0 {
-        (eye.y - bounds.min.y) / reach
-    } else {
-        f32::INFINITY
     };
-    let at = LatticePoint::new(centre.x, centre.y, fall);
     let block = Block {
         level: id.level,
         col: id.col as usize,
         row: id.row as usize,
     };
+    let before = parts.len();
+    model_parts(bounds, view, inputs.cull, sight.mean_height(block), parts);
     let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;
     let pending = Pending {
         block,
-        at,
+        parts: parts.len() - before,
         candidate: Candidate {
             slot,
             over: [0.0; LEVEL_COUNT + 1],
@@ -469,11 +471,90 @@ fn plan_block(
     (planned, Some(pending))
 }
 
+/// The most parts a side a block is read in (`model_parts`).
+pub const MAX_PARTS_SIDE: u32 = 4;
+
+/// Where a block is seen from, for reading its view model: one part, or,
+/// for a block whose far side is more than `BLOCK_DEPTH_RATIO` times as
+/// far as its near side (a patch near the eye), a square of up to
+/// `MAX_PARTS_SIDE` x `MAX_PARTS_SIDE` equal parts, each read from its own
+/// nearest point and direction, each its share of the block's pixels.
+/// The model's figures are the block's as a whole, so each part is taken
+/// to hold the block's spread of errors; what the parts add is where the
+/// block's ground lies: nearer ground covers more pixels and shows larger
+/// errors, farther ground fewer and smaller, and ground outside the
+/// frustum (`cull`) none. Every ray is taken to fall to the block's mean
+/// height (`mean`; the bottom of its box without one). The parts are
+/// added to `parts`.
+fn model_parts(
+    bounds: &NodeBox,
+    view: &LodView,
+    cull: bool,
+    mean: Option<f32>,
+    parts: &mut Vec<Part>,
+) {
+    let eye = view.eye_local;
+    let (near, far) = bounds.distances(eye);
+    let side = if far > BLOCK_DEPTH_RATIO * near {
+        ((far / (BLOCK_DEPTH_RATIO * near)).ceil() as u32)
+            .next_power_of_two()
+            .min(MAX_PARTS_SIDE)
+    } else {
+        1
+    };
+    let landing = mean.unwrap_or(bounds.min.y);
+    let step = (bounds.max - bounds.min) / side as f32;
+    let share = 1.0 / (side * side) as f32;
+    for i in 0..side {
+        for j in 0..side {
+            let lo = Vec3::new(
+                bounds.min.x + i as f32 * step.x,
+                bounds.min.y,
+                bounds.min.z + j as f32 * step.z,
+            );
+            let hi = Vec3::new(lo.x + step.x, bounds.max.y, lo.z + step.z);
+            let (lo, hi) = (lo - eye, hi - eye);
+            if cull && side > 1 && view.frustum.aabb_outside(0.5 * (lo + hi), 0.5 * (hi - lo)) {
+                continue;
+            }
+            let d = box_distance(lo, hi);
+            // The horizontal run to the part's nearest point, and the fall
+            // over it to where the rays land.
+            let run = Vec2::new(lo.x.max(-hi.x), lo.z.max(-hi.z))
+                .max(Vec2::ZERO)
+                .length();
+            let fall = if run > 0.0 {
+                (eye.y - landing) / run
+            } else {
+                f32::INFINITY
+            };
+            let centre = 0.5 * (lo + hi);
+            parts.push(Part {
+                at: LatticePoint::new(centre.x, centre.z, fall),
+                scale: view.scale(d),
+                share,
+            });
+        }
+    }
+}
+
+/// One part of a block as its view model is read (`model_parts`).
+#[derive(Clone, Copy, Debug)]
+struct Part {
+    /// The direction it is seen from.
+    at: LatticePoint,
+    /// Pixels a unit of length covers face-on at its nearest point.
+    scale: f32,
+    /// Its share of the block's area.
+    share: f32,
+}
+
 /// A block whose view model is still to be read: where it is seen from,
 /// and its candidate, whose pixels over tau the reading fills in.
 struct Pending {
     block: Block,
-    at: LatticePoint,
+    /// How many of the parts, following those of the blocks before it.
+    parts: usize,
     candidate: Candidate,
 }
 
@@ -484,31 +565,38 @@ struct Pending {
 /// the pixels the model sees of them all.
 fn read_model(
     sight: &SightTable,
-    pending: &[Pending],
+    (pending, parts): (&[Pending], &[Part]),
     tau: f32,
     viewport: f32,
 ) -> (Vec<Candidate>, f64) {
-    let views: Vec<Option<BlockView>> = pending
+    let blocks = pending
         .iter()
-        .map(|p| sight.view(p.block, &p.at, tau / p.candidate.scale))
+        .flat_map(|p| std::iter::repeat(p.block).take(p.parts));
+    let views: Vec<Option<BlockView>> = blocks
+        .zip(parts)
+        .map(|(block, part)| sight.view(block, &part.at, tau / part.scale))
         .collect();
     let mut frame_pixels = 0.0f64;
     let mut candidates = Vec::with_capacity(pending.len());
-    for (p, view) in pending.iter().zip(&views) {
-        let Some(view) = view else {
-            continue;
-        };
+    let mut views = views.iter().zip(parts);
+    for p in pending {
         let c = &p.candidate;
-        let pixels = (view.area() * c.scale * c.scale).min(viewport);
-        frame_pixels += f64::from(pixels);
-        if c.bound == 0 {
-            continue;
-        }
         let mut over = [0.0f32; LEVEL_COUNT + 1];
-        for (k, o) in over.iter_mut().enumerate().take(c.bound) {
-            *o = pixels * view.over_fraction(k);
+        let mut modelled = false;
+        for (view, part) in views.by_ref().take(p.parts) {
+            let Some(view) = view else {
+                continue;
+            };
+            modelled = true;
+            let pixels = (view.area() * part.share * part.scale * part.scale).min(viewport);
+            frame_pixels += f64::from(pixels);
+            for (k, o) in over.iter_mut().enumerate().take(c.bound) {
+                *o += pixels * view.over_fraction(k);
+            }
         }
-        candidates.push(Candidate { over, ..*c });
+        if modelled && c.bound > 0 {
+            candidates.push(Candidate { over, ..*c });
+        }
     }
     (candidates, frame_pixels)
 }
@@ -589,4 +677,100 @@ pub fn patches_in_view(
     }
     patches.sort_unstable();
     (patches, visited)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Mat4, Vec2, Vec3};
+
+    use super::*;
+    use crate::lod::view::Tau;
+    use crate::terrain::camera::Frustum;
+
+    /// A 1280x720 view from `eye` (terrain-local) looking along `forward`,
+    /// 60 degrees high.
+    fn view(eye: Vec3, forward: Vec3) -> LodView {
+        let fov = 60f32.to_radians();
+        let proj = Mat4::perspective_rh(fov, 1280.0 / 720.0, 1.0, 1.0e5);
+        let look = Mat4::look_to_rh(Vec3::ZERO, forward, Vec3::Y);
+        LodView {
+            eye_local: eye,
+            pixels_per_radian: 720.0 / (2.0 * (0.5 * fov).tan()),
+            frustum: Frustum::from_view_proj(proj * look),
+            viewport: Vec2::new(1280.0, 720.0),
+            tau: Tau::default(),
+        }
+    }
+
+    /// A 256 m square patch, 0 to 40 m high.
+    fn patch(x: f32, z: f32) -> NodeBox {
+        NodeBox {
+            min: Vec3::new(x, 0.0, z),
+            max: Vec3::new(x + 256.0, 40.0, z + 256.0),
+        }
+    }
+
+    fn parts_of(bounds: &NodeBox, view: &LodView, cull: bool) -> Vec<Part> {
+        let mut parts = Vec::new();
+        model_parts(bounds, view, cull, Some(20.0), &mut parts);
+        parts
+    }
+
+    /// A patch far off and about as deep as it is near is read as one
+    /// part, whole, from its nearest point.
+    #[test]
+    fn a_shallow_patch_is_one_part() {
+        let v = view(Vec3::new(0.0, 60.0, 0.0), Vec3::X);
+        let bounds = patch(4000.0, -128.0);
+        let parts = parts_of(&bounds, &v, true);
+        assert_eq!(parts.len(), 1);
+        assert_eq!(parts[0].share, 1.0);
+        let near = bounds.distances(v.eye_local).0;
+        assert_eq!(parts[0].scale, v.scale(near));
+    }
+
+    /// The patch under a low eye is read in the most parts; each is a
+    /// share of the patch, and nearer parts cover more pixels per unit
+    /// than farther ones. The half behind the eye is left out, and without
+    /// culling it is kept.
+    #[test]
+    fn a_deep_patch_is_read_in_parts_and_the_unseen_ones_are_left_out() {
+        let eye = Vec3::new(128.0, 60.0, 128.0);
+        let ahead = view(eye, Vec3::new(1.0, -0.3, 0.0).normalize());
+        let bounds = patch(0.0, 0.0);
+        let all = parts_of(&bounds, &ahead, false);
+        let side = MAX_PARTS_SIDE as usize;
+        assert_eq!(all.len(), side * side);
+        for part in &all {
+            assert_eq!(part.share, 1.0 / (side * side) as f32);
+        }
+        // Parts run along z within each step along x: the one just ahead
+        // of the eye, and the one a step beyond it.
+        let (near, beyond) = (&all[2 * side + 2], &all[3 * side + 2]);
+        assert!(near.scale > 3.0 * beyond.scale, "{near:?} {beyond:?}");
+        // Culled: the half behind the eye goes, the half ahead stays.
+        let seen = parts_of(&bounds, &ahead, true);
+        assert_eq!(seen.len(), all.len() / 2);
+        assert_eq!(seen[0].scale, all[2 * side].scale);
+        let behind = view(eye, Vec3::new(-1.0, -0.3, 0.0).normalize());
+        let seen = parts_of(&bounds, &behind, true);
+        assert_eq!(seen.len(), all.len() / 2);
+        assert_eq!(seen[0].scale, all[0].scale);
+    }
+
+    /// The rays fall to the mean height given, not to the bottom of the
+    /// box: a part level with the eye's mean-height ground reads a
+    /// shallower fall than the box's bottom would give.
+    #[test]
+    fn rays_fall_to_the_mean_height() {
+        let v = view(Vec3::new(0.0, 60.0, 0.0), Vec3::X);
+        let bounds = patch(4000.0, -128.0);
+        let mut at_mean = Vec::new();
+        model_parts(&bounds, &v, true, Some(40.0), &mut at_mean);
+        let mut at_bottom = Vec::new();
+        model_parts(&bounds, &v, true, None, &mut at_bottom);
+        let run = 4000.0;
+        assert_eq!(at_mean[0].at, LatticePoint::new(4128.0, 0.0, 20.0 / run));
+        assert_eq!(at_bottom[0].at, LatticePoint::new(4128.0, 0.0, 60.0 / run));
+    }
 }

@@ -25,9 +25,10 @@
 //! directions times the `SLOPES` a ray may fall) and each level of a
 //! full-size patch (one whose levels' vertices are samples), the table
 //! keeps the errors that `FRACTIONS` of the patch's pixels exceed, and the
-//! patch's pixel area per `K^2 / d^2`. A frame reads the directions its
-//! view of the patch spans and the fraction of pixels over its tolerance
-//! at each level (`over_fraction`). The far remainders (narrower patches)
+//! patch's pixel area per `K^2 / d^2`, and its mean height, to which the
+//! rays that show it fall. A frame reads the directions its view of the
+//! patch spans and the fraction of pixels over its tolerance at each level
+//! (`over_fraction`). The far remainders (narrower patches)
 //! have no entry: their levels' vertices fall between samples, and the
 //! level choice keeps their error bound.
 //!
@@ -67,7 +68,7 @@ const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
 /// part of its on-disk cache key.
-pub const MODEL_VERSION: u32 = 1;
+pub const MODEL_VERSION: u32 = 2;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -85,6 +86,8 @@ pub const BLOCK_LEVELS: u32 = 3;
 /// One patch's or block's entry.
 #[derive(Clone, Debug, PartialEq)]
 struct Entry {
+    /// Its mean height: where the rays that show it land, on average.
+    mean: f32,
     /// Pixel area per `K^2 / d^2` from each direction.
     area: [f32; DIRECTIONS],
     /// [direction][level][fraction] codes: a direction's levels lie
@@ -103,6 +106,8 @@ struct EntryLevel {
     blocks: usize,
     /// Per block, whether it has an entry.
     present: Vec<bool>,
+    /// Per block, its mean height.
+    mean: Vec<f32>,
     /// [direction][block] pixel areas per `K^2 / d^2`.
     area: Vec<f32>,
     /// [direction][block][level][fraction] codes.
@@ -128,6 +133,10 @@ impl EntryLevel {
             cols,
             blocks,
             present: entries.iter().map(Option::is_some).collect(),
+            mean: entries
+                .iter()
+                .map(|e| e.as_ref().map_or(0.0, |e| e.mean))
+                .collect(),
             area,
             codes,
         }
@@ -248,12 +257,16 @@ impl SightTable {
     }
 
     /// The table as bytes, `encoded_len` of them, for the on-disk cache:
-    /// its scale, then per level each block's presence, areas and codes.
+    /// its scale, then per level each block's presence, mean heights, areas
+    /// and codes.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = Vec::new();
         out.extend_from_slice(&self.scale.to_le_bytes());
         for level in &self.levels {
             out.extend(level.present.iter().map(|&p| u8::from(p)));
+            for m in &level.mean {
+                out.extend_from_slice(&m.to_le_bytes());
+            }
             for a in &level.area {
                 out.extend_from_slice(&a.to_le_bytes());
             }
@@ -264,7 +277,7 @@ impl SightTable {
 
     /// The length of `to_bytes` for `grid`'s table.
     pub fn encoded_len(grid: &PatchGrid) -> usize {
-        let per_block = 1 + DIRECTIONS * (4 + LEVELS * FRACTIONS);
+        let per_block = 1 + 4 + DIRECTIONS * (4 + LEVELS * FRACTIONS);
         4 + level_sizes(grid)
             .iter()
             .map(|&(cols, rows)| cols * rows * per_block)
@@ -289,15 +302,20 @@ impl SightTable {
             .map(|(cols, rows)| {
                 let blocks = cols * rows;
                 let present = take(blocks).iter().map(|&b| b != 0).collect();
-                let area = take(4 * DIRECTIONS * blocks)
-                    .chunks_exact(4)
-                    .map(|c| f32::from_le_bytes(c.try_into().expect("four bytes")))
-                    .collect();
+                let floats = |bytes: &[u8]| -> Vec<f32> {
+                    bytes
+                        .chunks_exact(4)
+                        .map(|c| f32::from_le_bytes(c.try_into().expect("four bytes")))
+                        .collect()
+                };
+                let mean = floats(take(4 * blocks));
+                let area = floats(take(4 * DIRECTIONS * blocks));
                 let codes = take(DIRECTIONS * blocks * LEVELS * FRACTIONS).to_vec();
                 EntryLevel {
                     cols,
                     blocks,
                     present,
+                    mean,
                     area,
                     codes,
                 }
@@ -332,6 +350,13 @@ impl SightTable {
     /// full-size).
     pub fn has(&self, block: Block) -> bool {
         self.entry(block).is_some()
+    }
+
+    /// `block`'s mean height, where it has an entry: the rays that show it
+    /// fall from the eye to about this height.
+    pub fn mean_height(&self, block: Block) -> Option<f32> {
+        let (level, b) = self.entry(block)?;
+        Some(level.mean[b])
     }
 
     /// `block` seen from `at` against a vertical error `error` (in the
@@ -455,6 +480,7 @@ pub struct Block {
 /// errors' largest (their codes' smallest) at each share.
 fn block_entry(children: &[&Entry]) -> Entry {
     let mut entry = children[0].clone();
+    entry.mean = children.iter().map(|c| c.mean).sum::<f32>() / children.len() as f32;
     for child in &children[1..] {
         for (a, b) in entry.area.iter_mut().zip(&child.area) {
             *a += b;
@@ -622,7 +648,8 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
             }
         })
         .collect();
-    Entry { area, codes }
+    let mean = (heights.iter().sum::<f64>() / heights.len() as f64) as f32;
+    Entry { mean, area, codes }
 }
 
 /// Weights of errors in bins `1 / BINS_PER_OCTAVE` octave wide below a
