@@ -9,14 +9,13 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
-use vkterrain::cli::scene_terrain_info;
 use vkterrain::lod::hierarchy::Hierarchy;
-use vkterrain::lod::plan::{plan, PlanInputs};
+use vkterrain::lod::plan::{plan, Landing, PlanInputs};
 use vkterrain::lod::view::Tau;
-use vkterrain::render::FrameView;
+use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
-use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, Terrain, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, TerrainInfo};
 
 const SIZE: usize = 4097;
 
@@ -114,8 +113,9 @@ fn bench(c: &mut Criterion) {
 
 fn frame_plan(c: &mut Criterion) {
     let scene = Scene::default_scene();
-    let (info, _) = scene_terrain_info(&scene, false).expect("the default scene loads");
-    let terrain = Terrain::new(info, 0.0).expect("the default scene's terrain");
+    let terrain = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)
+        .expect("the default scene loads")
+        .terrain;
     let (table, _) = terrain.error_tables();
     let sight = terrain.sight_table();
     let hierarchy = Hierarchy::new(&terrain, table);
@@ -128,6 +128,7 @@ fn frame_plan(c: &mut Criterion) {
                 sight,
                 merge: true,
                 cull: true,
+                landing: Landing::Mean,
             };
             group.bench_function(format!("{measure}/{}", view.name), |b| {
                 b.iter(|| black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs)))

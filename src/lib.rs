@@ -7,7 +7,7 @@
 //! - [`render`]: the terrain renderer, drawing into a target it is given.
 //! - [`lod`]: the level choice, from a terrain and a view to a frame plan.
 //!   No GPU types.
-//! - [`vk`]: Vulkan plumbing over ash; all `unsafe` lives here.
+//! - [`gpu`]: Vulkan plumbing over ash; all `unsafe` lives here.
 //! - [`material`]: a scene's textures, blend maps and lightmap, loaded.
 //! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
@@ -17,7 +17,7 @@
 //! - [`cache`], [`output`]: the on-disk cache and atomic file writes,
 //!   which any layer may use.
 //!
-//! `unsafe` is denied everywhere but in [`vk`], by the lint below.
+//! `unsafe` is denied everywhere but in [`gpu`], by the lint below.
 
 #![deny(unsafe_code)]
 
@@ -25,6 +25,8 @@ pub mod app;
 pub mod bench;
 pub mod cache;
 pub mod cli;
+#[allow(unsafe_code)]
+pub mod gpu;
 pub mod lod;
 pub mod material;
 pub mod output;
@@ -35,5 +37,3 @@ pub mod shader_constants;
 /// The shader variants build.rs compiles and the renderer picks, typed.
 pub mod shader_variants;
 pub mod terrain;
-#[allow(unsafe_code)]
-pub mod vk;

@@ -8,8 +8,8 @@ use common::vkterrain_in as vkterrain;
 use common::*;
 use glam::DVec2;
 use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath};
+use vkterrain::gpu::Gpu;
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
-use vkterrain::vk::Gpu;
 
 struct Count(u64, u64);
 

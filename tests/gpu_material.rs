@@ -11,6 +11,7 @@ use common::gpu::*;
 use common::*;
 use glam::DVec2;
 use vkterrain::bench::error::differing_pixels;
+use vkterrain::gpu::Capabilities;
 use vkterrain::material::generate::blend_maps_from_rules;
 use vkterrain::material::Appearance;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings};
@@ -18,7 +19,6 @@ use vkterrain::scene::{Asset, AssetSource, Scene, WeightSource};
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::shading::Rules;
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
-use vkterrain::vk::Capabilities;
 
 const W: u32 = 320;
 const H: u32 = 180;

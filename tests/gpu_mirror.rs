@@ -7,6 +7,7 @@ mod common;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec2, Vec3};
+use vkterrain::gpu::Gpu;
 use vkterrain::lod::{
     box_distance, cdlod_tess_factor, edge_distance, edge_length_tess_factor, error_tess_factor,
     sphere_tess_factor, tess_factor,
@@ -15,7 +16,6 @@ use vkterrain::render::mirror::{run_mirror_check, MirrorCase};
 use vkterrain::render::{FrameView, LodMetric, RenderSettings};
 use vkterrain::terrain::camera::aabb_outside_frustum;
 use vkterrain::terrain::{DistanceLod, DistanceMode};
-use vkterrain::vk::Gpu;
 
 #[test]
 fn glsl_formulas_match_their_rust_mirrors() {

@@ -264,7 +264,7 @@ fn a_new_target_is_never_taken_for_a_destroyed_one() {
     let mut seen = Vec::new();
     for samples in [1, 1, 4, 4, 1] {
         let target =
-            vkterrain::vk::target::OffscreenTarget::new(&gpu.device, 64, 48, samples).unwrap();
+            vkterrain::gpu::target::OffscreenTarget::new(&gpu.device, 64, 48, samples).unwrap();
         let id = target.views().depth_identity();
         assert!(
             !seen.contains(&id),

@@ -292,7 +292,7 @@ fn sample_counts_the_device_cannot_draw_are_refused_by_name() {
 #[test]
 fn the_default_sample_count_falls_back_where_a_device_lacks_it() {
     use vkterrain::render::sample_count;
-    let caps = |counts: Vec<u32>| vkterrain::vk::Capabilities {
+    let caps = |counts: Vec<u32>| vkterrain::gpu::Capabilities {
         sample_counts: counts.clone(),
         occlusion_sample_counts: counts,
         ..test_capabilities()

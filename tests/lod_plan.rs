@@ -7,7 +7,7 @@ mod common;
 use common::*;
 use glam::{DVec2, DVec3};
 use vkterrain::lod::hierarchy::Hierarchy;
-use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs};
+use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, Landing, PlanInputs};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
@@ -39,6 +39,7 @@ fn planned(
             sight,
             merge: true,
             cull: true,
+            landing: Landing::Mean,
         },
     )
 }
@@ -85,6 +86,7 @@ fn the_plan_visits_a_few_thousand_nodes_of_a_512_by_512_patch_grid() {
                     sight: None,
                     merge,
                     cull: true,
+                    landing: Landing::Mean,
                 };
                 let frame = plan(&terrain, &hierarchy, &view, &inputs);
                 assert!(

@@ -81,7 +81,7 @@ fn shutdown_reports_objects_left_alive() {
     if skip_gpu() {
         return;
     }
-    let gpu = vkterrain::vk::Gpu::new(true).expect("a Vulkan device with validation");
+    let gpu = vkterrain::gpu::Gpu::new(true).expect("a Vulkan device with validation");
     let leaked = gpu
         .device
         .create_host_buffer(

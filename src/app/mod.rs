@@ -19,6 +19,11 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
+use crate::gpu::commands::CommandSlots;
+use crate::gpu::memory::{Buffer, BufferDesc};
+use crate::gpu::owned::Semaphore;
+use crate::gpu::swapchain::{surface_extensions, Acquired, Surface, Swapchain};
+use crate::gpu::{Gpu, GpuOptions, ValidationReport};
 use crate::lod::view::Tau;
 use crate::lod::PeerPolicy;
 use crate::render::{
@@ -27,11 +32,6 @@ use crate::render::{
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceMode, Terrain};
-use crate::vk::commands::CommandSlots;
-use crate::vk::memory::{Buffer, BufferDesc};
-use crate::vk::owned::Semaphore;
-use crate::vk::swapchain::{surface_extensions, Acquired, Surface, Swapchain};
-use crate::vk::{Gpu, GpuOptions, ValidationReport};
 use camera::{CameraController, Mode, Movement};
 
 /// Frames the CPU may record ahead of the GPU.
@@ -348,7 +348,7 @@ impl Graphics {
         let renderer = Self::build_renderer(gpu, options, swapchain.format.format, samples)?;
         let image_available = (0..FRAMES_IN_FLIGHT)
             .map(|i| device.create_semaphore(&format!("demo.image_available[{i}]")))
-            .collect::<crate::vk::Result<Vec<_>>>()?;
+            .collect::<crate::gpu::Result<Vec<_>>>()?;
         let commands = device.create_command_slots(FRAMES_IN_FLIGHT as u32, "demo.commands")?;
         Ok((surface, swapchain, renderer, image_available, commands))
     }
@@ -439,7 +439,7 @@ fn policy_name(settings: &RenderSettings) -> String {
 }
 
 /// The paths a device can draw, in the order F6 cycles through them.
-fn paths(caps: &crate::vk::Capabilities) -> Vec<RenderPath> {
+fn paths(caps: &crate::gpu::Capabilities) -> Vec<RenderPath> {
     let mut paths = vec![RenderPath::Geomip, RenderPath::Brute];
     if caps.tessellation_shader {
         paths.insert(0, RenderPath::Tess);

@@ -6,11 +6,10 @@
 use serde::{Deserialize, Serialize};
 
 use super::run::median;
-use crate::material::Appearance;
+use crate::gpu::Gpu;
 use crate::render::{offscreen, RenderSettings, RendererOptions, DEFAULT_SAMPLES};
+use crate::render::{LoadedScene, Loading};
 use crate::scene::Scene;
-use crate::terrain::Terrain;
-use crate::vk::Gpu;
 
 /// One way of drawing the scene's view, and what it cost.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -56,11 +55,19 @@ pub fn measure(
     frames: usize,
 ) -> anyhow::Result<Vec<LookRow>> {
     let caps = &gpu.device.caps;
-    let info = scene.terrain_info()?;
     // Loaded once: the looks differ only in what the renderer and its
     // shader variants make of it.
-    let loaded = Appearance::load(scene, &info)?;
-    let terrain = Terrain::new(info, loaded.y_margin())?;
+    let LoadedScene {
+        terrain,
+        appearance: loaded,
+        ..
+    } = LoadedScene::load(
+        scene,
+        Loading {
+            stream: false,
+            appearance: true,
+        },
+    )?;
     let camera = scene.camera_for(terrain.info());
     let scene_settings = RenderSettings::for_scene(scene, terrain.info());
     let mut looks_built = Vec::new();

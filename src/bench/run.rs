@@ -7,6 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use super::cameras::{flythrough, named_views, FLYTHROUGH};
 use super::error::{differing_pixels, pixel_errors, DepthView, ErrorHistogram};
+use crate::gpu::target::OFFSCREEN_COLOR_FORMAT;
+use crate::gpu::Gpu;
 use crate::lod::geomip;
 use crate::lod::{PeerLod, PeerPolicy};
 use crate::render::{
@@ -15,8 +17,6 @@ use crate::render::{
 };
 use crate::terrain::camera::Camera;
 use crate::terrain::{DistanceLod, Terrain};
-use crate::vk::target::OFFSCREEN_COLOR_FORMAT;
-use crate::vk::Gpu;
 
 /// Pixel tolerances of the error-driven configurations.
 pub const TAUS: [f32; 6] = [0.25, 0.5, 1.0, 2.0, 4.0, 8.0];
@@ -570,7 +570,7 @@ impl<'a> Bench<'a> {
             &mut TerrainRenderer,
             &Terrain,
             &RenderSettings,
-        ) -> crate::vk::Result<T>,
+        ) -> crate::render::Result<T>,
     ) -> anyhow::Result<T> {
         let terrain = self.terrain;
         let settings = config.settings(self.scene_lod);

@@ -305,7 +305,7 @@ pub struct FeatureArgs {
     /// reports the Nth queue submission (default 1, uploads included) and
     /// all after it lost; `out-of-memory[@N]` fails the Nth allocation.
     #[arg(long, value_name = "FAULT", value_parser = parse_fault)]
-    pub inject_fault: Option<crate::vk::Fault>,
+    pub inject_fault: Option<crate::gpu::Fault>,
 
     /// Use the device whose name contains NAME (any case), such as
     /// llvmpipe; also VKTERRAIN_DEVICE. Default: the best device.
@@ -321,7 +321,7 @@ pub fn parse_samples(s: &str) -> Result<u32, String> {
     }
 }
 
-fn parse_fault(s: &str) -> Result<crate::vk::Fault, String> {
+fn parse_fault(s: &str) -> Result<crate::gpu::Fault, String> {
     let (kind, n) = match s.split_once('@') {
         Some((kind, n)) => {
             let n: u32 =
@@ -333,8 +333,8 @@ fn parse_fault(s: &str) -> Result<crate::vk::Fault, String> {
         None => (s, 1),
     };
     match kind {
-        "device-lost" => Ok(crate::vk::Fault::DeviceLost { submission: n }),
-        "out-of-memory" => Ok(crate::vk::Fault::OutOfDeviceMemory { allocation: n }),
+        "device-lost" => Ok(crate::gpu::Fault::DeviceLost { submission: n }),
+        "out-of-memory" => Ok(crate::gpu::Fault::OutOfDeviceMemory { allocation: n }),
         _ => Err(format!(
             "--inject-fault {s:?}: expected device-lost[@N] or out-of-memory[@N]"
         )),
@@ -355,8 +355,8 @@ fn parse_budget(s: &str) -> Result<u64, String> {
 
 impl FeatureArgs {
     /// How to open the device these options describe.
-    pub fn gpu_options(&self, validate: bool) -> crate::vk::GpuOptions {
-        crate::vk::GpuOptions {
+    pub fn gpu_options(&self, validate: bool) -> crate::gpu::GpuOptions {
+        crate::gpu::GpuOptions {
             validate,
             disabled: self.disabled(),
             memory_budget: self.gpu_memory_budget,
@@ -372,14 +372,14 @@ impl FeatureArgs {
     pub fn with_gpu<T>(
         &self,
         validate: bool,
-        work: impl FnOnce(&crate::vk::Gpu) -> anyhow::Result<T>,
-    ) -> anyhow::Result<(T, crate::vk::ValidationReport)> {
+        work: impl FnOnce(&crate::gpu::Gpu) -> anyhow::Result<T>,
+    ) -> anyhow::Result<(T, crate::gpu::ValidationReport)> {
         with_gpu(&self.gpu_options(validate), work)
     }
 
-    pub fn disabled(&self) -> crate::vk::DisabledFeatures {
+    pub fn disabled(&self) -> crate::gpu::DisabledFeatures {
         let off = |f| self.without.contains(&f);
-        crate::vk::DisabledFeatures {
+        crate::gpu::DisabledFeatures {
             tessellation_shader: off(Feature::Tessellation),
             fill_mode_non_solid: off(Feature::FillModeNonSolid),
             pipeline_statistics_query: off(Feature::PipelineStatistics),
@@ -426,8 +426,8 @@ pub fn fuzz_parse(text: &str) {
         assert!(b >= 1 << 20);
     }
     match parse_fault(text) {
-        Ok(crate::vk::Fault::DeviceLost { submission: n })
-        | Ok(crate::vk::Fault::OutOfDeviceMemory { allocation: n }) => assert!(n >= 1),
+        Ok(crate::gpu::Fault::DeviceLost { submission: n })
+        | Ok(crate::gpu::Fault::OutOfDeviceMemory { allocation: n }) => assert!(n >= 1),
         Err(_) => {}
     }
     use clap::Parser;
@@ -440,11 +440,11 @@ pub fn fuzz_parse(text: &str) {
 /// alive count too. A run that worked fails if validation reported
 /// anything; a run that failed says so as well, naming its own error.
 pub fn with_gpu<T>(
-    options: &crate::vk::GpuOptions,
-    work: impl FnOnce(&crate::vk::Gpu) -> anyhow::Result<T>,
-) -> anyhow::Result<(T, crate::vk::ValidationReport)> {
+    options: &crate::gpu::GpuOptions,
+    work: impl FnOnce(&crate::gpu::Gpu) -> anyhow::Result<T>,
+) -> anyhow::Result<(T, crate::gpu::ValidationReport)> {
     use anyhow::Context;
-    let gpu = crate::vk::Gpu::open(options).context("starting Vulkan")?;
+    let gpu = crate::gpu::Gpu::open(options).context("starting Vulkan")?;
     let result = work(&gpu);
     let report = gpu.shutdown();
     match result {

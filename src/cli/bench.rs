@@ -10,6 +10,7 @@ use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::FLYTHROUGH;
 use crate::bench::report::{self, check_targets};
 use crate::bench::run::{configs, Bench, BenchOptions, Progress};
+use crate::render::{LoadedScene, Loading};
 use crate::scene::HeightmapSource;
 use crate::terrain::Terrain;
 
@@ -170,7 +171,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
         )?;
         return Ok(());
     }
-    let terrain = Terrain::new(scene.terrain_info()?, 0.0)?;
+    let terrain = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)?.terrain;
     // Validation is counted after the device is destroyed, so leaked
     // objects count.
     let (((rows, device_name, options), look), validation) =
@@ -266,7 +267,7 @@ pub fn bench(cmd: BenchCmd, out: &mut dyn Write) -> Result<()> {
 /// Returns the rows, the device's name and the options they were taken
 /// with.
 fn measure(
-    gpu: &crate::vk::Gpu,
+    gpu: &crate::gpu::Gpu,
     cmd: &BenchCmd,
     scene: &crate::scene::Scene,
     terrain: &Terrain,

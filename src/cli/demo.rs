@@ -11,8 +11,7 @@ use clap::ValueEnum;
 use super::args::{parse_args, SizeArgs, TerrainArgs};
 use super::render::{render, RenderCmd, ViewArgs, DEFAULT_OUTPUT};
 use crate::app::{self, DemoOptions};
-use crate::material::Appearance;
-use crate::terrain::Terrain;
+use crate::render::{LoadedScene, Loading};
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
 pub enum PresentModeArg {
@@ -85,12 +84,23 @@ pub fn demo(cmd: DemoCmd, out: &mut dyn Write) -> Result<()> {
     }
     let mut scene = cmd.terrain.scene()?;
     cmd.view.apply_to_scene(&mut scene)?;
-    let (info, stream) = super::scene_terrain_info(&scene, !cmd.view.features.no_streaming)?;
-    let settings = cmd.view.settings(&scene, &info);
-    let camera = cmd.view.camera_override().apply(scene.camera_for(&info))?;
-    let appearance = Appearance::load(&scene, &info)?;
-    let terrain =
-        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
+    let LoadedScene {
+        terrain,
+        appearance,
+        stream,
+        ..
+    } = LoadedScene::load(
+        &scene,
+        Loading {
+            stream: !cmd.view.features.no_streaming,
+            appearance: true,
+        },
+    )?;
+    let settings = cmd.view.settings(&scene, terrain.info());
+    let camera = cmd
+        .view
+        .camera_override()
+        .apply(scene.camera_for(terrain.info()))?;
     writeln!(out, "{}", app::HELP)?;
     let summary = app::run(DemoOptions {
         terrain,

@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::scene::Scene;
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{PatchGrid, PatchId, Placement, Terrain, TerrainInfo};
+use crate::terrain::{PatchGrid, PatchId, Placement, Terrain};
 use args::{parse_point, TerrainArgs};
 
 pub mod bench;
@@ -311,36 +311,4 @@ pub fn progress_bar(len: u64, unit: &str) -> indicatif::ProgressBar {
         .expect("a valid template")
         .progress_chars("=> "),
     )
-}
-
-/// `scene`'s terrain as a drawing command holds it: a tiled terrain file
-/// (unless `stream` is off) read a tile at a time, with the configuration
-/// the renderer streams it with; any other heightmap whole, and None.
-pub fn scene_terrain_info(
-    scene: &Scene,
-    stream: bool,
-) -> Result<(TerrainInfo, Option<crate::render::StreamConfig>)> {
-    if stream {
-        if let Some(info) = scene.streamed_terrain_info()? {
-            let tiled = info
-                .tiled_samples()
-                .expect("a streamed terrain's info is tiled");
-            let config = crate::render::StreamConfig::new(tiled.path().to_path_buf());
-            return Ok((info, Some(config)));
-        }
-    }
-    Ok((scene.terrain_info()?, None))
-}
-
-/// The terrain a streamed scene is drawn with: its Y bounds widened for
-/// the base level `config` draws tiles from until they are resident.
-pub fn streamed_terrain(
-    mut terrain: Terrain,
-    config: Option<&crate::render::StreamConfig>,
-) -> Terrain {
-    if let (Some(config), Some(tiled)) = (config, terrain.info().tiled_samples()) {
-        let base = config.shape(tiled).base_level;
-        terrain.widen_y_bounds_to_blocks(1 << base);
-    }
-    terrain
 }

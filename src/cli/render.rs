@@ -13,8 +13,8 @@ use super::args::{
     parse_color, parse_dvec3, parse_fov, parse_range, parse_samples, with_gpu, FeatureArgs,
     SizeArgs, TerrainArgs,
 };
+use crate::gpu::Capabilities;
 use crate::lod::PeerPolicy;
-use crate::material::Appearance;
 use crate::output::{save_png, write_atomically};
 use crate::render::settings::{measurement_notes, sample_count};
 use crate::render::ErrorMeasure;
@@ -22,12 +22,12 @@ use crate::render::{
     offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
     RendererOptions, Shading, StreamStats,
 };
+use crate::render::{LoadTimings, LoadedScene, Loading};
 use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
 use crate::terrain::info::validate_cells_per_patch;
-use crate::terrain::{DistanceLod, DistanceMode, Terrain, TerrainInfo};
-use crate::vk::Capabilities;
+use crate::terrain::{DistanceLod, DistanceMode, TerrainInfo};
 
 /// Which way the terrain is drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -469,21 +469,28 @@ pub fn render_scene(
     scene: &Scene,
     view: impl FnOnce(&TerrainInfo) -> Result<(Camera, RenderSettings)>,
     picture: Picture,
-    gpu: &crate::vk::GpuOptions,
+    gpu: &crate::gpu::GpuOptions,
 ) -> Result<RenderOutput> {
     let Picture { width, height, .. } = picture;
     let ms = |t: std::time::Instant| t.elapsed().as_secs_f64() * 1e3;
-    let started = std::time::Instant::now();
-    let (info, stream) = super::scene_terrain_info(scene, picture.stream)?;
-    let load_ms = ms(started);
-    let (camera, settings) = view(&info)?;
-    let started = std::time::Instant::now();
-    let appearance = Appearance::load(scene, &info)?;
-    let material_ms = ms(started);
-    let started = std::time::Instant::now();
-    let terrain =
-        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
-    let bounds_ms = ms(started);
+    let LoadedScene {
+        terrain,
+        appearance,
+        stream,
+        timings,
+    } = LoadedScene::load(
+        scene,
+        Loading {
+            stream: picture.stream,
+            appearance: true,
+        },
+    )?;
+    let (camera, settings) = view(terrain.info())?;
+    let LoadTimings {
+        terrain_ms: load_ms,
+        appearance_ms: material_ms,
+        model_ms: bounds_ms,
+    } = timings;
     let ((frame, mut stats, notes), validation) = with_gpu(gpu, |gpu| {
         let mut notes = Vec::new();
         let settings = &with_fallback(settings, &gpu.device.caps, &mut notes);

@@ -8,11 +8,10 @@ use serde::Serialize;
 
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::flythrough;
-use crate::material::Appearance;
 use crate::render::{
     offscreen, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions,
 };
-use crate::terrain::Terrain;
+use crate::render::{LoadedScene, Loading};
 
 fn parse_soak_frames(s: &str) -> Result<u64, String> {
     let n: u64 = s
@@ -120,13 +119,21 @@ pub fn soak(cmd: SoakCmd, out: &mut dyn Write) -> Result<()> {
         bail!("--loop-frames {} must be at least 3", cmd.loop_frames);
     }
     let scene = cmd.terrain.scene()?;
-    let (info, stream) = super::scene_terrain_info(&scene, !cmd.features.no_streaming)?;
-    let cameras = flythrough(&info, cmd.loop_frames);
     // The scene's look too: its textures and lightmap are resources to
     // keep, and to free.
-    let appearance = Appearance::load(&scene, &info)?;
-    let terrain =
-        super::streamed_terrain(Terrain::new(info, appearance.y_margin())?, stream.as_ref());
+    let LoadedScene {
+        terrain,
+        appearance,
+        stream,
+        ..
+    } = LoadedScene::load(
+        &scene,
+        Loading {
+            stream: !cmd.features.no_streaming,
+            appearance: true,
+        },
+    )?;
+    let cameras = flythrough(terrain.info(), cmd.loop_frames);
     let base = RenderSettings::for_scene(&scene, terrain.info());
     let start = std::time::Instant::now();
     let baseline_frame = cmd.baseline_frame.min(cmd.frames - 1);

@@ -17,7 +17,7 @@ use crate::render::{
     offscreen, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
     StreamStats,
 };
-use crate::terrain::Terrain;
+use crate::render::{LoadedScene, Loading};
 
 #[derive(clap::Args, Debug)]
 pub struct StreamCmd {
@@ -126,14 +126,19 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         bail!("--pixel-error {} must be positive", cmd.pixel_error);
     }
     let scene = cmd.terrain.scene()?;
-    let (info, stream) = super::scene_terrain_info(&scene, true)?;
-    let Some(stream) = stream else {
+    let loaded = LoadedScene::load(
+        &scene,
+        Loading {
+            stream: true,
+            appearance: false,
+        },
+    )?;
+    let (terrain, Some(stream)) = (loaded.terrain, loaded.stream) else {
         bail!(
             "the stream flythrough needs a tiled terrain (from `vkterrain import`) as --heightmap"
         );
     };
-    let cameras = flythrough(&info, cmd.frames);
-    let terrain = super::streamed_terrain(Terrain::new(info, 0.0)?, Some(&stream));
+    let cameras = flythrough(terrain.info(), cmd.frames);
     let settings = RenderSettings {
         path: RenderPath::Tess,
         lod_metric: LodMetric::Error(cmd.pixel_error),
@@ -147,8 +152,8 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
     let resident = cmd
         .against_resident
         .then(|| -> Result<_> {
-            let whole = Terrain::new(scene.terrain_info()?, 0.0)?;
-            let gpu = crate::vk::Gpu::open(&crate::vk::GpuOptions {
+            let whole = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)?.terrain;
+            let gpu = crate::gpu::Gpu::open(&crate::gpu::GpuOptions {
                 memory_budget: None,
                 ..cmd.features.gpu_options(cmd.validate)
             })

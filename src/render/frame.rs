@@ -11,15 +11,21 @@ use super::material::GpuAppearance;
 use super::settings::RenderSettings;
 use super::tess_path::ChoiceBuffers;
 use super::uniforms::FrameUniforms;
+use crate::gpu::descriptors::{DescriptorSet, DescriptorSets};
+use crate::gpu::memory::{Buffer, Image};
+use crate::gpu::owned::Sampler;
+use crate::gpu::queries::FrameQueries;
+use crate::gpu::Device;
+use crate::render::error::Result;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION,
     BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_VISIBILITY,
 };
-use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
-use crate::vk::memory::{Buffer, Image};
-use crate::vk::owned::Sampler;
-use crate::vk::queries::FrameQueries;
-use crate::vk::{Device, Result};
+
+/// Parts of a frame whose pipeline statistics are counted apart: the
+/// whole frame, or, with occlusion culling, the draws before the culling
+/// pass and those after it.
+pub(super) const COUNTED_PARTS: u32 = 2;
 
 /// Per-frame-in-flight resources: the uniform block is rewritten each frame,
 /// so a frame still on the GPU keeps its own.
@@ -83,7 +89,11 @@ pub(super) fn build_frames(
             vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::STORAGE_BUFFER,
             bytemuck::bytes_of(&FrameUniforms::default()),
         )?;
-        let queries = FrameQueries::new(device, &format!("terrain.frame_queries[{i}]"))?;
+        let queries = FrameQueries::new(
+            device,
+            COUNTED_PARTS,
+            &format!("terrain.frame_queries[{i}]"),
+        )?;
         write_frame_bindings(device, set, &uniforms, heightmap, sampler);
         appearance.write(device, set);
         frames.push(FrameSlot {

@@ -12,17 +12,17 @@ use super::pipelines::{build_pipelines, PathPipelines, PipelineTarget};
 use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use super::view::FrameView;
 use super::view_measure::seen_errors;
+use crate::gpu::commands::Recorder;
+use crate::gpu::descriptors::DescriptorSet;
+use crate::gpu::memory::Buffer;
+use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip;
 use crate::lod::hierarchy::{Hierarchy, NodeId};
-use crate::lod::plan::{patches_in_view, plan, PlanInputs};
+use crate::lod::plan::{patches_in_view, plan, Landing, PlanInputs};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
+use crate::render::error::Result;
 use crate::terrain::{ErrorTable, Terrain};
-use crate::vk::commands::Recorder;
-use crate::vk::descriptors::DescriptorSet;
-use crate::vk::memory::Buffer;
-use crate::vk::owned::{DescriptorSetLayout, PipelineLayout};
-use crate::vk::Result;
 
 pub(super) struct GeomipGeometry {
     template: Buffer,
@@ -174,6 +174,7 @@ impl GeomipGeometry {
                         sight,
                         merge: false,
                         cull: settings.cull,
+                        landing: Landing::Bottom,
                     },
                 );
                 // Geomip level l has n / 2^l segments a side: the error

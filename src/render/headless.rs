@@ -6,12 +6,13 @@ use std::time::Instant;
 use super::renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 use super::settings::RenderSettings;
 use super::view::FrameView;
+use crate::gpu::commands::CommandSlots;
+use crate::gpu::target::{OffscreenTarget, Readback, OFFSCREEN_COLOR_FORMAT};
+use crate::gpu::{Device, Gpu};
 use crate::material::Appearance;
+use crate::render::error::Result;
 use crate::terrain::camera::Camera;
 use crate::terrain::Terrain;
-use crate::vk::commands::CommandSlots;
-use crate::vk::target::{OffscreenTarget, Readback, OFFSCREEN_COLOR_FORMAT};
-use crate::vk::{Device, Gpu, Result};
 
 /// One rendered frame.
 pub struct HeadlessFrame {

@@ -9,7 +9,12 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 
 use super::residency::StreamShape;
+use crate::gpu::descriptors::DescriptorSet;
+use crate::gpu::memory::{Buffer, Image, TexelUpload};
+use crate::gpu::owned::Sampler;
+use crate::gpu::Device;
 use crate::material::{Appearance, Material, TexelFormat, TextureArray};
+use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{
     BINDING_BLEND_MAPS, BINDING_DIFFUSE_MAPS, BINDING_HEIGHT_MAPS, BINDING_LIGHTMAP,
     BINDING_MATERIAL, BINDING_NORMAL_MAPS, MAX_LAYERS, SPEC_BLEND_MAP_COUNT, SPEC_LAYER_COUNT,
@@ -17,10 +22,6 @@ use crate::shader_constants::{
 };
 use crate::shader_variants::{Placing, Shading};
 use crate::terrain::TerrainInfo;
-use crate::vk::descriptors::DescriptorSet;
-use crate::vk::memory::{Buffer, Image, TexelUpload};
-use crate::vk::owned::Sampler;
-use crate::vk::{Device, Result, VkError};
 
 const _: () = assert!(MAX_LAYERS as usize == crate::terrain::shading::MAX_LAYERS);
 const _: () =
@@ -179,7 +180,7 @@ impl ShaderVariant {
 /// longer per frame with it (a 320x180 geomip frame of the default scene:
 /// 0.26 s without, 434 s at 16x; 2x is hardly faster). None without the
 /// device feature, or at 1.
-pub fn anisotropy_for(asked: Option<f32>, caps: &crate::vk::Capabilities) -> Option<f32> {
+pub fn anisotropy_for(asked: Option<f32>, caps: &crate::gpu::Capabilities) -> Option<f32> {
     let wanted = asked.unwrap_or(if caps.device_type == "CPU" { 1.0 } else { 16.0 });
     (caps.sampler_anisotropy && wanted > 1.0).then(|| wanted.min(caps.max_sampler_anisotropy))
 }
@@ -240,7 +241,7 @@ impl GpuAppearance {
                 | vk::FormatFeatureFlags::TRANSFER_DST;
             let has = device.format_features(format);
             if !has.contains(needed) {
-                return Err(VkError::Unsupported(format!(
+                return Err(RenderError::Unsupported(format!(
                     "{} cannot filter {format:?} textures ({has:?})",
                     device.caps.device_name
                 )));
@@ -249,23 +250,25 @@ impl GpuAppearance {
             if t.width.max(t.height) > caps.max_image_dimension_2d
                 || t.layers > caps.max_image_array_layers
             {
-                return Err(VkError::Unsupported(format!(
+                return Err(RenderError::Unsupported(format!(
                     "{name}: {}x{} with {} layers exceeds this device's images ({} on a side, {} layers)",
                     t.width, t.height, t.layers, caps.max_image_dimension_2d, caps.max_image_array_layers
                 )));
             }
             let levels: Vec<&[u8]> = t.levels.iter().map(Vec::as_slice).collect();
-            device.upload_image(
-                name,
-                &TexelUpload {
-                    format,
-                    width: t.width,
-                    height: t.height,
-                    layers: t.layers,
-                    view_type: vk::ImageViewType::TYPE_2D_ARRAY,
-                },
-                &levels,
-            )
+            device
+                .upload_image(
+                    name,
+                    &TexelUpload {
+                        format,
+                        width: t.width,
+                        height: t.height,
+                        layers: t.layers,
+                        view_type: vk::ImageViewType::TYPE_2D_ARRAY,
+                    },
+                    &levels,
+                )
+                .map_err(RenderError::from)
         };
         if let Some(m) = &appearance.material {
             self.uniforms = Some(device.upload_buffer(

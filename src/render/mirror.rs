@@ -12,11 +12,12 @@ use super::settings::RenderSettings;
 use super::shaders;
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
+use crate::gpu::memory::BufferDesc;
+use crate::gpu::Gpu;
+use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{BINDING_MIRROR_CASES, BINDING_MIRROR_RESULTS};
 use crate::terrain::error_table::PatchErrors;
 use crate::terrain::Terrain;
-use crate::vk::memory::BufferDesc;
-use crate::vk::{Gpu, Result, VkError};
 
 /// One input of the check.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -139,7 +140,7 @@ pub fn run_mirror_check(
     })?;
     let bytes = output
         .mapped()
-        .ok_or_else(|| VkError::Unsupported("result memory is not host-mapped".into()))?;
+        .ok_or(RenderError::NotMapped("result memory"))?;
     Ok(unpack_results(&bytemuck::pod_collect_to_vec(bytes)))
 }
 

@@ -1,9 +1,11 @@
 //! The terrain renderer: pipelines, descriptor sets, per-frame uniforms, and
 //! draw recording into a target it is given. Knows nothing of windows.
 
+pub mod error;
 mod frame;
 mod geomip_path;
 pub mod headless;
+pub mod loaded;
 pub mod material;
 pub mod mirror;
 pub mod occlusion;
@@ -19,7 +21,9 @@ pub mod uniforms;
 pub mod view;
 mod view_measure;
 
+pub use error::{RenderError, Result};
 pub use headless::{offscreen, Headless, HeadlessFrame, TimedFrame};
+pub use loaded::{LoadError, LoadTimings, LoadedScene, Loading};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 pub use settings::{
     sample_count, with_fallback, ErrorMeasure, LodMetric, RenderPath, RenderSettings, Shading,

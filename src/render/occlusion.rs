@@ -26,6 +26,13 @@ use gpu_allocator::MemoryLocation;
 
 use super::shaders;
 use super::uniforms::FrameUniforms;
+use crate::gpu::commands::Recorder;
+use crate::gpu::descriptors::{DescriptorSet, DescriptorSets};
+use crate::gpu::memory::{Buffer, BufferDesc};
+use crate::gpu::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
+use crate::gpu::target::TargetViews;
+use crate::gpu::Device;
+use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{
     BINDING_CONTROL_POINTS, BINDING_DRAW_COMMANDS, BINDING_DRAW_PATCHES, BINDING_FRAME,
     BINDING_HIZ_DEPTH, BINDING_HIZ_PYRAMID, BINDING_OCCLUSION_COUNT, BINDING_VISIBILITY,
@@ -33,12 +40,6 @@ use crate::shader_constants::{
 };
 use crate::shader_variants::{HizSource, Shader};
 use crate::terrain::Terrain;
-use crate::vk::commands::Recorder;
-use crate::vk::descriptors::{DescriptorSet, DescriptorSets};
-use crate::vk::memory::{Buffer, BufferDesc};
-use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
-use crate::vk::target::TargetViews;
-use crate::vk::{Device, Result, VkError};
 
 /// Levels one glsl/hiz.comp dispatch writes, texels a side of its first
 /// level that one workgroup of 8x8 invocations covers (each reduces a
@@ -275,7 +276,7 @@ impl Occlusion {
         let culling = self.culling.as_mut().ok_or_else(not_built)?;
         let s = &mut culling.slots[slot];
         if draws.len() > capacity {
-            return Err(VkError::Unsupported(format!(
+            return Err(RenderError::Unsupported(format!(
                 "{} draws listed, room for {capacity}",
                 draws.len()
             )));
@@ -291,7 +292,7 @@ impl Occlusion {
             .collect();
         let command_bytes: &[u8] = bytemuck::cast_slice(&commands);
         let ranges_bytes: &[u8] = bytemuck::cast_slice(&ranges);
-        let unmapped = || VkError::Unsupported("the draw list is not host-mapped".into());
+        let unmapped = || RenderError::NotMapped("the draw list");
         s.draw_patches.mapped_mut().ok_or_else(unmapped)?[..ranges_bytes.len()]
             .copy_from_slice(ranges_bytes);
         let second = capacity * DRAW_COMMAND_BYTES as usize;
@@ -320,7 +321,7 @@ impl Occlusion {
         match phase {
             OCCLUSION_PHASE_FIRST => Ok(0),
             OCCLUSION_PHASE_SECOND => Ok(self.list_capacity() as u64),
-            _ => Err(VkError::Unsupported(format!(
+            _ => Err(RenderError::Unsupported(format!(
                 "no listed draws for occlusion phase {phase}"
             ))),
         }
@@ -388,7 +389,7 @@ impl Occlusion {
         let s = &culling.slots[slot];
         let extent = target.extent;
         if s.pyramid.as_ref().map(|(_, e)| *e) != Some(extent) {
-            return Err(VkError::Unsupported(format!(
+            return Err(RenderError::Unsupported(format!(
                 "occlusion slot {slot} was not prepared for a {}x{} target",
                 extent.width, extent.height
             )));
@@ -518,9 +519,9 @@ impl Occlusion {
             rec.copy_buffer(pyramid, &host, size);
             rec.memory_barrier((S::COPY, A::TRANSFER_WRITE), (S::HOST, A::HOST_READ));
         })?;
-        let bytes = host.mapped().ok_or_else(|| {
-            VkError::Unsupported("the pyramid readback is not host-mapped".into())
-        })?;
+        let bytes = host
+            .mapped()
+            .ok_or(RenderError::NotMapped("the pyramid readback"))?;
         Ok(Some(bytemuck::pod_collect_to_vec(&bytes[..size as usize])))
     }
 
@@ -530,7 +531,7 @@ impl Occlusion {
         let bytes = culling.slots[slot]
             .count
             .mapped()
-            .ok_or_else(|| VkError::Unsupported("the culled count is not host-mapped".into()))?;
+            .ok_or(RenderError::NotMapped("the culled count"))?;
         Ok(bytemuck::pod_read_unaligned(&bytes[..4]))
     }
 }
@@ -669,8 +670,8 @@ impl Culling {
     }
 }
 
-fn not_built() -> VkError {
-    VkError::Unsupported("occlusion culling was not built for this renderer".into())
+fn not_built() -> RenderError {
+    RenderError::NotBuilt("occlusion culling")
 }
 
 #[cfg(test)]

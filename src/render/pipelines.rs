@@ -8,11 +8,12 @@ use ash::vk;
 use super::material::ShaderVariant;
 use super::settings::RenderPath;
 use super::shaders;
+use crate::gpu::owned::{Pipeline, PipelineLayout};
+use crate::gpu::pipeline::GraphicsPipelineDesc;
+use crate::gpu::target::DEPTH_FORMAT;
+use crate::gpu::Device;
+use crate::render::error::{RenderError, Result};
 use crate::shader_variants::{Placing, Shader};
-use crate::vk::owned::{Pipeline, PipelineLayout};
-use crate::vk::pipeline::GraphicsPipelineDesc;
-use crate::vk::target::DEPTH_FORMAT;
-use crate::vk::{Device, Result, VkError};
 
 /// What every terrain pipeline is built for: the device, the targets'
 /// colour format and samples, and the scene's shader variant.
@@ -34,9 +35,9 @@ impl PathPipelines {
         if !wireframe {
             return Ok(&self.fill);
         }
-        self.wireframe.as_ref().ok_or_else(|| {
-            VkError::Unsupported("the wireframe pipeline was not built for this renderer".into())
-        })
+        self.wireframe
+            .as_ref()
+            .ok_or(RenderError::NotBuilt("the wireframe pipeline"))
     }
 }
 
@@ -136,24 +137,26 @@ fn create_pipeline(
             &[],
         ),
     };
-    device.create_graphics_pipeline(&GraphicsPipelineDesc {
-        name: &name,
-        stages,
-        vertex_stride,
-        vertex_attributes,
-        topology,
-        patch_control_points,
-        polygon_mode,
-        cull_back_faces: true,
-        color_format,
-        depth_format: DEPTH_FORMAT,
-        // Reversed Z: nearer is larger.
-        depth_compare: vk::CompareOp::GREATER,
-        depth_write: true,
-        samples,
-        layout,
-        specialization: &variant.specialization(),
-    })
+    device
+        .create_graphics_pipeline(&GraphicsPipelineDesc {
+            name: &name,
+            stages,
+            vertex_stride,
+            vertex_attributes,
+            topology,
+            patch_control_points,
+            polygon_mode,
+            cull_back_faces: true,
+            color_format,
+            depth_format: DEPTH_FORMAT,
+            // Reversed Z: nearer is larger.
+            depth_compare: vk::CompareOp::GREATER,
+            depth_write: true,
+            samples,
+            layout,
+            specialization: &variant.specialization(),
+        })
+        .map_err(RenderError::from)
 }
 
 /// The tess path's stages: the vertex and control shaders, the evaluation
@@ -193,31 +196,33 @@ pub(super) fn create_culled_pipeline(
 ) -> Result<Pipeline> {
     let device = target.device;
     let spacing = if equal_spacing { "equal" } else { "fractional" };
-    device.create_graphics_pipeline(&GraphicsPipelineDesc {
-        name: &format!("terrain.pipeline.culled.{spacing}"),
-        stages: &tess_stages(
-            target.variant.placing(),
-            equal_spacing,
-            shaders::spirv(Shader::CulledFrag),
-        ),
-        vertex_stride: size_of::<[f32; 4]>() as u32,
-        vertex_attributes: &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
-        topology: vk::PrimitiveTopology::PATCH_LIST,
-        patch_control_points: 4,
-        polygon_mode: if device.caps.fill_mode_non_solid {
-            vk::PolygonMode::LINE
-        } else {
-            vk::PolygonMode::FILL
-        },
-        cull_back_faces: false,
-        color_format: target.color_format,
-        depth_format: DEPTH_FORMAT,
-        depth_compare: vk::CompareOp::ALWAYS,
-        depth_write: false,
-        samples: target.samples,
-        layout,
-        specialization: &target.variant.specialization(),
-    })
+    device
+        .create_graphics_pipeline(&GraphicsPipelineDesc {
+            name: &format!("terrain.pipeline.culled.{spacing}"),
+            stages: &tess_stages(
+                target.variant.placing(),
+                equal_spacing,
+                shaders::spirv(Shader::CulledFrag),
+            ),
+            vertex_stride: size_of::<[f32; 4]>() as u32,
+            vertex_attributes: &[(0, vk::Format::R32G32B32A32_SFLOAT, 0)],
+            topology: vk::PrimitiveTopology::PATCH_LIST,
+            patch_control_points: 4,
+            polygon_mode: if device.caps.fill_mode_non_solid {
+                vk::PolygonMode::LINE
+            } else {
+                vk::PolygonMode::FILL
+            },
+            cull_back_faces: false,
+            color_format: target.color_format,
+            depth_format: DEPTH_FORMAT,
+            depth_compare: vk::CompareOp::ALWAYS,
+            depth_write: false,
+            samples: target.samples,
+            layout,
+            specialization: &target.variant.specialization(),
+        })
+        .map_err(RenderError::from)
 }
 
 /// The sky's pipeline: one triangle at the far plane, drawn where the
@@ -228,30 +233,32 @@ pub(super) fn create_sky_pipeline(
     color_format: vk::Format,
     samples: vk::SampleCountFlags,
 ) -> Result<Pipeline> {
-    device.create_graphics_pipeline(&GraphicsPipelineDesc {
-        name: "terrain.pipeline.sky",
-        stages: &[
-            (
-                vk::ShaderStageFlags::VERTEX,
-                shaders::spirv(Shader::SkyVert),
-            ),
-            (
-                vk::ShaderStageFlags::FRAGMENT,
-                shaders::spirv(Shader::SkyFrag),
-            ),
-        ],
-        vertex_stride: 0,
-        vertex_attributes: &[],
-        topology: vk::PrimitiveTopology::TRIANGLE_LIST,
-        patch_control_points: 0,
-        polygon_mode: vk::PolygonMode::FILL,
-        cull_back_faces: false,
-        color_format,
-        depth_format: DEPTH_FORMAT,
-        depth_compare: vk::CompareOp::GREATER_OR_EQUAL,
-        depth_write: false,
-        samples,
-        layout,
-        specialization: &[],
-    })
+    device
+        .create_graphics_pipeline(&GraphicsPipelineDesc {
+            name: "terrain.pipeline.sky",
+            stages: &[
+                (
+                    vk::ShaderStageFlags::VERTEX,
+                    shaders::spirv(Shader::SkyVert),
+                ),
+                (
+                    vk::ShaderStageFlags::FRAGMENT,
+                    shaders::spirv(Shader::SkyFrag),
+                ),
+            ],
+            vertex_stride: 0,
+            vertex_attributes: &[],
+            topology: vk::PrimitiveTopology::TRIANGLE_LIST,
+            patch_control_points: 0,
+            polygon_mode: vk::PolygonMode::FILL,
+            cull_back_faces: false,
+            color_format,
+            depth_format: DEPTH_FORMAT,
+            depth_compare: vk::CompareOp::GREATER_OR_EQUAL,
+            depth_write: false,
+            samples,
+            layout,
+            specialization: &[],
+        })
+        .map_err(RenderError::from)
 }

@@ -45,19 +45,20 @@ use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
+use crate::gpu::descriptors::DescriptorSets;
+use crate::gpu::memory::{Buffer, Image};
+use crate::gpu::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
+use crate::gpu::queries::PipelineStatistics;
+use crate::gpu::{sample_count_flag, Device, Gpu, VkError};
 use crate::lod::geomip;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::patches_in_view;
 use crate::lod::view::Tau;
 use crate::material::Appearance;
+use crate::render::error::{RenderError, Result};
 use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::{ErrorTable, Terrain, TerrainInfo};
-use crate::vk::descriptors::DescriptorSets;
-use crate::vk::memory::{Buffer, Image};
-use crate::vk::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
-use crate::vk::queries::PipelineStatistics;
-use crate::vk::{sample_count_flag, Device, Gpu, Result, VkError};
 
 mod budget;
 use budget::BuildInputs;
@@ -202,7 +203,7 @@ impl TerrainRenderer {
             match (Self::build_within_budget(inputs, &options), &options.stream) {
                 (Ok(Built::Renderer(renderer)), _) => return Ok(*renderer),
                 (Ok(Built::Rebase(config)), _) => options.stream = Some(config),
-                (Err(VkError::OverBudget { budget, .. }), Some(config)) => {
+                (Err(RenderError::Vk(VkError::OverBudget { budget, .. })), Some(config)) => {
                     return Err(Self::refuse_budget(
                         inputs,
                         &options,
@@ -533,7 +534,7 @@ impl TerrainRenderer {
         self.frames[slot]
             .uniforms
             .mapped_mut()
-            .ok_or_else(|| VkError::Unsupported("uniform memory is not host-mapped".into()))?
+            .ok_or(RenderError::NotMapped("uniform memory"))?
             .copy_from_slice(bytemuck::bytes_of(&uniforms));
         self.last_prepared = slot;
         let frame = &mut self.frames[slot];
@@ -574,7 +575,7 @@ impl TerrainRenderer {
                 let hierarchy = self
                     .hierarchy
                     .as_ref()
-                    .ok_or_else(|| VkError::Unsupported("the tess path was not built".into()))?;
+                    .ok_or(RenderError::NotBuilt("the tess path"))?;
                 let start = Instant::now();
                 let lod_view = view.lod_view(Tau::DEFAULT);
                 let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
@@ -608,7 +609,7 @@ impl TerrainRenderer {
         settings: &RenderSettings,
         pixels: f32,
     ) -> Result<()> {
-        let not_built = || VkError::Unsupported("the tess path's error LOD was not built".into());
+        let not_built = || RenderError::NotBuilt("the tess path's error LOD");
         let (Some(tess), Some(hierarchy), Some(geomip)) = (
             self.tess.as_mut(),
             self.hierarchy.as_ref(),
@@ -688,9 +689,10 @@ impl TerrainRenderer {
     /// draws its per-patch levels.
     pub fn set_geomip_levels(&mut self, terrain: &Terrain, levels: Option<&[u8]>) -> Result<()> {
         self.ensure(terrain, RenderPath::Geomip, false)?;
-        let geomip = self.geomip.as_mut().ok_or_else(|| {
-            VkError::Unsupported("the geomip path was not built for this renderer".into())
-        })?;
+        let geomip = self
+            .geomip
+            .as_mut()
+            .ok_or(RenderError::NotBuilt("the geomip path"))?;
         let grid = terrain.grid();
         let count = geomip::level_count(grid.cells_per_patch());
         geomip.given = match levels {
@@ -699,7 +701,7 @@ impl TerrainRenderer {
                 if levels.len() != grid.patch_count()
                     || levels.iter().any(|&l| usize::from(l) >= count)
                 {
-                    return Err(VkError::Unsupported(format!(
+                    return Err(RenderError::Unsupported(format!(
                         "{} geomip levels given for {} patches of at most {count} levels",
                         levels.len(),
                         grid.patch_count()
@@ -747,7 +749,7 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
     let (cols, rows) = (info.cols() as u32, info.rows() as u32);
     let limit = device.caps.max_image_dimension_2d;
     if options.stream.is_none() && (cols > limit || rows > limit) {
-        return Err(VkError::Unsupported(format!(
+        return Err(RenderError::Unsupported(format!(
             "heightmap of {cols}x{rows} samples exceeds this device's largest image ({limit}x{limit})"
         )));
     }
@@ -755,7 +757,7 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
     if !features
         .contains(vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::TRANSFER_DST)
     {
-        return Err(VkError::Unsupported(format!(
+        return Err(RenderError::Unsupported(format!(
             "{} cannot sample R32_SFLOAT images ({features:?})",
             device.caps.device_name
         )));
@@ -772,13 +774,13 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
 fn check_path(device: &Device, terrain: &Terrain, path: RenderPath, wireframe: bool) -> Result<()> {
     let caps = &device.caps;
     if wireframe && !caps.fill_mode_non_solid {
-        return Err(VkError::Unsupported(format!(
+        return Err(RenderError::Unsupported(format!(
             "wireframe needs fillModeNonSolid, which {} lacks",
             caps.device_name
         )));
     }
     if path == RenderPath::Tess && !caps.tessellation_shader {
-        return Err(VkError::Unsupported(format!(
+        return Err(RenderError::Unsupported(format!(
             "the tess path needs tessellationShader, which {} lacks",
             caps.device_name
         )));
@@ -786,7 +788,7 @@ fn check_path(device: &Device, terrain: &Terrain, path: RenderPath, wireframe: b
     let brute_vertices = brute_vertex_count(terrain);
     if path == RenderPath::Brute && brute_vertices > i32::MAX as u64 {
         let info = terrain.info();
-        return Err(VkError::Unsupported(format!(
+        return Err(RenderError::Unsupported(format!(
             "the brute path draws {brute_vertices} vertices for {}x{} samples, over the {} one draw can address",
             info.cols(),
             info.rows(),
@@ -800,11 +802,13 @@ fn check_path(device: &Device, terrain: &Terrain, path: RenderPath, wireframe: b
 pub(super) fn upload_heightmap(device: &Device, info: &TerrainInfo, name: &str) -> Result<Image> {
     let (cols, rows) = (info.cols() as u32, info.rows() as u32);
     let heightmap = info.heightmap().ok_or_else(|| {
-        VkError::Unsupported(
+        RenderError::Unsupported(
             "a tiled terrain read a tile at a time can only be drawn streamed".into(),
         )
     })?;
-    device.upload_r32f_image(name, cols, rows, heightmap.heights())
+    device
+        .upload_r32f_image(name, cols, rows, heightmap.heights())
+        .map_err(RenderError::from)
 }
 
 /// The tiled terrain file `config` streams: the one the terrain's CPU
@@ -815,7 +819,7 @@ fn open_streamed(info: &TerrainInfo, config: &StreamConfig) -> Result<Arc<TiledH
         Some(tiled) if tiled.path() == config.path => Ok(Arc::clone(tiled)),
         _ => TiledHeightmap::open(&config.path)
             .map(Arc::new)
-            .map_err(|e| VkError::Stream(e.to_string())),
+            .map_err(|e| RenderError::Stream(e.to_string())),
     }
 }
 

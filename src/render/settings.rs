@@ -3,6 +3,7 @@
 //! that fits them to what a device can do.
 
 use crate::lod::{PeerLod, PeerPolicy};
+use crate::render::error::RenderError;
 use crate::scene::{Fog, Lighting, Scene};
 use crate::terrain::{DistanceLod, DistanceMode};
 
@@ -24,7 +25,7 @@ pub enum RenderPath {
 /// drawn filled. Says so in `notes`.
 pub fn with_fallback(
     settings: RenderSettings,
-    caps: &crate::vk::Capabilities,
+    caps: &crate::gpu::Capabilities,
     notes: &mut Vec<String>,
 ) -> RenderSettings {
     let mut settings = settings;
@@ -64,12 +65,12 @@ pub const DEFAULT_SAMPLES: u32 = 4;
 /// `notes`) where it cannot.
 pub fn sample_count(
     requested: Option<u32>,
-    caps: &crate::vk::Capabilities,
+    caps: &crate::gpu::Capabilities,
     notes: &mut Vec<String>,
-) -> crate::vk::Result<u32> {
+) -> crate::render::error::Result<u32> {
     match requested {
         Some(n) if caps.supports_samples(n) => Ok(n),
-        Some(n) => Err(crate::vk::VkError::Unsupported(format!(
+        Some(n) => Err(RenderError::Unsupported(format!(
             "{} cannot draw {n} samples per pixel (--samples {})",
             caps.device_name,
             caps.sample_count_list()
@@ -221,7 +222,7 @@ impl RenderSettings {
 /// What this device cannot measure or filter for `appearance`: notes for
 /// the user, beside those of `with_fallback`.
 pub fn measurement_notes(
-    caps: &crate::vk::Capabilities,
+    caps: &crate::gpu::Capabilities,
     appearance: &crate::material::Appearance,
 ) -> Vec<String> {
     let mut notes = Vec::new();
@@ -236,7 +237,7 @@ pub fn measurement_notes(
             "{name}: timestamp queries are unavailable, so GPU time is not measured"
         ));
     }
-    let with_feature = crate::vk::Capabilities {
+    let with_feature = crate::gpu::Capabilities {
         sampler_anisotropy: true,
         ..caps.clone()
     };

@@ -35,14 +35,15 @@ use super::stream_budget::{
     coarsest_base, headroom, plan_stream_memory, StreamMemory, MIN_POOL_LAYERS_PER_LEVEL,
 };
 use super::view::FrameView;
+use crate::gpu::commands::Recorder;
+use crate::gpu::descriptors::DescriptorSet;
+use crate::gpu::memory::{Buffer, Image, LayerCopy};
+use crate::gpu::owned::Sampler;
+use crate::gpu::{Device, VkError};
+use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT};
 use crate::terrain::tiled::{TiledError, TiledHeightmap};
 use crate::terrain::TerrainInfo;
-use crate::vk::commands::Recorder;
-use crate::vk::descriptors::DescriptorSet;
-use crate::vk::memory::{Buffer, Image, LayerCopy};
-use crate::vk::owned::Sampler;
-use crate::vk::{Device, Result, VkError};
 
 /// Samples a side of the base level may have at most, by default: 2049^2
 /// f32 is 16 MiB.
@@ -177,7 +178,7 @@ impl Loader {
                         break;
                     }
                 })
-                .map_err(|e| VkError::Stream(format!("starting a page loader: {e}")))?;
+                .map_err(|e| RenderError::Stream(format!("starting a page loader: {e}")))?;
             handles.push(handle);
         }
         Ok(Loader {
@@ -191,7 +192,7 @@ impl Loader {
         self.requests
             .as_ref()
             .and_then(|r| r.send(load).ok())
-            .ok_or_else(|| VkError::Stream("the page loaders stopped".into()))
+            .ok_or_else(|| RenderError::Stream("the page loaders stopped".into()))
     }
 }
 
@@ -263,13 +264,13 @@ impl Streamer {
             (room, coarsest_base(&preferred, cells_per_patch)),
         )
         .map_err(|least| match (budget, least) {
-            (Some(budget), Some(least)) => VkError::OverBudget {
+            (Some(budget), Some(least)) => RenderError::Vk(VkError::OverBudget {
                 name: "terrain.stream (its smallest layout)".into(),
                 requested: least + headroom(budget),
                 in_use,
                 budget,
-            },
-            _ => VkError::Stream(format!(
+            }),
+            _ => RenderError::Stream(format!(
                 "{}: its coarsest base level takes {} pages of {side}x{side} samples, and the \
                  device allows {device_layers} layers in all; import it with larger tiles (--tile)",
                 config.path.display(),
@@ -294,7 +295,7 @@ impl Streamer {
         frames: usize,
     ) -> Result<Self> {
         if (tiled.width(), tiled.depth()) != (info.cols(), info.rows()) {
-            return Err(VkError::Stream(format!(
+            return Err(RenderError::Stream(format!(
                 "{} holds {}x{} samples, the terrain drawn {}x{}",
                 config.path.display(),
                 tiled.width(),
@@ -477,7 +478,7 @@ impl Streamer {
                 Ok(r) => Some(r),
                 Err(RecvTimeoutError::Timeout) => None,
                 Err(RecvTimeoutError::Disconnected) => {
-                    return Err(VkError::Stream("the page loaders stopped".into()))
+                    return Err(RenderError::Stream("the page loaders stopped".into()))
                 }
             },
             None => self.loader.results.try_recv().ok(),
@@ -487,7 +488,7 @@ impl Streamer {
                 Ok(heights) => self.arrived.push_back((load, heights)),
                 Err(e) => {
                     self.residency.cancelled(load);
-                    return Err(VkError::Stream(e.to_string()));
+                    return Err(RenderError::Stream(e.to_string()));
                 }
             }
             next = self.loader.results.try_recv().ok();
@@ -536,7 +537,7 @@ impl Streamer {
             }
             let staging = self.staging[slot]
                 .mapped_mut()
-                .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
+                .ok_or(RenderError::NotMapped("staging memory"))?;
             let (level, px, pz) = self.shape.page_coords(load.page);
             copies.push(stage_page(
                 staging,
@@ -616,7 +617,7 @@ impl Streamer {
         self.stats.missing_px = self.missing_px(scales);
         let table = self.tables[slot]
             .mapped_mut()
-            .ok_or_else(|| VkError::Unsupported("page table memory is not host-mapped".into()))?;
+            .ok_or(RenderError::NotMapped("page table memory"))?;
         table.copy_from_slice(bytemuck::cast_slice(&self.table));
         self.stats.resident_pages = self.residency.resident_pages() as u32;
         self.stats.layers = self.residency.layers();
@@ -751,13 +752,13 @@ fn upload_base(
         let last = (first + at_once).min(shape.base_pages());
         let mapped = staging
             .mapped_mut()
-            .ok_or_else(|| VkError::Unsupported("staging memory is not host-mapped".into()))?;
+            .ok_or(RenderError::NotMapped("staging memory"))?;
         let mut copies = Vec::new();
         let mut offset = 0u64;
         for layer in first..last {
             let (px, pz) = (layer % across, layer / across);
             let page = read_page(tiled, shape, (shape.base_level, px, pz))
-                .map_err(|e| VkError::Stream(e.to_string()))?;
+                .map_err(|e| RenderError::Stream(e.to_string()))?;
             let size = shape.page_size(shape.base_level, px, pz);
             copies.push(stage_page(mapped, offset, &page, layer, size));
             offset += 4 * page.len() as u64;

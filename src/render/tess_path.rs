@@ -19,20 +19,21 @@ use super::pipelines::{build_pipelines, PathPipelines, PipelineTarget};
 use super::settings::{ErrorMeasure, RenderPath, RenderSettings};
 use super::view::FrameView;
 use super::view_measure::seen_errors;
+use crate::gpu::descriptors::DescriptorSet;
+use crate::gpu::memory::Buffer;
+use crate::gpu::owned::PipelineLayout;
+use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::DrawOrder;
 use crate::lod::patch_merge::MergedNode;
-use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock};
+use crate::lod::plan::{plan, FramePlan, Landing, PlanInputs, PlannedBlock};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
+use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY,
 };
 use crate::terrain::{ErrorTable, Terrain};
-use crate::vk::descriptors::DescriptorSet;
-use crate::vk::memory::Buffer;
-use crate::vk::owned::PipelineLayout;
-use crate::vk::{Device, Result, VkError};
 
 pub(super) struct TessGeometry {
     pub(super) control_points: Buffer,
@@ -117,6 +118,7 @@ impl TessGeometry {
                 sight,
                 merge: settings.merge_patches,
                 cull: settings.cull,
+                landing: Landing::Mean,
             },
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -379,7 +381,7 @@ compile_error!("the merged level bytes are written in little-endian order");
 fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
     buffer
         .mapped_mut()
-        .ok_or_else(|| VkError::Unsupported("error LOD memory is not host-mapped".into()))
+        .ok_or(RenderError::NotMapped("error LOD memory"))
 }
 
 /// The tess path's draws of `plan`'s blocks not drawn at full resolution

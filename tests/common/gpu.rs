@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
+use vkterrain::gpu::{Gpu, GpuOptions};
 use vkterrain::material::Appearance;
 use vkterrain::render::{
     offscreen, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, StreamConfig,
@@ -11,7 +12,6 @@ use vkterrain::render::{
 };
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::Terrain;
-use vkterrain::vk::{Gpu, GpuOptions};
 
 /// True when the environment explicitly asks to skip GPU tests. The test
 /// then returns early and says so; without the variable a missing device
@@ -170,7 +170,7 @@ impl GpuScene {
         stream: StreamConfig,
         (width, height): (u32, u32),
         budget: u64,
-    ) -> Result<Self, vkterrain::vk::VkError> {
+    ) -> Result<Self, vkterrain::render::RenderError> {
         let options = RendererOptions {
             stream: Some(stream),
             ..RendererOptions::single_sample(vec![RenderPath::Tess])

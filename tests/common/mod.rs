@@ -72,8 +72,8 @@ pub fn cliff_map(width: usize, depth: usize, height: f32) -> Heightmap {
 
 /// Capabilities of a made-up device, for policies tested without one:
 /// everything optional present, 1 or 4 samples per pixel.
-pub fn test_capabilities() -> vkterrain::vk::Capabilities {
-    vkterrain::vk::Capabilities {
+pub fn test_capabilities() -> vkterrain::gpu::Capabilities {
+    vkterrain::gpu::Capabilities {
         device_name: "test".into(),
         device_type: "discrete GPU".into(),
         driver_name: String::new(),

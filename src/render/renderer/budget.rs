@@ -5,11 +5,12 @@
 use ash::vk;
 
 use super::{Built, RendererOptions, TerrainRenderer};
+use crate::gpu::Gpu;
 use crate::material::Appearance;
+use crate::render::error::RenderError;
 use crate::render::stream_budget::{headroom, smallest_budget};
 use crate::render::streaming::StreamConfig;
 use crate::terrain::Terrain;
-use crate::vk::{Gpu, VkError};
 
 /// What a renderer is built from, besides its options.
 pub(super) type BuildInputs<'a> = (&'a Gpu, &'a Terrain, &'a Appearance, vk::Format, u32);
@@ -23,7 +24,7 @@ impl TerrainRenderer {
         options: &RendererOptions,
         config: &StreamConfig,
         (before, budget): (u64, u64),
-    ) -> VkError {
+    ) -> RenderError {
         let (gpu, terrain, ..) = inputs;
         let device = &gpu.device;
         let tiled = match super::open_streamed(terrain.info(), config) {
@@ -44,7 +45,7 @@ impl TerrainRenderer {
                 drop(renderer);
                 Ok(bytes)
             }
-            Ok(Built::Rebase(_)) => Err(VkError::Unsupported(
+            Ok(Built::Rebase(_)) => Err(RenderError::Unsupported(
                 "the smallest streaming layout asked for another base level".into(),
             )),
             Err(e) => Err(e),
@@ -56,7 +57,7 @@ impl TerrainRenderer {
         };
         let least = smallest_budget(before, needed);
         let mib = |bytes: u64| bytes.div_ceil(1 << 20);
-        VkError::Stream(format!(
+        RenderError::Stream(format!(
             "{}: a GPU memory budget of {} MiB is too small to stream it here; it needs at least \
              {} MiB (--gpu-memory-budget {}): {} MiB in use before the renderer (the render \
              targets), {} MiB for the renderer with its smallest layout (base level {}, {layers} \

@@ -5,7 +5,12 @@
 use ash::vk;
 
 use super::{FrameMeasurements, OcclusionMeasurements, TerrainRenderer};
-use crate::render::frame::FrameSlot;
+use crate::gpu::commands::{Recorder, RenderingSpan};
+use crate::gpu::memory::Buffer;
+use crate::gpu::owned::Pipeline;
+use crate::gpu::target::TargetViews;
+use crate::render::error::{RenderError, Result};
+use crate::render::frame::{FrameSlot, COUNTED_PARTS};
 use crate::render::geomip_path::GeomipDraw;
 use crate::render::occlusion::{ListedDraw, DRAW_COMMAND_BYTES};
 use crate::render::settings::{LodMetric, RenderPath, RenderSettings};
@@ -13,12 +18,6 @@ use crate::render::tess_path::TessGeometry;
 use crate::shader_constants::{
     OCCLUSION_PHASE_ALL, OCCLUSION_PHASE_CULLED, OCCLUSION_PHASE_FIRST, OCCLUSION_PHASE_SECOND,
 };
-use crate::vk::commands::{Recorder, RenderingPart};
-use crate::vk::memory::Buffer;
-use crate::vk::owned::Pipeline;
-use crate::vk::queries::COUNTED_PARTS;
-use crate::vk::target::TargetViews;
-use crate::vk::{Result, VkError};
 
 impl TerrainRenderer {
     /// Records the frame `prepare` set slot `slot` up for into `target`
@@ -26,12 +25,12 @@ impl TerrainRenderer {
     /// queries: in one pass, or with occlusion culling in two.
     pub fn record(&mut self, rec: &Recorder, slot: usize, target: &TargetViews) -> Result<()> {
         let settings = self.frames[slot].settings.ok_or_else(|| {
-            VkError::Unsupported(format!(
+            RenderError::Unsupported(format!(
                 "frame slot {slot} was recorded before it was prepared"
             ))
         })?;
         if target.samples != self.samples || target.color_format != self.color_format {
-            return Err(VkError::Unsupported(format!(
+            return Err(RenderError::Unsupported(format!(
                 "a target of {:?} with {:?} samples per pixel, for a renderer built for {:?} with {:?}",
                 target.color_format, target.samples, self.color_format, self.samples
             )));
@@ -96,7 +95,7 @@ impl TerrainRenderer {
         if cull {
             let occlusion = &self.occlusion;
             occlusion.record_start(rec, slot)?;
-            rec.begin_rendering(target, RenderingPart::First { clear_color });
+            rec.begin_rendering(target, RenderingPart::First { clear_color }.span());
             frame.queries.begin_counting(rec, 0);
             self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_FIRST)?;
             frame.queries.end_counting(rec, 0);
@@ -107,7 +106,7 @@ impl TerrainRenderer {
             occlusion.record_cull(rec, slot, target)?;
             frame.queries.mark_span_end(rec);
             occlusion.record_resume(rec, target);
-            rec.begin_rendering(target, RenderingPart::Last);
+            rec.begin_rendering(target, RenderingPart::Last.span());
             frame.queries.begin_counting(rec, 1);
             self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_SECOND)?;
             frame.queries.end_counting(rec, 1);
@@ -115,7 +114,7 @@ impl TerrainRenderer {
                 self.draw_culled(rec, frame, &settings)?;
             }
         } else {
-            rec.begin_rendering(target, RenderingPart::Whole { clear_color });
+            rec.begin_rendering(target, RenderingPart::Whole { clear_color }.span());
             frame.queries.begin_counting(rec, 0);
             self.draw_terrain(rec, slot, &settings, OCCLUSION_PHASE_ALL)?;
             frame.queries.end_counting(rec, 0);
@@ -142,7 +141,7 @@ impl TerrainRenderer {
     ) -> Result<()> {
         let frame = &self.frames[slot];
         let not_built = || {
-            VkError::Unsupported(format!(
+            RenderError::Unsupported(format!(
                 "the {:?} path was not built for this renderer",
                 settings.path
             ))
@@ -287,5 +286,37 @@ impl TerrainRenderer {
             statistics: frame.queries.statistics(parts)?,
             occlusion,
         })
+    }
+}
+
+/// Which part of a frame a rendering is: the whole frame, or, with
+/// occlusion culling between them, the first or last of two.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum RenderingPart {
+    /// The whole frame: cleared to the colour, resolved at its end.
+    Whole { clear_color: [f32; 3] },
+    /// The first of two: cleared, kept for the last.
+    First { clear_color: [f32; 3] },
+    /// The last of two: continues the first, resolved at its end.
+    Last,
+}
+
+impl RenderingPart {
+    /// How its rendering starts and ends.
+    fn span(self) -> RenderingSpan {
+        match self {
+            RenderingPart::Whole { clear_color } => RenderingSpan {
+                clear_color: Some(clear_color),
+                resolve: true,
+            },
+            RenderingPart::First { clear_color } => RenderingSpan {
+                clear_color: Some(clear_color),
+                resolve: false,
+            },
+            RenderingPart::Last => RenderingSpan {
+                clear_color: None,
+                resolve: true,
+            },
+        }
     }
 }

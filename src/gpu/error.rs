@@ -23,11 +23,6 @@ pub enum VkError {
     #[error("{0}")]
     Unsupported(String),
 
-    /// A streamed terrain's file or loaders failed (the message names the
-    /// file and, for a bad tile, the tile).
-    #[error("streaming the terrain: {0}")]
-    Stream(String),
-
     #[error("the validation layer reported {count} messages; the first: {first}")]
     Validation { count: u32, first: String },
 

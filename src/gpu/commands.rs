@@ -142,15 +142,15 @@ impl Drop for CommandSlots {
     }
 }
 
-/// Which part of a frame a rendering is (see `Recorder::begin_rendering`).
+/// How a rendering starts and ends (see `Recorder::begin_rendering`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RenderingPart {
-    /// The whole frame: cleared to the colour, resolved at its end.
-    Whole { clear_color: [f32; 3] },
-    /// The first of two: cleared, kept for the last.
-    First { clear_color: [f32; 3] },
-    /// The last of two: continues the first, resolved at its end.
-    Last,
+pub struct RenderingSpan {
+    /// Cleared to this colour (and depth to 1) first; None: continues
+    /// what an earlier rendering stored.
+    pub clear_color: Option<[f32; 3]>,
+    /// Resolved at its end (multisampled targets); otherwise stored for a
+    /// later rendering to continue.
+    pub resolve: bool,
 }
 
 /// A command buffer being recorded.
@@ -237,36 +237,35 @@ impl<'a> Recorder<'a> {
         };
     }
 
-    /// Starts dynamic rendering into `target` for `part` of a frame, with a
-    /// full-size viewport. A frame's first part clears colour and depth (to
-    /// 0: reversed Z puts the far plane at 0); its last part resolves
+    /// Starts dynamic rendering into `target` over `span`, with a
+    /// full-size viewport. A span with a clear colour clears colour and
+    /// depth (to 0: reversed Z puts the far plane at 0), else it loads what
+    /// the rendering before it stored; a resolving span resolves
     /// multisampled attachments and discards them, colour by the average of
-    /// its samples, depth by sample 0. A part before another keeps what it
-    /// drew for the next, which loads it.
+    /// its samples, depth by sample 0, else it stores them for the next.
     ///
     /// The clear is a `vkCmdClearAttachments` inside the rendering rather
     /// than a CLEAR load op: lavapipe (Mesa 22.3) re-applies a CLEAR load op
     /// each time it flushes a full tile scene in the middle of a large draw,
     /// wiping everything drawn before the flush. A clear command runs once.
-    pub fn begin_rendering(&self, target: &TargetViews, part: RenderingPart) {
-        let (clear_color, last) = match part {
-            RenderingPart::Whole { clear_color } => (Some(clear_color), true),
-            RenderingPart::First { clear_color } => (Some(clear_color), false),
-            RenderingPart::Last => (None, true),
-        };
+    pub fn begin_rendering(&self, target: &TargetViews, span: RenderingSpan) {
+        let RenderingSpan {
+            clear_color,
+            resolve,
+        } = span;
         let load_op = match clear_color {
             Some(_) => vk::AttachmentLoadOp::DONT_CARE,
             None => vk::AttachmentLoadOp::LOAD,
         };
-        let attachment = |view, layout, resolve: Option<vk::ImageView>, mode| {
+        let attachment = |view, layout, resolve_into: Option<vk::ImageView>, mode| {
             let info = vk::RenderingAttachmentInfo::default()
                 .image_view(view)
                 .image_layout(layout)
                 .load_op(load_op);
-            match resolve {
-                Some(resolve) if last => info
+            match resolve_into {
+                Some(resolve_view) if resolve => info
                     .resolve_mode(mode)
-                    .resolve_image_view(resolve)
+                    .resolve_image_view(resolve_view)
                     .resolve_image_layout(layout)
                     .store_op(vk::AttachmentStoreOp::DONT_CARE),
                 _ => info.store_op(vk::AttachmentStoreOp::STORE),

@@ -35,19 +35,22 @@ const STATISTICS: [vk::QueryPipelineStatisticFlags; 6] = [
 
 /// Timestamps of one frame: its start and end, and two marks inside it.
 const TIMESTAMPS: u32 = 4;
-/// Pipeline-statistics queries of one frame: one per part it draws in.
-pub const COUNTED_PARTS: u32 = 2;
 
 /// Query pools for one frame in flight.
 pub struct FrameQueries {
     timestamps: Option<Owned<vk::QueryPool>>,
     statistics: Option<Owned<vk::QueryPool>>,
+    /// Pipeline-statistics queries: one per part of the frame counted.
+    counted_parts: u32,
     period_ns: f64,
     valid_mask: u64,
 }
 
 impl FrameQueries {
-    pub fn new(device: &Device, name: &str) -> Result<Self> {
+    /// Pools for a frame that counts its pipeline statistics in
+    /// `counted_parts` parts (at least one).
+    pub fn new(device: &Device, counted_parts: u32, name: &str) -> Result<Self> {
+        let counted_parts = counted_parts.max(1);
         let timestamps = match device.caps.timestamp_period_ns {
             Some(_) => {
                 let info = vk::QueryPoolCreateInfo::default()
@@ -66,7 +69,7 @@ impl FrameQueries {
                 .fold(vk::QueryPipelineStatisticFlags::empty(), |a, &f| a | f);
             let info = vk::QueryPoolCreateInfo::default()
                 .query_type(vk::QueryType::PIPELINE_STATISTICS)
-                .query_count(COUNTED_PARTS)
+                .query_count(counted_parts)
                 .pipeline_statistics(flags);
             // SAFETY: the feature is enabled on the device.
             let pool = unsafe { device.ash().create_query_pool(&info, None) }
@@ -79,6 +82,7 @@ impl FrameQueries {
         Ok(FrameQueries {
             timestamps,
             statistics,
+            counted_parts,
             period_ns: f64::from(device.caps.timestamp_period_ns.unwrap_or(0.0)),
             valid_mask: if bits >= 64 {
                 u64::MAX
@@ -97,7 +101,7 @@ impl FrameQueries {
                 device.cmd_reset_query_pool(cmd, pool.raw(), 0, TIMESTAMPS);
             }
             if let Some(pool) = &self.statistics {
-                device.cmd_reset_query_pool(cmd, pool.raw(), 0, COUNTED_PARTS);
+                device.cmd_reset_query_pool(cmd, pool.raw(), 0, self.counted_parts);
             }
         }
     }
@@ -107,7 +111,7 @@ impl FrameQueries {
         self.write_timestamp(rec, vk::PipelineStageFlags2::TOP_OF_PIPE, 0);
     }
 
-    /// Starts counting part `part` (below `COUNTED_PARTS`) of the frame.
+    /// Starts counting part `part` (below the parts counted) of the frame.
     pub fn begin_counting(&self, rec: &Recorder, part: u32) {
         if let Some(pool) = &self.statistics {
             // SAFETY: the pool was reset earlier in this command buffer.
@@ -197,20 +201,20 @@ impl FrameQueries {
         let Some(pool) = &self.statistics else {
             return Ok(None);
         };
-        let mut values = [[0u64; STATISTICS.len()]; COUNTED_PARTS as usize];
-        let parts = parts.clamp(1, COUNTED_PARTS) as usize;
+        let parts = parts.clamp(1, self.counted_parts) as usize;
+        let mut values = vec![[0u64; STATISTICS.len()]; parts];
         // SAFETY: the queries were ended in a completed submission.
         unsafe {
             pool.device().ash().get_query_pool_results(
                 pool.raw(),
                 0,
-                &mut values[..parts],
+                &mut values,
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
             )
         }
         .context("reading pipeline statistics")?;
         let mut sum = [0u64; STATISTICS.len()];
-        for part in &values[..parts] {
+        for part in &values {
             for (s, v) in sum.iter_mut().zip(part) {
                 *s += v;
             }
