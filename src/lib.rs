@@ -8,7 +8,7 @@
 //! - [`lod`]: the level choice, from a terrain and a view to a frame plan.
 //!   No GPU types.
 //! - [`gpu`]: Vulkan plumbing over ash; all `unsafe` lives here.
-//! - [`material`]: a scene's textures, blend maps and lightmap, loaded.
+//! - [`appearance`]: a scene's textures, blend maps and lightmap, loaded.
 //! - [`scene`]: what to load.
 //! - [`terrain`]: the CPU model (heightmaps, patch grid, Y bounds, error
 //!   table, the view model, height queries, frustum maths). No GPU types.
@@ -22,13 +22,13 @@
 #![deny(unsafe_code)]
 
 pub mod app;
+pub mod appearance;
 pub mod bench;
 pub mod cache;
 pub mod cli;
 #[allow(unsafe_code)]
 pub mod gpu;
 pub mod lod;
-pub mod material;
 pub mod output;
 pub mod render;
 pub mod scene;

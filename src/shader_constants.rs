@@ -82,7 +82,7 @@ pub const BINDING_BLEND_MAPS: u32 = 9;
 pub const BINDING_LIGHTMAP: u32 = 10;
 /// Most material layers. Mirror: terrain::shading::MAX_LAYERS.
 pub const MAX_LAYERS: u32 = 8;
-/// Most directional lights. Mirror: scene::material::MAX_LIGHTS.
+/// Most directional lights. Mirror: scene::look::MAX_LIGHTS.
 pub const MAX_LIGHTS: u32 = 3;
 /// Specialisation constant: number of material layers.
 pub const SPEC_LAYER_COUNT: u32 = 0;

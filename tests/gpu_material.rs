@@ -10,10 +10,10 @@ use std::path::{Path, PathBuf};
 use common::gpu::*;
 use common::*;
 use glam::DVec2;
+use vkterrain::appearance::generate::blend_maps_from_rules;
+use vkterrain::appearance::Appearance;
 use vkterrain::bench::error::differing_pixels;
 use vkterrain::gpu::Capabilities;
-use vkterrain::material::generate::blend_maps_from_rules;
-use vkterrain::material::Appearance;
 use vkterrain::render::{LodMetric, RenderPath, RenderSettings};
 use vkterrain::scene::{Asset, AssetSource, Scene, WeightSource};
 use vkterrain::terrain::camera::Camera;
@@ -397,7 +397,7 @@ fn anisotropy_follows_the_scene_within_the_device() {
         sampler_anisotropy: has,
         ..test_capabilities()
     };
-    use vkterrain::render::material::anisotropy_for;
+    use vkterrain::render::appearance::anisotropy_for;
     let gpu = caps("discrete GPU", true);
     assert_eq!(anisotropy_for(None, &gpu), Some(16.0));
     assert_eq!(anisotropy_for(Some(4.0), &gpu), Some(4.0));

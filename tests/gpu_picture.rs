@@ -6,7 +6,7 @@ mod common;
 use common::gpu::*;
 use common::*;
 use glam::{Vec3, Vec4};
-use vkterrain::material::Appearance;
+use vkterrain::appearance::Appearance;
 use vkterrain::render::{RenderSettings, Shading, DEFAULT_SAMPLES};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::Terrain;

@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 
 use common::*;
 use glam::{DVec2, DVec3};
-use vkterrain::material::generate::blend_maps_from_rules;
-use vkterrain::material::{blend_map_sizes, Appearance, MaterialError, TexelFormat};
+use vkterrain::appearance::generate::blend_maps_from_rules;
+use vkterrain::appearance::{blend_map_sizes, Appearance, MaterialError, TexelFormat};
 use vkterrain::scene::{AssetSource, Scene, SceneFileError, WeightSource};
 use vkterrain::terrain::shading::{
     bake_lightmap, blend_map_weights, blend_values, max_displacement, Cliff, HeightBand, Rules,
@@ -427,7 +427,7 @@ fn the_lightmap_shadows_the_lee_of_a_wall_and_nothing_else() {
 #[test]
 fn the_committed_textures_and_blend_map_are_what_the_generators_make() {
     let pixels = |path: &Path| image::open(path).unwrap().to_rgba8();
-    for layer in vkterrain::material::generate::layer_textures(256) {
+    for layer in vkterrain::appearance::generate::layer_textures(256) {
         for (suffix, made) in [
             ("", image::DynamicImage::ImageRgb8(layer.diffuse)),
             ("-normal", image::DynamicImage::ImageRgb8(layer.normal)),
@@ -502,7 +502,8 @@ fn the_lightmap_cache_returns_the_bake_and_survives_bad_entries() {
     let sun = glam::DVec3::new(0.6, 0.5, -0.3);
     let baked = vkterrain::terrain::shading::bake_lightmap(&info, sun);
     let dir = tempfile::tempdir().unwrap();
-    let cached = |d: Option<&std::path::Path>| vkterrain::material::cached_lightmap(d, &info, sun);
+    let cached =
+        |d: Option<&std::path::Path>| vkterrain::appearance::cached_lightmap(d, &info, sun);
     assert_eq!(cached(None), baked, "without a cache directory");
     assert_eq!(cached(Some(dir.path())), baked, "first launch: baked");
     let entries: Vec<_> = std::fs::read_dir(dir.path())
@@ -533,7 +534,7 @@ fn the_lightmap_cache_returns_the_bake_and_survives_bad_entries() {
     // Another sun is another entry.
     let other = glam::DVec3::new(-0.6, 0.5, 0.3);
     assert_eq!(
-        vkterrain::material::cached_lightmap(Some(dir.path()), &info, other),
+        vkterrain::appearance::cached_lightmap(Some(dir.path()), &info, other),
         vkterrain::terrain::shading::bake_lightmap(&info, other)
     );
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);

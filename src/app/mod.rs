@@ -59,7 +59,7 @@ pub struct DemoOptions {
     /// wait for it.
     pub stream: Option<crate::render::StreamConfig>,
     /// The scene's material layers and lightmap.
-    pub appearance: crate::material::Appearance,
+    pub appearance: crate::appearance::Appearance,
     pub camera: Camera,
     pub settings: RenderSettings,
     pub width: u32,

@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use anyhow::{bail, Context, Result};
 
 use super::args::TerrainArgs;
-use crate::material::blend_map_sizes;
-use crate::material::generate::{blend_maps_from_rules, layer_textures};
+use crate::appearance::blend_map_sizes;
+use crate::appearance::generate::{blend_maps_from_rules, layer_textures};
 use crate::output::write_atomically;
 use crate::scene::WeightSource;
 use crate::terrain::shading::Rules;

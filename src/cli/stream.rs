@@ -10,9 +10,9 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
+use crate::appearance::Appearance;
 use crate::bench::cameras::flythrough;
 use crate::bench::error::{enclosed_background, measure, DepthView};
-use crate::material::Appearance;
 use crate::render::{
     offscreen, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
     StreamStats,

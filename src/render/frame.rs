@@ -6,8 +6,8 @@ use std::mem::size_of;
 
 use ash::vk;
 
+use super::appearance::GpuAppearance;
 use super::geomip_path::GeomipDraw;
-use super::material::GpuAppearance;
 use super::settings::RenderSettings;
 use super::tess_path::ChoiceBuffers;
 use super::uniforms::FrameUniforms;

@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use crate::material::{Appearance, MaterialError};
+use crate::appearance::{Appearance, MaterialError};
 use crate::scene::{Scene, SceneError};
 use crate::terrain::{Terrain, TerrainError};
 

@@ -1,12 +1,12 @@
 //! The terrain renderer: pipelines, descriptor sets, per-frame uniforms, and
 //! draw recording into a target it is given. Knows nothing of windows.
 
+pub mod appearance;
 pub mod error;
 mod frame;
 mod geomip_path;
 pub mod headless;
 pub mod loaded;
-pub mod material;
 pub mod mirror;
 pub mod occlusion;
 mod pipelines;

@@ -5,7 +5,7 @@ use std::mem::size_of;
 
 use ash::vk;
 
-use super::material::ShaderVariant;
+use super::appearance::ShaderVariant;
 use super::settings::RenderPath;
 use super::shaders;
 use crate::gpu::owned::{Pipeline, PipelineLayout};

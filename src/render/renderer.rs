@@ -31,9 +31,9 @@ use std::time::Instant;
 
 use ash::vk;
 
+use super::appearance::GpuAppearance;
 use super::frame::{build_frames, DescriptorPlan, FrameSlot};
 use super::geomip_path::GeomipGeometry;
-use super::material::GpuAppearance;
 use super::occlusion::Occlusion;
 use super::pipelines::{
     build_pipelines, create_culled_pipeline, create_sky_pipeline, CulledPipelines, PathPipelines,
@@ -45,6 +45,7 @@ use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
 use super::view::FrameView;
+use crate::appearance::Appearance;
 use crate::gpu::descriptors::DescriptorSets;
 use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
@@ -55,7 +56,6 @@ use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::patches_in_view;
 use crate::lod::view::Tau;
-use crate::material::Appearance;
 use crate::render::error::{RenderError, Result};
 use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::{ErrorTable, Terrain, TerrainInfo};

@@ -223,7 +223,7 @@ impl RenderSettings {
 /// the user, beside those of `with_fallback`.
 pub fn measurement_notes(
     caps: &crate::gpu::Capabilities,
-    appearance: &crate::material::Appearance,
+    appearance: &crate::appearance::Appearance,
 ) -> Vec<String> {
     let mut notes = Vec::new();
     let name = &caps.device_name;
@@ -244,7 +244,7 @@ pub fn measurement_notes(
     let asked = appearance.material.as_ref().map(|m| m.anisotropy);
     if let Some(asked) = asked {
         if !caps.sampler_anisotropy
-            && super::material::anisotropy_for(asked, &with_feature).is_some()
+            && super::appearance::anisotropy_for(asked, &with_feature).is_some()
         {
             notes.push(format!(
                 "{name}: samplerAnisotropy is unavailable, so textures are filtered without anisotropy"

@@ -1,8 +1,6 @@
 //! The per-frame uniform block shared with GLSL (`Frame` in
 //! glsl/terrain_common.glsl), std140, with its layout checked at compile time.
 
-use std::mem::{offset_of, size_of};
-
 use glam::{Vec3, Vec4};
 
 use super::settings::{LodMetric, RenderSettings, Shading};
@@ -58,29 +56,9 @@ pub struct FrameUniforms {
     pub sky_zenith: [f32; 4],
 }
 
-// std140: mat4 at 0, vec4[6] at 64, then one vec4 per field.
-const _: () = assert!(size_of::<FrameUniforms>() == 560);
-const _: () = assert!(offset_of!(FrameUniforms, frustum) == 64);
-const _: () = assert!(offset_of!(FrameUniforms, eye_local) == 160);
-const _: () = assert!(offset_of!(FrameUniforms, lod) == 176);
-const _: () = assert!(offset_of!(FrameUniforms, grid) == 192);
-const _: () = assert!(offset_of!(FrameUniforms, spacing_size) == 208);
-const _: () = assert!(offset_of!(FrameUniforms, ambient) == 224);
-const _: () = assert!(offset_of!(FrameUniforms, height_min) == 240);
-const _: () = assert!(offset_of!(FrameUniforms, cull) == 248);
-const _: () = assert!(offset_of!(FrameUniforms, lod_mode) == 256);
-const _: () = assert!(offset_of!(FrameUniforms, lod_metric) == 268);
-const _: () = assert!(offset_of!(FrameUniforms, light_dir) == 288);
-const _: () = assert!(offset_of!(FrameUniforms, light_color) == 336);
-const _: () = assert!(offset_of!(FrameUniforms, fog) == 384);
-const _: () = assert!(offset_of!(FrameUniforms, fog_color) == 400);
-const _: () = assert!(offset_of!(FrameUniforms, error_lod) == 272);
-const _: () = assert!(offset_of!(FrameUniforms, peer) == 416);
-const _: () = assert!(offset_of!(FrameUniforms, viewport) == 432);
-const _: () = assert!(offset_of!(FrameUniforms, camera_right) == 448);
-const _: () = assert!(offset_of!(FrameUniforms, sky_ray) == 464);
-const _: () = assert!(offset_of!(FrameUniforms, sky_horizon) == 528);
-const _: () = assert!(offset_of!(FrameUniforms, sky_zenith) == 544);
+// Every member of the GLSL frame block at the offset the shader compiler
+// gave it, and the block's size, read from the compiled SPIR-V by build.rs.
+include!(concat!(env!("OUT_DIR"), "/frame_block.rs"));
 
 /// Angular radius of the sun disc the sky draws, in degrees: about twice
 /// the real sun's, so that it reads at screen resolutions.

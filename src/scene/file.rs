@@ -38,9 +38,7 @@ use glam::{DVec2, DVec3};
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::material::{
-    parse_fog, parse_lighting, parse_material, FogToml, LightingToml, MaterialToml,
-};
+use super::look::{parse_fog, parse_lighting, parse_material, FogToml, LightingToml, MaterialToml};
 use super::{HeightmapSource, Scene};
 use crate::terrain::camera::Camera;
 use crate::terrain::heightmap::DEFAULT_MAX_SAMPLES;

@@ -4,14 +4,14 @@
 //! built into the binary, so the run command works from any directory.
 
 mod file;
-pub mod material;
+pub mod look;
 
 use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3};
 
 pub use file::SceneFileError;
-pub use material::{
+pub use look::{
     Asset, AssetSource, DirectionalLight, Fog, LayerSpec, Lighting, MaterialSpec, WeightSource,
     MAX_LIGHTS,
 };

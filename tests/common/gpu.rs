@@ -4,8 +4,8 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
+use vkterrain::appearance::Appearance;
 use vkterrain::gpu::{Gpu, GpuOptions};
-use vkterrain::material::Appearance;
 use vkterrain::render::{
     offscreen, Headless, HeadlessFrame, RenderPath, RenderSettings, RendererOptions, StreamConfig,
     TerrainRenderer,

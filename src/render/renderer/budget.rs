@@ -5,8 +5,8 @@
 use ash::vk;
 
 use super::{Built, RendererOptions, TerrainRenderer};
+use crate::appearance::Appearance;
 use crate::gpu::Gpu;
-use crate::material::Appearance;
 use crate::render::error::RenderError;
 use crate::render::stream_budget::{headroom, smallest_budget};
 use crate::render::streaming::StreamConfig;

@@ -172,7 +172,7 @@ pub struct Material {
     pub blend_maps: Option<TextureArray>,
     pub cliff: Option<Cliff>,
     /// Most anisotropic filtering samples; None: the device's default
-    /// (see `render::material::anisotropy_for`).
+    /// (see `render::appearance::anisotropy_for`).
     pub anisotropy: Option<f32>,
     /// Steep ground projected from the side too (`MaterialSpec::triplanar`).
     pub triplanar: bool,

@@ -9,11 +9,11 @@ use std::mem::{offset_of, size_of};
 use ash::vk;
 
 use super::residency::StreamShape;
+use crate::appearance::{Appearance, Material, TexelFormat, TextureArray};
 use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::{Buffer, Image, TexelUpload};
 use crate::gpu::owned::Sampler;
 use crate::gpu::Device;
-use crate::material::{Appearance, Material, TexelFormat, TextureArray};
 use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{
     BINDING_BLEND_MAPS, BINDING_DIFFUSE_MAPS, BINDING_HEIGHT_MAPS, BINDING_LIGHTMAP,
@@ -25,7 +25,7 @@ use crate::terrain::TerrainInfo;
 
 const _: () = assert!(MAX_LAYERS as usize == crate::terrain::shading::MAX_LAYERS);
 const _: () =
-    assert!(crate::shader_constants::MAX_LIGHTS as usize == crate::scene::material::MAX_LIGHTS);
+    assert!(crate::shader_constants::MAX_LIGHTS as usize == crate::scene::look::MAX_LIGHTS);
 
 /// One layer (`Layer` in glsl/material.glsl), std140.
 #[repr(C)]

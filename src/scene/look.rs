@@ -1,6 +1,6 @@
 //! The look of a scene: material layers and how they are weighted, lights
 //! and fog, as parsed from the scene file. Nothing is read here but the
-//! file itself; `crate::material` loads the images these name.
+//! file itself; `crate::appearance` loads the images these name.
 //!
 //! ```toml
 //! [lighting]
