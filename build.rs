@@ -7,9 +7,9 @@
 //! - Optimised for performance in release builds.
 //! - `#include "..."` resolves inside `glsl/`.
 //! - The constants of `src/shader_constants.rs` arrive as macro definitions.
-//! - Each module's SPIR-V is read back (`reflect`): a descriptor binding
-//!   that no `BINDING_*` constant names, or a set other than 0, fails the
-//!   build, and the frame block's members and std140 offsets, as the
+//! - A binding in GLSL names a `BINDING_*` constant, never a number; each
+//!   module's SPIR-V is read back (`reflect`): a descriptor binding that no
+//!   `BINDING_*` constant has, or a set other than 0, fails the build, and the frame block's members and std140 offsets, as the
 //!   compiler laid them out, become compile-time checks against
 //!   `render::uniforms::FrameUniforms` (`frame_block.rs`), so a block
 //!   changed in one language only fails `cargo build`.
@@ -46,6 +46,7 @@ fn main() {
     files.sort();
     for file in &files {
         println!("cargo:rerun-if-changed={}", file.display());
+        check_bindings_named(file);
     }
 
     let compiler = shaderc::Compiler::new().unwrap_or_else(|e| fail(&format!("shaderc: {e}")));
@@ -173,6 +174,38 @@ fn main() {
     };
     std::fs::write(out_dir.join("frame_block.rs"), frame_block_checks(&members))
         .unwrap_or_else(|e| fail(&format!("cannot write the frame block's checks: {e}")));
+}
+
+/// Fails the build where a GLSL file gives a binding as anything but a
+/// `BINDING_*` constant of `src/shader_constants.rs`, so that each number
+/// is written once, in Rust.
+fn check_bindings_named(file: &std::path::Path) {
+    let Ok(source) = std::fs::read_to_string(file) else {
+        return;
+    };
+    let names = binding_constants();
+    for (line, text) in source.lines().enumerate() {
+        let mut rest = text;
+        while let Some(at) = rest.find("binding") {
+            rest = &rest[at + "binding".len()..];
+            let Some(value) = rest.trim_start().strip_prefix('=') else {
+                continue;
+            };
+            let token: String = value
+                .trim_start()
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            if !names.iter().any(|(name, _)| *name == token) {
+                fail(&format!(
+                    "{}:{}: binding = {token}: name a BINDING_* constant of \
+                     src/shader_constants.rs instead",
+                    file.display(),
+                    line + 1
+                ));
+            }
+        }
+    }
 }
 
 /// Every `BINDING_*` constant of `src/shader_constants.rs`, by name.
