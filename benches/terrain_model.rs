@@ -10,7 +10,7 @@ use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughpu
 use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
 use vkterrain::lod::hierarchy::Hierarchy;
-use vkterrain::lod::plan::{plan, Landing, PlanInputs};
+use vkterrain::lod::plan::{plan, PlanInputs, SightReading};
 use vkterrain::lod::view::Tau;
 use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
@@ -128,7 +128,7 @@ fn frame_plan(c: &mut Criterion) {
                 sight,
                 merge: true,
                 cull: true,
-                landing: Landing::Mean,
+                reading: SightReading::Tessellated,
             };
             group.bench_function(format!("{measure}/{}", view.name), |b| {
                 b.iter(|| black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs)))

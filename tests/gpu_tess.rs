@@ -1453,7 +1453,7 @@ fn reference_height(info: &TerrainInfo, x: f64, z: f64) -> Option<f64> {
 #[test]
 fn each_patch_stays_within_its_predicted_error() {
     use vkterrain::lod::hierarchy::Hierarchy;
-    use vkterrain::lod::plan::{plan, Landing, PlanInputs};
+    use vkterrain::lod::plan::{plan, PlanInputs, SightReading};
     use vkterrain::lod::view::Tau;
     if skip_gpu() {
         return;
@@ -1492,7 +1492,7 @@ fn each_patch_stays_within_its_predicted_error() {
                     sight,
                     merge: settings.merge_patches,
                     cull: true,
-                    landing: Landing::Mean,
+                    reading: SightReading::Tessellated,
                 };
                 let frame = plan(&terrain, &hierarchy, &lod_view, &inputs);
                 let predicted = predicted_per_patch(&terrain, &frame, tau);

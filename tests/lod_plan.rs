@@ -7,7 +7,7 @@ mod common;
 use common::*;
 use glam::{DVec2, DVec3};
 use vkterrain::lod::hierarchy::Hierarchy;
-use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, Landing, PlanInputs};
+use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs, SightReading};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
@@ -39,7 +39,7 @@ fn planned(
             sight,
             merge: true,
             cull: true,
-            landing: Landing::Mean,
+            reading: SightReading::Tessellated,
         },
     )
 }
@@ -86,7 +86,7 @@ fn the_plan_visits_a_few_thousand_nodes_of_a_512_by_512_patch_grid() {
                     sight: None,
                     merge,
                     cull: true,
-                    landing: Landing::Mean,
+                    reading: SightReading::Tessellated,
                 };
                 let frame = plan(&terrain, &hierarchy, &view, &inputs);
                 assert!(
@@ -249,4 +249,58 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
         }
     }
     assert!(compared >= 6);
+}
+
+/// The far remainders (patches narrower than the rest) have entries laid
+/// out as the tessellator cuts them, their vertices between samples: on a
+/// plane every level is the surface and no pixel is over any error; on a
+/// curved map the coarse levels put pixels over a small error and full
+/// resolution none. No block of patches decided at once holds a narrower
+/// one.
+#[test]
+fn narrower_patches_have_entries_of_their_own() {
+    // 57 x 37 samples in 16-cell patches: a last column 8 cells wide and
+    // a last row 4 cells deep.
+    let sight_of = |height: fn(f32, f32) -> f32| {
+        let map = Heightmap::from_fn(57, 37, |r, c| height(c as f32, r as f32)).unwrap();
+        let info = TerrainInfo::new(map, DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+        let terrain = Terrain::new(info, 0.0).unwrap();
+        let sight = terrain.sight_table().unwrap().clone();
+        (terrain, sight)
+    };
+    let (terrain, plane) = sight_of(|x, z| 3.0 * x - 2.0 * z + 100.0);
+    let (_, curved) = sight_of(|x, z| 0.4 * (x - 20.0).powi(2) + 0.3 * (z - 18.0).powi(2));
+    let grid = terrain.grid();
+    assert_eq!((grid.patch_cols(), grid.patch_rows()), (4, 3));
+    let at = LatticePoint::new(1.0, 0.4, 0.3);
+    let narrower = [(3usize, 0usize, 8usize), (0, 2, 4), (3, 2, 4)];
+    for (col, row, side) in narrower {
+        let block = Block { level: 0, col, row };
+        let flat = plane
+            .view(block, &at, 1e-3)
+            .expect("a narrower patch's entry");
+        let bent = curved
+            .view(block, &at, 1e-3)
+            .expect("a narrower patch's entry");
+        // Level k has 2^k segments; from the first reaching the smaller
+        // side on, full resolution.
+        let full = side.trailing_zeros() as usize;
+        for k in 0..LEVELS {
+            assert_eq!(flat.over_fraction(k), 0.0, "{block:?} level {k} on a plane");
+            if k < full {
+                assert!(bent.over_fraction(k) > 0.0, "{block:?} level {k} curved");
+            } else {
+                assert_eq!(bent.over_fraction(k), 0.0, "{block:?} level {k}");
+            }
+        }
+    }
+    // Of the blocks of 2x2 patches, the first holds four full-size ones;
+    // the one beside it two of the narrower last column.
+    let block = |col| Block {
+        level: 1,
+        col,
+        row: 0,
+    };
+    assert!(curved.has(block(0)));
+    assert!(!curved.has(block(1)));
 }

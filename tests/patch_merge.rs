@@ -9,7 +9,7 @@ use vkterrain::lod::hierarchy::Hierarchy;
 use vkterrain::lod::patch_merge::{
     node_across, node_error_factors, node_errors, NodeAcross, PatchMerge, MAX_MERGE_LEVEL,
 };
-use vkterrain::lod::plan::{plan, FramePlan, Landing, PlanInputs};
+use vkterrain::lod::plan::{plan, FramePlan, PlanInputs, SightReading};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::lod::{patch_error_factors, Across};
 use vkterrain::terrain::camera::Frustum;
@@ -42,7 +42,7 @@ fn planned(terrain: &Terrain, eye: Vec3, pixels: f32) -> FramePlan {
             sight: None,
             merge: true,
             cull: false,
-            landing: Landing::Mean,
+            reading: SightReading::Tessellated,
         },
     )
 }

@@ -24,8 +24,8 @@
 //! let a share of its terrain's pixels exceed tau (`EXCEED_SHARE`): each
 //! block's pixels over tau at each coarser level are read off the view
 //! model from the direction the block is seen (its rays falling to its
-//! mean height, or for the geomip path to its bottom: `Landing`), and the
-//! share is spent greedily on the blocks and levels
+//! mean height, or for the geomip path to its bottom: `SightReading`),
+//! and the share is spent greedily on the blocks and levels
 //! that save the most triangles for it (the same exchange as the view
 //! measure's, on the model's figures). A patch much deeper than it is
 //! near (one near the eye) is read in parts, each from its own nearest
@@ -84,22 +84,26 @@ pub struct PlanInputs<'a> {
     pub merge: bool,
     /// Leave out what lies outside the frustum.
     pub cull: bool,
-    /// Where the view model takes a block's rays to land.
-    pub landing: Landing,
+    /// How the view model is read.
+    pub reading: SightReading,
 }
 
-/// The height the view model takes a block's rays to fall to.
+/// How the path a plan is for draws a level, which decides how the view
+/// model is read.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Landing {
-    /// Its mean height: where the rays that show it land, on average.
-    Mean,
-    /// The bottom of its box: the steepest fall any of its rays can have,
-    /// so the largest gaps. For a path whose drawn surface has errors the
-    /// model does not see (the geomip path's stitched edges and glides
-    /// between levels), this leaves them the margin the steeper fall
-    /// gives: on the default scene's overview at 2 px, rays landing at
-    /// the mean put the geomip path's p99 at 2.05 px, at the bottom 1.97.
-    Bottom,
+pub enum SightReading {
+    /// The tess path: the model's layout. A block's rays fall to its mean
+    /// height, where the rays that show it land on average, and the
+    /// narrower far patches read their own entries.
+    Tessellated,
+    /// The geomip path, whose template lays a narrower patch's levels out
+    /// differently (clamped to its far sides): those patches keep the
+    /// bound. Its stitched edges and glides between levels are errors the
+    /// model does not see, and a block's rays fall to the bottom of its box,
+    /// the steepest fall any of them can have and so the largest gaps,
+    /// which leaves them a margin: on the default scene's overview at 2 px,
+    /// rays landing at the mean put its p99 at 2.05 px, at the bottom 1.97.
+    Template,
 }
 
 /// A square of patches the frame draws one by one, all decided at once: a
@@ -327,9 +331,11 @@ pub fn plan(
             col: id.col as usize,
             row: id.row as usize,
         };
-        let modelled = inputs
-            .sight
-            .filter(|s| id.level <= BLOCK_LEVELS && s.has(block));
+        let modelled = inputs.sight.filter(|s| {
+            id.level <= BLOCK_LEVELS
+                && s.has(block)
+                && (node.whole || inputs.reading == SightReading::Tessellated)
+        });
         // A block small and shallow on screen is decided at once. Without
         // the model, only whole blocks whose bound needs no patch at full
         // resolution: the tessellator still sets each edge's factor itself,
@@ -470,9 +476,9 @@ fn plan_block(
         row: id.row as usize,
     };
     let before = parts.len();
-    let landing = match inputs.landing {
-        Landing::Mean => sight.mean_height(block),
-        Landing::Bottom => None,
+    let landing = match inputs.reading {
+        SightReading::Tessellated => sight.mean_height(block),
+        SightReading::Template => None,
     };
     model_parts(bounds, view, inputs.cull, landing, parts);
     let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;

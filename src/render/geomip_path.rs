@@ -18,7 +18,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip;
 use crate::lod::hierarchy::{Hierarchy, NodeId};
-use crate::lod::plan::{patches_in_view, plan, Landing, PlanInputs};
+use crate::lod::plan::{patches_in_view, plan, PlanInputs, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
@@ -174,7 +174,7 @@ impl GeomipGeometry {
                         sight,
                         merge: false,
                         cull: settings.cull,
-                        landing: Landing::Bottom,
+                        reading: SightReading::Template,
                     },
                 );
                 // Geomip level l has n / 2^l segments a side: the error

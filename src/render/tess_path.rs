@@ -26,7 +26,7 @@ use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::DrawOrder;
 use crate::lod::patch_merge::MergedNode;
-use crate::lod::plan::{plan, FramePlan, Landing, PlanInputs, PlannedBlock};
+use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::{RenderError, Result};
@@ -118,7 +118,7 @@ impl TessGeometry {
                 sight,
                 merge: settings.merge_patches,
                 cull: settings.cull,
-                landing: Landing::Mean,
+                reading: SightReading::Tessellated,
             },
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -23,24 +23,23 @@
 //!
 //! **The table.** For each direction of a lattice (`AZIMUTHS` horizontal
 //! directions times the `SLOPES` a ray may fall) and each level of a
-//! full-size patch (one whose levels' vertices are samples), the table
-//! keeps the errors that `FRACTIONS` of the patch's pixels exceed, and the
-//! patch's pixel area per `K^2 / d^2`, and its mean height, to which the
-//! rays that show it fall. A frame reads the directions its view of the
-//! patch spans and the fraction of pixels over its tolerance at each level
-//! (`over_fraction`). The far remainders (narrower patches)
-//! have no entry: their levels' vertices fall between samples, and the
-//! level choice keeps their error bound.
+//! patch, laid over it as the tessellator cuts it (on the far remainders,
+//! patches narrower than the rest, its vertices fall between samples), the
+//! table keeps the errors that `FRACTIONS` of the patch's pixels exceed,
+//! and the patch's pixel area per `K^2 / d^2`, and its mean height, to
+//! which the rays that show it fall. A frame reads the directions its view
+//! of the patch spans and the fraction of pixels over its tolerance at
+//! each level (`over_fraction`).
 //!
 //! Hidden ground and silhouettes are not modelled: a patch behind a ridge
 //! counts its pixels as if seen, and a moved silhouette's pixels are not
 //! counted at all.
 //!
 //! **Blocks.** The level choice may decide a whole aligned block of 2^m x
-//! 2^m patches at once (m up to `BLOCK_LEVELS`), every patch at the same
-//! level: a block's entry is its patches' pixel areas added up and, at
-//! each share, the largest of their errors, so the share of the block's
-//! pixels over an error is never more than the entry says.
+//! 2^m full-size patches at once (m up to `BLOCK_LEVELS`), every patch at
+//! the same level: a block's entry is its patches' pixel areas added up
+//! and, at each share, the largest of their errors, so the share of the
+//! block's pixels over an error is never more than the entry says.
 //!
 //! Errors are stored as one byte each, on a log scale below one scale for
 //! the whole terrain (`CODES_PER_OCTAVE` to an octave), rounded up: the
@@ -68,7 +67,7 @@ const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
 /// part of its on-disk cache key.
-pub const MODEL_VERSION: u32 = 2;
+pub const MODEL_VERSION: u32 = 3;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -219,15 +218,28 @@ impl SightTable {
         let steepest = SLOPES.iter().fold(0.0f32, |m, t| m.max(t.abs()));
         let (lo, hi) = map.min_max();
         let scale = (diagonal * steepest).max(hi - lo);
-        let patches = (0..grid.patch_count())
+        let patches: Vec<Option<Entry>> = (0..grid.patch_count())
             .into_par_iter()
+            .map(|p| {
+                Some(patch_entry(
+                    map,
+                    grid.sample_rect(grid.patch_id(p)),
+                    spacing,
+                    scale,
+                ))
+            })
+            .collect();
+        // Blocks are of full-size patches only: a block's patches all take
+        // one level, which a narrower patch lays out differently.
+        let whole: Vec<Option<Entry>> = (0..grid.patch_count())
             .map(|p| {
                 let rect = grid.sample_rect(grid.patch_id(p));
                 (rect.cells_x() == n && rect.cells_z() == n)
-                    .then(|| patch_entry(map, rect, spacing, scale))
+                    .then(|| patches[p].clone())
+                    .flatten()
             })
             .collect();
-        let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), patches)];
+        let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), whole)];
         let mut rows = grid.patch_rows();
         for _ in 0..BLOCK_LEVELS {
             let (below_cols, below) = built.last().expect("level 0");
@@ -249,6 +261,7 @@ impl SightTable {
                 .collect();
             built.push((cols, entries));
         }
+        built[0].1 = patches;
         let levels = built
             .iter()
             .map(|(cols, entries)| EntryLevel::pack(*cols, entries))
@@ -346,8 +359,8 @@ impl SightTable {
         level.present[b].then_some((level, b))
     }
 
-    /// Whether `block` has an entry (it is whole and its patches
-    /// full-size).
+    /// Whether `block` has an entry: every patch has one, and every block
+    /// whole and of full-size patches.
     pub fn has(&self, block: Block) -> bool {
         self.entry(block).is_some()
     }
@@ -492,16 +505,22 @@ fn block_entry(children: &[&Entry]) -> Entry {
     entry
 }
 
-/// One full-size patch's entry, its errors coded below `scale`.
+/// One patch's entry, its errors coded below `scale`. Each level is laid
+/// over the patch as the tessellator cuts it: 2^k equal segments a side,
+/// whatever its cells, so on a narrower patch (a far remainder) its
+/// vertices fall between samples, at the reference's height there
+/// (`Heightmap::interpolate`, as the evaluation shader reads it). Levels
+/// from the first whose segments reach the patch's smaller side are full
+/// resolution, with no error.
 fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f32) -> Entry {
-    let n = rect.cells_x();
-    let stride = n + 1;
+    let (nx, nz) = (rect.cells_x(), rect.cells_z());
+    let stride = nx + 1;
     let (w, d) = (map.width(), map.depth());
     let h = |r: usize, c: usize| f64::from(map.get(r, c));
     // The reference's gradient (x, z) at each sample, by central
     // differences, one-sided at the map's edges; local z falls as rows rise.
-    let mut reference = Vec::with_capacity(stride * stride);
-    let mut heights = Vec::with_capacity(stride * stride);
+    let mut reference = Vec::with_capacity(stride * (nz + 1));
+    let mut heights = Vec::with_capacity(stride * (nz + 1));
     for r in rect.row0..=rect.row1 {
         for c in rect.col0..=rect.col1 {
             let (c0, c1) = (c.saturating_sub(1), (c + 1).min(w - 1));
@@ -513,6 +532,15 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
             heights.push(h(r, c));
         }
     }
+    // The reference at patch-local (row, column): a sample where both are
+    // whole, else as the evaluation shader reads between samples.
+    let at = |r: f64, c: f64| {
+        if r.fract() == 0.0 && c.fract() == 0.0 {
+            heights[r as usize * stride + c as usize]
+        } else {
+            map.interpolate(rect.col0 as f64 + c, rect.row0 as f64 + r)
+        }
+    };
     let cos = SLOPES.map(|t| 1.0 / (1.0 + t * t).sqrt());
     let point_area = (dx * dz) as f32;
     let mut area = [0.0f32; DIRECTIONS];
@@ -528,41 +556,39 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     }
     // Errors per level and direction, at each fraction.
     let mut errors = vec![0.0f32; LEVELS * DIRECTIONS * FRACTIONS];
-    let mut delta = vec![0.0f32; stride * stride];
-    let mut drawn = vec![[0.0f32; 2]; stride * stride];
-    let mut along: Vec<(f32, f32, f32)> = Vec::with_capacity(stride * stride);
+    let mut delta = vec![0.0f32; heights.len()];
+    let mut drawn = vec![[0.0f32; 2]; heights.len()];
+    let mut along: Vec<(f32, f32, f32)> = Vec::with_capacity(heights.len());
     for k in 0..LEVELS {
         let segments = 1usize << k;
-        if segments >= n {
+        if segments >= nx.min(nz) {
             break;
         }
-        let q = n / segments;
-        let (quad_x, quad_z) = (q as f64 * dx, q as f64 * dz);
+        // A quad's sides in samples, and in the heightmap's units.
+        let (qx, qz) = (nx as f64 / segments as f64, nz as f64 / segments as f64);
+        let (quad_x, quad_z) = (qx * dx, qz * dz);
         let diagonal = (quad_x * quad_x + quad_z * quad_z).sqrt() as f32;
-        for i in 0..=n {
-            let (qi, fi) = if i == n {
-                (segments - 1, q)
-            } else {
-                (i / q, i % q)
-            };
-            for j in 0..=n {
-                let (qj, fj) = if j == n {
-                    (segments - 1, q)
-                } else {
-                    (j / q, j % q)
-                };
-                let (r0, c0) = (qi * q, qj * q);
+        // The quad along one side holding sample `i` of `cells`, and where
+        // in it the sample lies (0 to 1).
+        let place = |i: usize, cells: usize, q: f64| {
+            let quad = ((i * segments) / cells).min(segments - 1);
+            (quad, (i as f64 - quad as f64 * q) / q)
+        };
+        for i in 0..=nz {
+            let (qi, v) = place(i, nz, qz);
+            for j in 0..=nx {
+                let (qj, u) = place(j, nx, qx);
+                let (r0, c0) = (qi as f64 * qz, qj as f64 * qx);
                 // A upper-left, B upper-right, C lower-left, D lower-right.
                 let corners = [
-                    heights[r0 * stride + c0],
-                    heights[r0 * stride + c0 + q],
-                    heights[(r0 + q) * stride + c0],
-                    heights[(r0 + q) * stride + c0 + q],
+                    at(r0, c0),
+                    at(r0, c0 + qx),
+                    at(r0 + qz, c0),
+                    at(r0 + qz, c0 + qx),
                 ];
-                let (u, v) = (fj as f64 / q as f64, fi as f64 / q as f64);
                 let here = heights[i * stride + j];
-                let bc = split_bc(corners, u, v, fi + fj <= q);
-                let ad = split_ad(corners, u, v, fj >= fi);
+                let bc = split_bc(corners, u, v, u + v <= 1.0);
+                let ad = split_ad(corners, u, v, u >= v);
                 delta[i * stride + j] = (here - bc).abs().max((here - ad).abs()) as f32;
                 let [a, b, c, dd] = corners;
                 drawn[i * stride + j] = [
