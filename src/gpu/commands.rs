@@ -8,7 +8,7 @@ use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
 use super::memory::{subresource_range, Buffer, Transition};
 use super::owned::{Fence, Owned, Pipeline, PipelineLayout, Semaphore};
-use super::target::TargetViews;
+use super::views::TargetViews;
 
 /// Command buffers for work in flight, one per slot, each with the fence
 /// its last submission signals. Recording into a slot first waits for that

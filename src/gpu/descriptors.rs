@@ -6,7 +6,7 @@ use super::device::Device;
 use super::error::{Result, VkError, VkResultExt};
 use super::memory::{Buffer, Image};
 use super::owned::{DescriptorSetLayout, Owned, Sampler};
-use super::target::TargetViews;
+use super::views::TargetViews;
 
 /// One descriptor set of a `DescriptorSets`; valid while they are.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -269,7 +269,7 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
         let (type_name, rank) = device_type_name(props.device_type);
         let timestamps = family.timestamp_valid_bits > 0 && props.limits.timestamp_period > 0.0;
         let depth_features = instance
-            .get_physical_device_format_properties(physical, super::target::DEPTH_FORMAT)
+            .get_physical_device_format_properties(physical, super::views::DEPTH_FORMAT)
             .optimal_tiling_features;
         let sampled_depth = if depth_features.contains(vk::FormatFeatureFlags::SAMPLED_IMAGE) {
             props.limits.sampled_image_depth_sample_counts

@@ -17,6 +17,8 @@ pub mod queries;
 pub mod shader;
 pub mod swapchain;
 pub mod target;
+pub mod transfer;
+pub mod views;
 
 use std::ffi::{c_char, CStr};
 

@@ -37,8 +37,9 @@ use super::stream_budget::{
 use super::view::FrameView;
 use crate::gpu::commands::Recorder;
 use crate::gpu::descriptors::DescriptorSet;
-use crate::gpu::memory::{Buffer, Image, LayerCopy};
+use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::Sampler;
+use crate::gpu::transfer::LayerCopy;
 use crate::gpu::{Device, VkError};
 use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{BINDING_PAGES, BINDING_PAGE_TABLE, PAGE_LEVEL_SHIFT};

@@ -32,11 +32,13 @@
 //! fov = 55.0
 //! ```
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use glam::{DVec2, DVec3};
 use serde::Deserialize;
 use toml::Spanned;
+
+use super::check::{Checker, SceneFileError};
 
 use super::look::{parse_fog, parse_lighting, parse_material, FogToml, LightingToml, MaterialToml};
 use super::{HeightmapSource, Scene};
@@ -44,28 +46,6 @@ use crate::terrain::camera::Camera;
 use crate::terrain::heightmap::DEFAULT_MAX_SAMPLES;
 use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{DistanceLod, HeightmapFormat, LoadOptions, DEFAULT_CELLS_PER_PATCH};
-
-/// Why a scene file was refused.
-#[derive(Debug, thiserror::Error)]
-pub enum SceneFileError {
-    #[error("{path}: cannot read the scene: {source}")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// Syntax errors, unknown keys and wrong types; toml's message carries
-    /// the line, column and key.
-    #[error("{path}: {message}")]
-    Parse { path: PathBuf, message: String },
-    #[error("{path}:{line}: {key}: {message}")]
-    Invalid {
-        path: PathBuf,
-        line: usize,
-        key: String,
-        message: String,
-    },
-}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -127,45 +107,6 @@ struct CameraToml {
     eye: Spanned<[f64; 3]>,
     target: Spanned<[f64; 3]>,
     fov: Option<Spanned<f32>>,
-}
-
-/// 1-based line of a byte offset.
-pub(super) fn line_of(text: &str, offset: usize) -> usize {
-    text[..offset.min(text.len())].matches('\n').count() + 1
-}
-
-pub(super) struct Checker<'a> {
-    pub(super) path: &'a Path,
-    pub(super) text: &'a str,
-}
-
-impl Checker<'_> {
-    pub(super) fn invalid<T>(
-        &self,
-        key: &str,
-        span: std::ops::Range<usize>,
-        message: String,
-    ) -> Result<T, SceneFileError> {
-        Err(SceneFileError::Invalid {
-            path: self.path.to_path_buf(),
-            line: line_of(self.text, span.start),
-            key: key.to_string(),
-            message,
-        })
-    }
-
-    fn finite<const N: usize>(
-        &self,
-        key: &'static str,
-        v: &Spanned<[f64; N]>,
-    ) -> Result<[f64; N], SceneFileError> {
-        let value = *v.get_ref();
-        if value.iter().all(|x| x.is_finite()) {
-            Ok(value)
-        } else {
-            self.invalid(key, v.span(), format!("{value:?} must be finite"))
-        }
-    }
 }
 
 impl Scene {

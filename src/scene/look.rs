@@ -43,7 +43,7 @@ use glam::{DVec3, Vec2, Vec3};
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::file::Checker;
+use super::check::Checker;
 use super::SceneFileError;
 use crate::terrain::shading::{Cliff, HeightBand, MAX_LAYERS};
 
@@ -421,7 +421,7 @@ fn asset(check: &Checker, scene_dir: &Path, key: String, v: &Spanned<String>) ->
             scene_dir.join(p)
         }),
         scene: check.path.to_path_buf(),
-        line: super::file::line_of(check.text, v.span().start),
+        line: super::check::line_of(check.text, v.span().start),
         key,
     }
 }

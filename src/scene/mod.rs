@@ -3,6 +3,7 @@
 //! The default scene, `assets/scenes/default.toml` and its heightmap, is
 //! built into the binary, so the run command works from any directory.
 
+mod check;
 mod file;
 pub mod look;
 
@@ -10,7 +11,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{DVec2, DVec3};
 
-pub use file::SceneFileError;
+pub use check::SceneFileError;
 pub use look::{
     Asset, AssetSource, DirectionalLight, Fog, LayerSpec, Lighting, MaterialSpec, WeightSource,
     MAX_LIGHTS,
