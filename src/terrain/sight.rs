@@ -231,17 +231,16 @@ impl SightTable {
             .collect();
         // Blocks are of full-size patches only: a block's patches all take
         // one level, which a narrower patch lays out differently.
-        let whole: Vec<Option<Entry>> = (0..grid.patch_count())
+        let full_size: Vec<bool> = (0..grid.patch_count())
             .map(|p| {
                 let rect = grid.sample_rect(grid.patch_id(p));
-                (rect.cells_x() == n && rect.cells_z() == n)
-                    .then(|| patches[p].clone())
-                    .flatten()
+                rect.cells_x() == n && rect.cells_z() == n
             })
             .collect();
-        let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), whole)];
+        let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), patches)];
         let mut rows = grid.patch_rows();
         for _ in 0..BLOCK_LEVELS {
+            let of_patches = built.len() == 1;
             let (below_cols, below) = built.last().expect("level 0");
             let (cols, below_rows) = (below_cols.div_ceil(2), rows);
             rows = rows.div_ceil(2);
@@ -250,8 +249,9 @@ impl SightTable {
                     let (c, r) = (b % cols, b / cols);
                     let child = |dc: usize, dr: usize| {
                         let (cc, cr) = (2 * c + dc, 2 * r + dr);
-                        (cc < *below_cols && cr < below_rows)
-                            .then(|| below[cr * below_cols + cc].as_ref())
+                        let i = cr * below_cols + cc;
+                        (cc < *below_cols && cr < below_rows && (!of_patches || full_size[i]))
+                            .then(|| below[i].as_ref())
                             .flatten()
                     };
                     let children = [child(0, 0), child(1, 0), child(0, 1), child(1, 1)];
@@ -261,7 +261,6 @@ impl SightTable {
                 .collect();
             built.push((cols, entries));
         }
-        built[0].1 = patches;
         let levels = built
             .iter()
             .map(|(cols, entries)| EntryLevel::pack(*cols, entries))
