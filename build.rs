@@ -39,6 +39,8 @@ fn main() {
     println!("cargo:rerun-if-changed=src/shader_variants.rs");
     println!("cargo:rerun-if-changed={}", glsl_dir.display());
 
+    // Every `BINDING_*` constant, which each GLSL binding must name.
+    let bindings = binding_constants();
     let mut files: Vec<PathBuf> = std::fs::read_dir(&glsl_dir)
         .unwrap_or_else(|e| fail(&format!("cannot list {}: {e}", glsl_dir.display())))
         .map(|entry| entry.expect("readable glsl/ entry").path())
@@ -46,7 +48,7 @@ fn main() {
     files.sort();
     for file in &files {
         println!("cargo:rerun-if-changed={}", file.display());
-        check_bindings_named(file);
+        check_bindings_named(file, &bindings);
     }
 
     let compiler = shaderc::Compiler::new().unwrap_or_else(|e| fail(&format!("shaderc: {e}")));
@@ -125,7 +127,7 @@ fn main() {
         let module = reflect::Module::parse(artifact.as_binary())
             .unwrap_or_else(|e| fail(&format!("{key}: reading its SPIR-V back: {e}")));
         for (set, binding) in module.bindings() {
-            if set != 0 || !binding_constants().iter().any(|&(_, b)| b == binding) {
+            if set != 0 || !bindings.iter().any(|&(_, b)| b == binding) {
                 fail(&format!(
                     "{key}: declares set {set}, binding {binding}, which no BINDING_* constant in \
                      src/shader_constants.rs names in set 0"
@@ -179,11 +181,10 @@ fn main() {
 /// Fails the build where a GLSL file gives a binding as anything but a
 /// `BINDING_*` constant of `src/shader_constants.rs`, so that each number
 /// is written once, in Rust.
-fn check_bindings_named(file: &std::path::Path) {
+fn check_bindings_named(file: &std::path::Path, names: &[(&str, u32)]) {
     let Ok(source) = std::fs::read_to_string(file) else {
         return;
     };
-    let names = binding_constants();
     for (line, text) in source.lines().enumerate() {
         let mut rest = text;
         while let Some(at) = rest.find("binding") {
