@@ -8,11 +8,9 @@ use std::process::Command;
 
 use common::gpu::{assert_images_match, skip_gpu};
 
-/// Runs `vkterrain demo ARGS` under a fresh Xvfb and returns its stdout,
-/// failing the test unless it exits 0 after `frames` frames with no
-/// validation message.
-fn demo_under_xvfb(args: &[&str], frames: u32) -> String {
-    let out = Command::new("xvfb-run")
+/// Runs `vkterrain demo ARGS` under a fresh Xvfb.
+fn run_under_xvfb(args: &[&str]) -> std::process::Output {
+    Command::new("xvfb-run")
         .args([
             "-a",
             "-s",
@@ -23,7 +21,14 @@ fn demo_under_xvfb(args: &[&str], frames: u32) -> String {
         .args(args)
         .env_remove("WAYLAND_DISPLAY")
         .output()
-        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)");
+        .expect("xvfb-run is installed (apt-get install xvfb; .ci/run does)")
+}
+
+/// Runs `vkterrain demo ARGS` under a fresh Xvfb and returns its stdout,
+/// failing the test unless it exits 0 after `frames` frames with no
+/// validation message.
+fn demo_under_xvfb(args: &[&str], frames: u32) -> String {
+    let out = run_under_xvfb(args);
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
@@ -166,17 +171,20 @@ fn a_window_resized_larger_under_a_budget_plans_its_pool_again() {
     let terrain = terrain.to_str().unwrap();
     // The smallest budget at the storm's largest size, from the refusal
     // of a budget that holds its targets but not the renderer.
-    let probe = Command::new("xvfb-run")
-        .args(["-a", "-s", "-screen 0 1600x1200x24"])
-        .arg(env!("CARGO_BIN_EXE_vkterrain"))
-        .args(["demo", "--flat", "--heightmap", terrain])
-        .args([
-            "--width", "640", "--height", "400", "--frames", "1", "--exit",
-        ])
-        .args(["--gpu-memory-budget", "9"])
-        .env_remove("WAYLAND_DISPLAY")
-        .output()
-        .unwrap();
+    let probe = run_under_xvfb(&[
+        "--flat",
+        "--heightmap",
+        terrain,
+        "--width",
+        "640",
+        "--height",
+        "400",
+        "--frames",
+        "1",
+        "--exit",
+        "--gpu-memory-budget",
+        "9",
+    ]);
     let refusal = String::from_utf8_lossy(&probe.stderr).into_owned();
     assert!(!probe.status.success(), "9 MiB was not refused");
     let smallest: u64 = refusal
