@@ -194,17 +194,25 @@ fn levels_by_projected_error() {
     );
     assert!(strict.levels[7] > 0, "the far corner coarser");
     assert!(strict.morph.iter().all(|m| (0.0..=1.0).contains(m)));
-    // A patch that is not drawn is refined only as far as its drawn
-    // neighbours need, and they are never the finer for it.
+    // A patch that is not drawn takes the finest level of its drawn
+    // neighbours: their sides with it can be on screen, and none of them
+    // is stitched to it.
     let mut drawn = all.clone();
     drawn[7 * 8] = false;
     let culled = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &drawn);
-    assert!(culled.levels[7 * 8] > 0);
-    assert!(strict
-        .levels
-        .iter()
-        .zip(&culled.levels)
-        .all(|(s, c)| s <= c));
+    let grid = terrain.grid();
+    let beside: Vec<usize> = grid.neighbours(7 * 8).into_iter().flatten().collect();
+    let finest = beside.iter().map(|&q| culled.levels[q]).min().unwrap();
+    assert_eq!(culled.levels[7 * 8], finest);
+    for q in beside {
+        let (coarser, _) = neighbour_masks(&culled.levels, grid, grid.patch_id(q));
+        let side = [LEFT, TOP, RIGHT, BOTTOM][grid
+            .neighbours(q)
+            .iter()
+            .position(|&n| n == Some(7 * 8))
+            .unwrap()];
+        assert_eq!(coarser & side, 0, "patch {q} stitched to the culled one");
+    }
 }
 
 #[test]
@@ -238,4 +246,42 @@ fn a_morph_limit_holds_for_the_sides_a_same_level_neighbour_shares() {
     };
     limit_morph(&mut chosen, &[None; 4], &[true, false, true, true], &grid);
     assert_eq!(chosen.morph, [0.9, 0.0, 0.9, 0.9]);
+}
+
+/// A culled patch beside a drawn one takes the drawn one's level, so the
+/// drawn patch stitches none of its sides to it; patches beside nothing
+/// drawn keep the coarsest level until balancing lowers them.
+#[test]
+fn culled_patches_beside_drawn_ones_match_them() {
+    // 4x4 patches of 16 cells: levels 0 (full) to 4 (one quad).
+    let grid = vkterrain::terrain::PatchGrid::for_size(65, 65, 16);
+    let at = |row, col| grid.patch_index(vkterrain::terrain::PatchId { row, col });
+    let mut levels = vec![4u8; grid.patch_count()];
+    let mut drawn = vec![false; grid.patch_count()];
+    // Drawn: (1, 1) at full resolution and (1, 2) at level 1.
+    levels[at(1, 1)] = 0;
+    levels[at(1, 2)] = 1;
+    drawn[at(1, 1)] = true;
+    drawn[at(1, 2)] = true;
+    let mut lowered = refine_beside_drawn(&mut levels, &grid, &drawn);
+    lowered.sort_unstable();
+    lowered.dedup();
+    let mut expected: Vec<u32> = [(0, 1), (2, 1), (1, 0), (0, 2), (2, 2), (1, 3)]
+        .map(|(r, c)| at(r, c) as u32)
+        .to_vec();
+    expected.sort_unstable();
+    assert_eq!(lowered, expected);
+    for (r, c, l) in [(0, 1, 0), (2, 1, 0), (1, 0, 0), (0, 2, 1), (2, 2, 1), (1, 3, 1)] {
+        assert_eq!(levels[at(r, c)], l, "patch ({r}, {c})");
+    }
+    assert_eq!(levels[at(3, 3)], 4, "a patch beside nothing drawn");
+    balance(&mut levels, &grid);
+    // (1, 2) is one level coarser than (1, 1): that side is the one
+    // stitched, by the drawn pair's own choice; no side of either is
+    // stitched to a culled patch.
+    assert_eq!(
+        neighbour_masks(&levels, &grid, grid.patch_id(at(1, 1))).0,
+        RIGHT
+    );
+    assert_eq!(neighbour_masks(&levels, &grid, grid.patch_id(at(1, 2))).0, 0);
 }

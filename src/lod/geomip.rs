@@ -258,6 +258,26 @@ pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[u32]) {
     }
 }
 
+/// Lowers every patch that is not drawn but shares a side with one that
+/// is (`drawn`, one flag per patch) to the finest level of its drawn
+/// neighbours, and returns the patches lowered. The shared side can be on
+/// screen though the patch beyond it is culled: left coarser, that
+/// neighbour would have the drawn patch stitch the side to a level no
+/// choice made for it. Only ever lowers, so balancing afterwards keeps it;
+/// a patch lowered twice is listed twice.
+pub fn refine_beside_drawn(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool]) -> Vec<u32> {
+    let mut lowered = Vec::new();
+    for p in (0..grid.patch_count()).filter(|&p| drawn[p]) {
+        for q in grid.neighbours(p).into_iter().flatten() {
+            if !drawn[q] && levels[q] > levels[p] {
+                levels[q] = levels[p];
+                lowered.push(q as u32);
+            }
+        }
+    }
+    lowered
+}
+
 /// Sides of `id` whose neighbour is coarser (`.0`) and finer (`.1`), for
 /// balanced levels.
 pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8) {
@@ -278,6 +298,7 @@ pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8)
 
 /// Levels of every patch (culled ones too: their neighbours need them) and
 /// each patch's own morph factor towards the next coarser level.
+#[derive(Clone, Debug, PartialEq)]
 pub struct PatchLevels {
     pub levels: Vec<u8>,
     pub morph: Vec<f32>,
@@ -352,8 +373,8 @@ pub fn select_levels_by_error(
         .enumerate()
         .map(|(p, &d)| {
             if !drawn[p] {
-                // Not drawn: its sides are out of view, so it takes the
-                // coarsest level and constrains no neighbour.
+                // Not drawn: the coarsest level, unless a drawn neighbour
+                // needs it finer (`refine_beside_drawn`).
                 return (count - 1) as u8;
             }
             (0..count)
@@ -362,6 +383,7 @@ pub fn select_levels_by_error(
                 .unwrap_or(0) as u8
         })
         .collect();
+    refine_beside_drawn(&mut levels, grid, drawn);
     balance(&mut levels, grid);
     let morph = distances
         .iter()

@@ -22,6 +22,7 @@ use crate::lod::plan::{patches_in_view, plan, PlanInputs, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
+use crate::terrain::grid::PatchGrid;
 use crate::terrain::{ErrorTable, Terrain};
 
 pub(super) struct GeomipGeometry {
@@ -136,10 +137,13 @@ impl GeomipGeometry {
             _ => None,
         };
         let lod_view = view.lod_view(tau.and_then(|t| Tau::new(t).ok()).unwrap_or_default());
-        if let Some(chosen) = self.given.take() {
+        if let Some(given) = &self.given {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+            let mut chosen = given.clone();
+            let lowered =
+                geomip::refine_beside_drawn(&mut chosen.levels, grid, &drawn_flags(grid, &visible));
+            geomip::balance_from(&mut chosen.levels, grid, &lowered);
             self.set_draws(terrain, settings, &visible, &chosen, draws);
-            self.given = Some(chosen);
             return GeomipChoice::Drawn(None);
         }
         if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
@@ -216,10 +220,13 @@ impl GeomipGeometry {
                 visible.sort_unstable();
             }
         }
-        // Only a patch at least two levels finer than the coarsest can
+        // Culled patches beside drawn ones are refined to match them; then
+        // only a patch at least two levels finer than the coarsest can
         // lower a neighbour.
+        let beside = geomip::refine_beside_drawn(&mut levels, grid, &drawn_flags(grid, &visible));
         let lowered: Vec<u32> = visible
             .iter()
+            .chain(&beside)
             .copied()
             .filter(|&p| usize::from(levels[p as usize]) + 2 < count)
             .collect();
@@ -432,4 +439,13 @@ fn patch_distance(terrain: &Terrain, p: usize, eye_local: glam::Vec3) -> f32 {
     ((eye_local - centre).abs() - extents)
         .max(glam::Vec3::ZERO)
         .length()
+}
+
+/// One flag per patch of `grid`: whether it is among `visible`.
+fn drawn_flags(grid: &PatchGrid, visible: &[u32]) -> Vec<bool> {
+    let mut drawn = vec![false; grid.patch_count()];
+    for &p in visible {
+        drawn[p as usize] = true;
+    }
+    drawn
 }
