@@ -15,7 +15,7 @@ use vkterrain::lod::view::Tau;
 use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
-use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, TerrainInfo};
 
 const SIZE: usize = 4097;
 
@@ -53,7 +53,7 @@ fn bench(c: &mut Criterion) {
     let map = heightmap();
     let bytes = (map.heights().len() * 4) as u64;
     let info = TerrainInfo::new(map, DVec2::new(1.0, 1.0), 32, DVec2::ZERO).unwrap();
-    let grid = PatchGrid::new(&info);
+    let grid = info.patch_grid();
 
     let mut group = c.benchmark_group("4097x4097");
     group.sample_size(10);

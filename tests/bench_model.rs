@@ -12,6 +12,7 @@ use vkterrain::bench::report::{check_targets, csv, markdown, merge, Results};
 use vkterrain::bench::run::{
     configs, Config, Row, RowLod, RowPath, OCCLUSION_TAU, QUICK_TAUS, TAUS, VIEW_MEASURE_TAU,
 };
+use vkterrain::render::FrameFigures;
 use vkterrain::terrain::{DistanceLod, TerrainInfo};
 
 fn terrains() -> Vec<(&'static str, TerrainInfo)> {
@@ -271,14 +272,17 @@ fn row(
         lod: lod.map(|l| serde_json::from_str(&format!("{l:?}")).unwrap()),
         tau,
         config: format!("{path} {lod:?} {tau:?}, {tris}"),
-        gpu_ms: Some(gpu),
-        cpu_ms: 0.1,
-        // The error rows' level choice takes a little longer the finer tau.
-        lod_ms: tau.map(|t| 0.05 / f64::from(t)),
+        figures: FrameFigures {
+            gpu_ms: Some(gpu),
+            cpu_ms: 0.1,
+            // The error rows' level choice takes a little longer the finer
+            // tau.
+            lod_ms: tau.map(|t| 0.05 / f64::from(t)),
+            triangles: Some(tris),
+            tes_invocations: Some(tris / 2),
+        },
         lod_ms_max: tau.map(|t| 0.2 / f64::from(t)),
         frame_ms: Some(gpu + 0.1),
-        triangles: Some(tris),
-        tes_invocations: Some(tris / 2),
         // Finer rows shade more of each pixel's hidden ground.
         fragment_invocations: Some(2048 + tris / 100),
         covered_pixels: Some(1024),

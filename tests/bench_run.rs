@@ -73,7 +73,7 @@ fn a_quick_run_measures_every_configuration() {
             (brute.max_px, brute.p99_px, brute.mismatched_pixels),
             (0.0, 0.0, 0)
         );
-        let brute_tris = brute.triangles.expect("lavapipe counts primitives");
+        let brute_tris = brute.figures.triangles.expect("lavapipe counts primitives");
         for r in rows.iter().filter(|r| r.camera == camera) {
             assert!(
                 r.error_pixels > 500,
@@ -81,8 +81,8 @@ fn a_quick_run_measures_every_configuration() {
                 r.config,
                 r.error_pixels
             );
-            assert!(r.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
-            assert!(r.triangles.is_some_and(|t| t > 0), "{}", r.config);
+            assert!(r.figures.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+            assert!(r.figures.triangles.is_some_and(|t| t > 0), "{}", r.config);
             assert!(r.gpu_memory_bytes > 96 * 64 * 8, "{}", r.config);
             assert!(
                 r.p99_px <= r.max_px && r.mean_px <= r.max_px,
@@ -92,7 +92,7 @@ fn a_quick_run_measures_every_configuration() {
             assert_eq!(r.frames, if camera == "grazing" { 1 } else { 3 });
             // Only the tess path tessellates; its error LOD may draw every
             // patch at full resolution instead.
-            let tessellates = r.tes_invocations.unwrap() > 0;
+            let tessellates = r.figures.tes_invocations.unwrap() > 0;
             if r.path != RowPath::Tess || r.lod == Some(RowLod::Distance) {
                 assert_eq!(tessellates, r.path == RowPath::Tess, "{}", r.config);
             }
@@ -116,12 +116,17 @@ fn a_quick_run_measures_every_configuration() {
             }
             // Every row but brute's chooses levels and times it, in every
             // frame; the frame's time is the CPU's and the GPU's.
-            assert_eq!(r.lod_ms.is_some(), r.path != RowPath::Brute, "{}", r.config);
-            if let (Some(median), Some(max)) = (r.lod_ms, r.lod_ms_max) {
+            assert_eq!(
+                r.figures.lod_ms.is_some(),
+                r.path != RowPath::Brute,
+                "{}",
+                r.config
+            );
+            if let (Some(median), Some(max)) = (r.figures.lod_ms, r.lod_ms_max) {
                 assert!(median <= max && median > 0.0, "{}", r.config);
             }
             let frame = r.frame_ms.expect("lavapipe has timestamps");
-            assert!(frame >= r.gpu_ms.unwrap(), "{}", r.config);
+            assert!(frame >= r.figures.gpu_ms.unwrap(), "{}", r.config);
         }
         // Looser tolerances draw no more. The oracle picks each patch's
         // level on its own, so every step holds. The error modes share the
@@ -136,7 +141,7 @@ fn a_quick_run_measures_every_configuration() {
         ] {
             let tris: Vec<u64> = rows_of(&rows, camera, path, lod)
                 .iter()
-                .map(|r| r.triangles.unwrap())
+                .map(|r| r.figures.triangles.unwrap())
                 .collect();
             assert_eq!(tris.len(), 3);
             let monotone = if path == RowPath::Oracle {
@@ -153,7 +158,7 @@ fn a_quick_run_measures_every_configuration() {
                 .find(|o| o.tau == r.tau)
                 .expect("an occluded row has its counterpart");
             assert_eq!(r.differing_pixels, Some(0), "{}", r.config);
-            assert!(r.triangles <= off.triangles, "{}", r.config);
+            assert!(r.figures.triangles <= off.figures.triangles, "{}", r.config);
             assert!(r.patches_occluded.is_some(), "{}", r.config);
             assert!(r.culling_gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
             assert_eq!(
@@ -172,7 +177,7 @@ fn a_quick_run_measures_every_configuration() {
             );
         }
         for r in rows_of(&rows, camera, RowPath::Oracle, None) {
-            assert!(r.triangles.unwrap() <= brute_tris, "{}", r.config);
+            assert!(r.figures.triangles.unwrap() <= brute_tris, "{}", r.config);
         }
     }
 }
@@ -355,6 +360,6 @@ fn a_single_frame_run_renders_each_view_once() {
     assert_eq!(rows.len(), 3 * configs.len());
     for r in &rows {
         assert_eq!(r.frames, 1);
-        assert!(r.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+        assert!(r.figures.gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
     }
 }

@@ -122,7 +122,7 @@ fn tables_for(
     cells_per_patch: u32,
 ) -> ((ErrorTable, ErrorTable), PatchGrid, TerrainInfo) {
     let info = TerrainInfo::new(map, DVec2::new(1.0, 1.0), cells_per_patch, DVec2::ZERO).unwrap();
-    let grid = PatchGrid::new(&info);
+    let grid = info.patch_grid();
     (ErrorTable::compute_pair(info.whole(), &grid), grid, info)
 }
 

@@ -271,7 +271,14 @@ fn culled_patches_beside_drawn_ones_match_them() {
         .to_vec();
     expected.sort_unstable();
     assert_eq!(lowered, expected);
-    for (r, c, l) in [(0, 1, 0), (2, 1, 0), (1, 0, 0), (0, 2, 1), (2, 2, 1), (1, 3, 1)] {
+    for (r, c, l) in [
+        (0, 1, 0),
+        (2, 1, 0),
+        (1, 0, 0),
+        (0, 2, 1),
+        (2, 2, 1),
+        (1, 3, 1),
+    ] {
         assert_eq!(levels[at(r, c)], l, "patch ({r}, {c})");
     }
     assert_eq!(levels[at(3, 3)], 4, "a patch beside nothing drawn");
@@ -283,5 +290,8 @@ fn culled_patches_beside_drawn_ones_match_them() {
         neighbour_masks(&levels, &grid, grid.patch_id(at(1, 1))).0,
         RIGHT
     );
-    assert_eq!(neighbour_masks(&levels, &grid, grid.patch_id(at(1, 2))).0, 0);
+    assert_eq!(
+        neighbour_masks(&levels, &grid, grid.patch_id(at(1, 2))).0,
+        0
+    );
 }

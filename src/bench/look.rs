@@ -5,8 +5,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::run::median;
 use crate::gpu::Gpu;
+use crate::render::figures::median;
 use crate::render::{offscreen, RenderSettings, RendererOptions, DEFAULT_SAMPLES};
 use crate::render::{LoadedScene, Loading};
 use crate::scene::Scene;

@@ -108,13 +108,13 @@ pub fn csv(rows: &[Row]) -> String {
             opt(r.lod.map(RowLod::name)),
             opt(r.tau),
             csv_field(&r.config),
-            opt(r.gpu_ms.map(|v| format!("{v:.3}"))),
-            format!("{:.3}", r.cpu_ms),
-            opt(r.lod_ms.map(|v| format!("{v:.4}"))),
+            opt(r.figures.gpu_ms.map(|v| format!("{v:.3}"))),
+            format!("{:.3}", r.figures.cpu_ms),
+            opt(r.figures.lod_ms.map(|v| format!("{v:.4}"))),
             opt(r.lod_ms_max.map(|v| format!("{v:.4}"))),
             opt(r.frame_ms.map(|v| format!("{v:.3}"))),
-            opt(r.triangles),
-            opt(r.tes_invocations),
+            opt(r.figures.triangles),
+            opt(r.figures.tes_invocations),
             opt(r.fragment_invocations),
             opt(r.covered_pixels),
             r.gpu_memory_bytes.to_string(),
@@ -286,12 +286,12 @@ pub fn check_targets(rows: &[&Row]) -> TargetCheck {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
     };
-    let tris = |r: Option<&Row>| r.and_then(|r| r.triangles).map(|t| t as f64);
+    let tris = |r: Option<&Row>| r.and_then(|r| r.figures.triangles).map(|t| t as f64);
     let within: Vec<&Row> = rows.iter().filter(|r| r.p99_px <= 1.0).copied().collect();
     let fewest = within
         .iter()
-        .filter(|r| r.triangles.is_some())
-        .min_by_key(|r| r.triangles)
+        .filter(|r| r.figures.triangles.is_some())
+        .min_by_key(|r| r.figures.triangles)
         .copied();
     let fastest = within
         .iter()
@@ -321,7 +321,7 @@ pub fn check_targets(rows: &[&Row]) -> TargetCheck {
             fastest.and_then(|r| r.frame_ms),
         ),
         tess_vs_brute_triangles: ratio(tris(tess), tris(brute)),
-        fewest_config: fewest.map(|r| format!("{} ({})", r.config, opt(r.triangles))),
+        fewest_config: fewest.map(|r| format!("{} ({})", r.config, opt(r.figures.triangles))),
         tess_vs_fewest: ratio(tris(tess), tris(fewest)),
     }
 }
@@ -597,7 +597,7 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
         let best = group
             .iter()
             .filter(|r| r.p99_px <= 1.0 && !r.occlusion)
-            .filter_map(|r| r.triangles)
+            .filter_map(|r| r.figures.triangles)
             .min();
         for path in [RowPath::Tess, RowPath::Geomip] {
             let find = |occlusion: bool| error_row_at_1px(&group, path, occlusion);
@@ -608,10 +608,10 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
                 (Some(a), Some(b)) if b > 0 => format!("{:.2}x", a as f64 / b as f64),
                 _ => "n/a".into(),
             };
-            let fewer = ratio(off.triangles, on.triangles);
-            let vs_best = ratio(on.triangles, best);
+            let fewer = ratio(off.figures.triangles, on.figures.triangles);
+            let vs_best = ratio(on.figures.triangles, best);
             let ms = |v: Option<f64>| v.map_or("n/a".into(), |v| format!("{v:.1}"));
-            let share = match (on.culling_gpu_ms, on.gpu_ms) {
+            let share = match (on.culling_gpu_ms, on.figures.gpu_ms) {
                 (Some(c), Some(f)) if f > 0.0 => format!("{c:.1} ({:.1} %)", 100.0 * c / f),
                 _ => "n/a".into(),
             };
@@ -619,11 +619,11 @@ fn occlusion_section(w: &mut String, rows: &[Row]) {
                 w,
                 "| {scene} | {device} | {camera} | {} | {} / {} / {} | {fewer} | {vs_best} | {} / {} | {share} | {} | {} | {} |",
                 path.name(),
-                opt(off.triangles),
-                opt(on.triangles),
-                opt(oracle.and_then(|o| o.triangles)),
-                ms(off.gpu_ms),
-                ms(on.gpu_ms),
+                opt(off.figures.triangles),
+                opt(on.figures.triangles),
+                opt(oracle.and_then(|o| o.figures.triangles)),
+                ms(off.figures.gpu_ms),
+                ms(on.figures.gpu_ms),
                 opt(on.patches_occluded),
                 opt(on.patches_drawn_hidden),
                 opt(on.differing_pixels),
@@ -659,12 +659,12 @@ fn results_section(w: &mut String, rows: &[Row]) {
                 w,
                 "| {} | {} | {} | {} | {} | {:.2} | {} | {} | {} | {} | {:.2} | {:.3} | {:.4} | {:.3} % |",
                 r.config,
-                opt(r.triangles),
-                opt(r.tes_invocations),
+                opt(r.figures.triangles),
+                opt(r.figures.tes_invocations),
                 overdraw(r).map_or("n/a".into(), |v| format!("{v:.2}")),
-                r.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
-                r.cpu_ms,
-                match (r.lod_ms, r.lod_ms_max) {
+                r.figures.gpu_ms.map_or("n/a".into(), |v| format!("{v:.2}")),
+                r.figures.cpu_ms,
+                match (r.figures.lod_ms, r.lod_ms_max) {
                     (Some(m), Some(x)) => format!("{m:.3} ({x:.3})"),
                     _ => "n/a".into(),
                 },
@@ -684,9 +684,12 @@ fn results_section(w: &mut String, rows: &[Row]) {
 
 /// What every absolute GPU time in a report is taken under.
 pub const GPU_CLOCK_NOTE: &str = "Each frame is submitted alone and waited for, as one frame in \
-flight: a GPU that lowers its clocks when lightly loaded draws it at that clock (an NVIDIA H100 \
-ran such frames at 345 of its 1,980 MHz, at 8 % utilisation). Ratios between rows of one run \
-are fair; an absolute GPU time can read several times what the same frame costs at full clock.";
+flight: a GPU that lowers its clocks when lightly loaded draws it at that clock, and an absolute \
+GPU time can read several times what the same frame costs at full clock. On lavapipe ratios \
+between rows of one run are fair. On an NVIDIA GPU they are not always: an H200, sampled once a \
+second during its run, drew at 1,980 MHz in each scene's first seconds (where the grazing view's \
+brute row is drawn) and mostly at 345 MHz after, so its GPU times bound a row's cost from above \
+and its CPU times (`lod_ms`, `cpu_ms`) are the figures to compare.";
 
 /// Fragment shader invocations per pixel the terrain covers.
 pub fn overdraw(r: &Row) -> Option<f64> {
@@ -873,7 +876,7 @@ pub fn pareto(rows: &[Row], path: &Path) -> Result<()> {
             let measures: [(&str, Box<Measure>); 2] = [
                 (
                     "triangles per frame",
-                    Box::new(|r: &Row| r.triangles.map(|t| t as f64)),
+                    Box::new(|r: &Row| r.figures.triangles.map(|t| t as f64)),
                 ),
                 ("frame ms (CPU + GPU)", Box::new(|r: &Row| r.frame_ms)),
             ];

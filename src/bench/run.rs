@@ -11,6 +11,7 @@ use crate::gpu::target::OFFSCREEN_COLOR_FORMAT;
 use crate::gpu::Gpu;
 use crate::lod::geomip;
 use crate::lod::{PeerLod, PeerPolicy};
+use crate::render::figures::{mean_count, median, FrameFigures};
 use crate::render::{
     ErrorMeasure, Headless, HeadlessFrame, LodMetric, RenderPath, RenderSettings, RendererOptions,
     Shading, TerrainRenderer, TimedFrame,
@@ -344,14 +345,10 @@ pub struct Row {
     pub lod: Option<RowLod>,
     pub tau: Option<f32>,
     pub config: String,
-    /// Median GPU time of the timed frames; null without timestamps.
-    pub gpu_ms: Option<f64>,
-    /// Median CPU time to prepare and record a frame.
-    pub cpu_ms: f64,
-    /// Median CPU time of the level choice alone (part of `cpu_ms`); null
-    /// for the brute path and the oracle's given levels.
-    #[serde(default)]
-    pub lod_ms: Option<f64>,
+    /// The median of each time over the timed frames and the mean of each
+    /// count over the measured ones (per frame of the flythrough).
+    #[serde(flatten)]
+    pub figures: FrameFigures,
     /// The largest level choice of any frame of the row, warm-up frames
     /// and each fixed view's first frame included.
     #[serde(default)]
@@ -360,10 +357,6 @@ pub struct Row {
     /// costs a user. Null without GPU timestamps.
     #[serde(default)]
     pub frame_ms: Option<f64>,
-    /// Clipping primitives per frame (mean over the flythrough); null
-    /// without pipeline statistics.
-    pub triangles: Option<u64>,
-    pub tes_invocations: Option<u64>,
     /// Fragment shader invocations per frame (mean over the flythrough);
     /// null without pipeline statistics.
     #[serde(default)]
@@ -420,13 +413,11 @@ pub trait Progress {
 /// Figures of one configuration, gathered over a camera sequence.
 #[derive(Default)]
 struct Gathered {
-    gpu_ms: Vec<f64>,
-    cpu_ms: Vec<f64>,
-    lod_ms: Vec<f64>,
+    /// The timed frames' figures, and those of the frames counted.
+    timed: Vec<FrameFigures>,
+    counted: Vec<FrameFigures>,
     lod_ms_max: Option<f64>,
     frame_ms: Vec<f64>,
-    triangles: Vec<u64>,
-    tes_invocations: Vec<u64>,
     fragment_invocations: Vec<u64>,
     covered_pixels: Vec<u64>,
     predicted_max_px: Option<f64>,
@@ -436,25 +427,6 @@ struct Gathered {
     patches_drawn_hidden: Vec<u64>,
     culling_ms: Vec<f64>,
     differing_pixels: Option<usize>,
-}
-
-/// The median; None for no values.
-pub fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    values.sort_by(f64::total_cmp);
-    let n = values.len();
-    Some(if n % 2 == 1 {
-        values[n / 2]
-    } else {
-        0.5 * (values[n / 2 - 1] + values[n / 2])
-    })
-}
-
-fn mean_count(values: &[u64]) -> Option<u64> {
-    (!values.is_empty())
-        .then(|| (values.iter().sum::<u64>() as f64 / values.len() as f64).round() as u64)
 }
 
 /// A renderer of one path, with or without occlusion culling (each keeps
@@ -625,18 +597,14 @@ impl<'a> Bench<'a> {
             if first_sample + r < self.warm_up {
                 continue;
             }
-            gathered.gpu_ms.extend(t.measurements.gpu_ms);
-            gathered.cpu_ms.push(t.cpu_ms);
-            gathered.lod_ms.extend(t.lod_ms);
-            gathered
-                .frame_ms
-                .extend(t.measurements.gpu_ms.map(|gpu| gpu + t.cpu_ms));
+            let figures = t.figures();
+            gathered.timed.push(figures);
+            gathered.frame_ms.extend(figures.frame_ms());
             let culling = t.measurements.occlusion.and_then(|o| o.culling_ms);
             gathered.culling_ms.extend(culling);
         }
+        gathered.counted.push(frame.figures());
         if let Some(s) = frame.measurements.statistics {
-            gathered.triangles.push(s.clipping_primitives);
-            gathered.tes_invocations.push(s.tes_invocations);
             gathered.fragment_invocations.push(s.fragment_invocations);
             let covered = frame.covered_pixels();
             gathered.covered_pixels.push(covered as u64);
@@ -937,13 +905,9 @@ impl<'a> Bench<'a> {
                     lod: config.lod(),
                     tau: config.tau(),
                     config: config.label(),
-                    gpu_ms: median(&mut g.gpu_ms),
-                    cpu_ms: median(&mut g.cpu_ms).unwrap_or(0.0),
-                    lod_ms: median(&mut g.lod_ms),
+                    figures: FrameFigures::summary(&g.timed, &g.counted),
                     lod_ms_max: g.lod_ms_max,
                     frame_ms: median(&mut g.frame_ms),
-                    triangles: mean_count(&g.triangles),
-                    tes_invocations: mean_count(&g.tes_invocations),
                     fragment_invocations: mean_count(&g.fragment_invocations),
                     covered_pixels: mean_count(&g.covered_pixels),
                     gpu_memory_bytes: bytes,

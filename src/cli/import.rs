@@ -8,8 +8,9 @@ use anyhow::{Context, Result};
 
 use super::args::SampleArgs;
 use crate::output::write_atomically;
+use crate::terrain::grid::validate_cells_per_patch;
 use crate::terrain::heightmap::{LoadOptions, DEFAULT_MAX_SAMPLES};
-use crate::terrain::info::{stored_cells_per_patch, validate_cells_per_patch};
+use crate::terrain::info::stored_cells_per_patch;
 use crate::terrain::tiled::{self, SourceKind, DEFAULT_TILE_CELLS};
 
 #[derive(clap::Args, Debug)]

@@ -13,7 +13,7 @@ use glam::DVec2;
 use serde::Serialize;
 
 use crate::scene::Scene;
-use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::grid::validate_cells_per_patch;
 use crate::terrain::{PatchGrid, PatchId, Placement, Terrain};
 use args::{parse_point, TerrainArgs};
 

@@ -17,16 +17,16 @@ use crate::gpu::Capabilities;
 use crate::lod::PeerPolicy;
 use crate::output::{save_png, write_atomically};
 use crate::render::settings::{measurement_notes, sample_count};
-use crate::render::ErrorMeasure;
 use crate::render::{
     offscreen, with_fallback, HeadlessFrame, LodMetric, RenderPath, RenderSettings,
     RendererOptions, Shading, StreamStats,
 };
+use crate::render::{ErrorMeasure, FrameFigures};
 use crate::render::{LoadTimings, LoadedScene, Loading};
 use crate::scene::{Scene, DEFAULT_PIXEL_ERROR};
 use crate::terrain::camera::Camera;
 use crate::terrain::generate::{generate as generate_heightmap, write_png16, GeneratorParams};
-use crate::terrain::info::validate_cells_per_patch;
+use crate::terrain::grid::validate_cells_per_patch;
 use crate::terrain::{DistanceLod, DistanceMode, TerrainInfo};
 
 /// Which way the terrain is drawn.
@@ -375,12 +375,11 @@ pub struct FrameStats {
     /// Merged nodes the tess path's error LOD drew, each one patch for a
     /// block of patches (`lod::patch_merge`).
     pub merged_nodes: usize,
+    #[serde(flatten)]
+    pub figures: FrameFigures,
     pub tcs_patches: Option<u64>,
-    pub tes_invocations: Option<u64>,
-    pub triangles: Option<u64>,
     pub vertex_invocations: Option<u64>,
     pub clipping_invocations: Option<u64>,
-    pub gpu_ms: Option<f64>,
     /// Whether the frame was drawn with occlusion culling (two passes).
     pub occlusion: bool,
     /// Patches in view that occlusion culling hid (null without it).
@@ -398,7 +397,6 @@ pub struct FrameStats {
     /// whole): tiles resident, uploaded, evicted, and the largest error a
     /// tile drawn from the base level adds.
     pub stream: Option<StreamStats>,
-    pub cpu_ms: f64,
     pub gpu_memory_bytes: u64,
     pub gpu_memory: BTreeMap<String, u64>,
     pub validation_enabled: bool,
@@ -527,19 +525,16 @@ pub fn render_scene(
             patches_in_frustum: frame.patches_in_frustum,
             patches_full_resolution: renderer.full_resolution_patches(),
             merged_nodes: renderer.merged_nodes(),
+            figures: frame.figures(),
             tcs_patches: statistics.map(|s| s.tcs_patches),
-            tes_invocations: statistics.map(|s| s.tes_invocations),
-            triangles: statistics.map(|s| s.clipping_primitives),
             vertex_invocations: statistics.map(|s| s.vertex_invocations),
             clipping_invocations: statistics.map(|s| s.clipping_invocations),
-            gpu_ms: frame.measurements.gpu_ms,
             occlusion: frame.measurements.occlusion.is_some(),
             patches_occluded: frame.measurements.occlusion.map(|o| o.patches_occluded),
             culling_gpu_ms: frame.measurements.occlusion.and_then(|o| o.culling_ms),
             predicted_max_px: renderer.predicted_max_px(),
             predicted_p99_px: renderer.predicted_p99_px(),
             stream: renderer.stream_stats(),
-            cpu_ms: frame.cpu_ms,
             gpu_memory_bytes: gpu_memory.values().sum(),
             gpu_memory,
             // Set from the report once the device is gone.
@@ -605,11 +600,11 @@ pub fn render(cmd: RenderCmd, out: &mut dyn Write) -> Result<()> {
         cmd.out.display(),
         s.width,
         s.height,
-        figure(s.triangles),
+        figure(s.figures.triangles),
         s.patches_in_frustum,
         s.patches_total,
-        s.gpu_ms.map_or("n/a".into(), |ms| format!("{ms:.2} ms")),
-        s.cpu_ms,
+        s.figures.gpu_ms.map_or("n/a".into(), |ms| format!("{ms:.2} ms")),
+        s.figures.cpu_ms,
         s.validation_messages,
     )?;
     Ok(())
@@ -756,7 +751,7 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
     }
     tiled::validate_tile_cells(cmd.tile)?;
     if let Some(n) = cmd.cells_per_patch {
-        crate::terrain::info::validate_cells_per_patch(n)?;
+        crate::terrain::grid::validate_cells_per_patch(n)?;
     }
     let cells_per_patch = cmd
         .cells_per_patch

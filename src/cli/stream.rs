@@ -14,8 +14,8 @@ use crate::appearance::Appearance;
 use crate::bench::cameras::flythrough;
 use crate::bench::error::{enclosed_background, measure, DepthView};
 use crate::render::{
-    offscreen, ErrorMeasure, LodMetric, RenderPath, RenderSettings, RendererOptions, Shading,
-    StreamStats,
+    offscreen, ErrorMeasure, FrameFigures, LodMetric, RenderPath, RenderSettings, RendererOptions,
+    Shading, StreamStats,
 };
 use crate::render::{LoadedScene, Loading};
 
@@ -63,12 +63,8 @@ pub struct StreamCmd {
 #[derive(Serialize, Debug, Clone)]
 pub struct StreamFrame {
     pub frame: usize,
-    /// CPU milliseconds to prepare and record the frame.
-    pub cpu_ms: f64,
-    /// Of that, the level choice's.
-    pub lod_ms: Option<f64>,
-    pub gpu_ms: Option<f64>,
-    pub triangles: Option<u64>,
+    #[serde(flatten)]
+    pub figures: FrameFigures,
     pub stream: StreamStats,
     /// Background pixels enclosed by the terrain: holes and cracks.
     pub holes: usize,
@@ -229,10 +225,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
                 .context("the renderer streams this terrain")?;
             frames.push(StreamFrame {
                 frame: i,
-                cpu_ms: frame.cpu_ms,
-                lod_ms: frame.lod_ms,
-                gpu_ms: frame.measurements.gpu_ms,
-                triangles: frame.measurements.statistics.map(|s| s.clipping_primitives),
+                figures: frame.figures(),
                 stream: stats,
                 holes,
                 error_max_px: error.map(|e| e.max_px),
@@ -248,6 +241,8 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
         let max_f64 = |v: &mut dyn Iterator<Item = f64>| {
             v.fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))))
         };
+        let figures: Vec<FrameFigures> = frames.iter().map(|f| f.figures).collect();
+        let summary = FrameFigures::summary(&figures, &figures);
         Ok(StreamReport {
             device: gpu.device.caps.device_name.clone(),
             width: size.0,
@@ -263,11 +258,9 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             resident_bytes: super::render::resident_bytes().unwrap_or(0),
             frames: frames.len(),
             holes: frames.iter().map(|f| f.holes).sum(),
-            max_cpu_ms: frames.iter().map(|f| f.cpu_ms).fold(0.0, f64::max),
-            lod_ms: crate::bench::run::median(
-                &mut frames.iter().filter_map(|f| f.lod_ms).collect::<Vec<_>>(),
-            ),
-            max_lod_ms: max_f64(&mut frames.iter().filter_map(|f| f.lod_ms)),
+            max_cpu_ms: figures.iter().map(|f| f.cpu_ms).fold(0.0, f64::max),
+            lod_ms: summary.lod_ms,
+            max_lod_ms: max_f64(&mut figures.iter().filter_map(|f| f.lod_ms)),
             max_upload_bytes: frames
                 .iter()
                 .map(|f| f.stream.upload_bytes)
@@ -287,9 +280,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
                 .iter()
                 .map(|f| f.stream.missing_px)
                 .fold(0.0, f32::max),
-            gpu_ms: crate::bench::run::median(
-                &mut frames.iter().filter_map(|f| f.gpu_ms).collect::<Vec<_>>(),
-            ),
+            gpu_ms: summary.gpu_ms,
             gpu_timing: crate::bench::report::GPU_CLOCK_NOTE,
             error_max_px: max_f64(&mut frames.iter().filter_map(|f| f.error_max_px)),
             error_p99_px: max_f64(&mut frames.iter().filter_map(|f| f.error_p99_px)),

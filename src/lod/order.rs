@@ -100,7 +100,7 @@ mod tests {
     fn order(eye: Vec3) -> DrawOrder {
         let heightmap = Heightmap::from_heights(33, 33, vec![0.0; 33 * 33]).expect("valid");
         let info = TerrainInfo::new(heightmap, DVec2::ONE, 4, DVec2::ZERO).expect("valid");
-        DrawOrder::new(&info, &PatchGrid::new(&info), eye)
+        DrawOrder::new(&info, &info.patch_grid(), eye)
     }
 
     #[test]

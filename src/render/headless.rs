@@ -3,6 +3,7 @@
 
 use std::time::Instant;
 
+use super::figures::FrameFigures;
 use super::renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};
 use super::settings::RenderSettings;
 use super::view::FrameView;
@@ -27,6 +28,11 @@ pub struct HeadlessFrame {
 }
 
 impl HeadlessFrame {
+    /// What the frame cost and drew.
+    pub fn figures(&self) -> FrameFigures {
+        FrameFigures::new(&self.measurements, self.cpu_ms, self.lod_ms)
+    }
+
     /// Pixels that show terrain (depth above 0, the far plane in reversed
     /// Z).
     pub fn covered_pixels(&self) -> usize {
@@ -165,6 +171,13 @@ pub struct TimedFrame {
     pub cpu_ms: f64,
     /// Of that, the level choice's (`TerrainRenderer::lod_ms`).
     pub lod_ms: Option<f64>,
+}
+
+impl TimedFrame {
+    /// What the frame cost and drew.
+    pub fn figures(&self) -> FrameFigures {
+        FrameFigures::new(&self.measurements, self.cpu_ms, self.lod_ms)
+    }
 }
 
 impl Drop for Headless {

@@ -3,6 +3,7 @@
 
 pub mod appearance;
 pub mod error;
+pub mod figures;
 mod frame;
 mod geomip_path;
 pub mod headless;
@@ -22,6 +23,7 @@ pub mod view;
 mod view_measure;
 
 pub use error::{RenderError, Result};
+pub use figures::FrameFigures;
 pub use headless::{offscreen, Headless, HeadlessFrame, TimedFrame};
 pub use loaded::{LoadError, LoadTimings, LoadedScene, Loading};
 pub use renderer::{FrameMeasurements, RendererOptions, TerrainRenderer};

@@ -43,8 +43,8 @@ use super::check::{Checker, SceneFileError};
 use super::look::{parse_fog, parse_lighting, parse_material, FogToml, LightingToml, MaterialToml};
 use super::{HeightmapSource, Scene};
 use crate::terrain::camera::Camera;
+use crate::terrain::grid::validate_cells_per_patch;
 use crate::terrain::heightmap::DEFAULT_MAX_SAMPLES;
-use crate::terrain::info::validate_cells_per_patch;
 use crate::terrain::{DistanceLod, HeightmapFormat, LoadOptions, DEFAULT_CELLS_PER_PATCH};
 
 #[derive(Deserialize)]

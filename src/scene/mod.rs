@@ -219,7 +219,7 @@ impl Scene {
         if self.load.smooth || !TiledHeightmap::is_tiled(path) {
             return Ok(None);
         }
-        crate::terrain::heightmap::check_tiled_options(path, &self.load)?;
+        crate::terrain::tiled::check_tiled_options(path, &self.load)?;
         let tiled = TiledHeightmap::open(path).map_err(HeightmapError::from)?;
         let placement =
             Placement::new(tiled.width(), tiled.depth(), self.cell_spacing, self.origin)?;
@@ -232,7 +232,7 @@ impl Scene {
     /// for any other heightmap; an error for a tiled one that stores
     /// nothing for this patch size.
     pub fn streamed_terrain_info(&self) -> Result<Option<TerrainInfo>, SceneError> {
-        crate::terrain::info::validate_cells_per_patch(self.cells_per_patch)?;
+        crate::terrain::grid::validate_cells_per_patch(self.cells_per_patch)?;
         let Some((tiled, _)) = self.open_tiled()? else {
             return Ok(None);
         };
@@ -259,7 +259,7 @@ impl Scene {
     /// error tables of the scene's patch size brings them along, so they
     /// are not rebuilt.
     pub fn terrain_info(&self) -> Result<TerrainInfo, SceneError> {
-        crate::terrain::info::validate_cells_per_patch(self.cells_per_patch)?;
+        crate::terrain::grid::validate_cells_per_patch(self.cells_per_patch)?;
         if let Some((tiled, _)) = self.open_tiled()? {
             let heightmap = tiled
                 .to_heightmap(self.load.max_samples)

@@ -92,7 +92,7 @@ pub enum HeightmapError {
     TiledOption { path: PathBuf, option: &'static str },
 
     #[error(transparent)]
-    Tiled(#[from] super::tiled::TiledError),
+    Tiled(#[from] TiledError),
 
     #[error("{path}: height scale {scale} and offset {offset} must be finite")]
     BadMapping {
@@ -121,4 +121,90 @@ pub enum TerrainError {
     /// message names the file and the tile).
     #[error("{0}")]
     Tiled(String),
+}
+
+/// Why a tiled terrain could not be read or written. Every variant names
+/// the file; those about one tile name the tile and level too.
+#[derive(Debug, thiserror::Error)]
+pub enum TiledError {
+    // The reason follows in the error's source chain.
+    #[error("{path}: cannot read")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: file not found")]
+    Missing { path: PathBuf },
+
+    #[error("{path}: cannot write")]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+
+    #[error("{path}: not a tiled terrain (no vkterrain tiled header)")]
+    NotTiled { path: PathBuf },
+
+    #[error("{path}: tiled terrain version {found}, but this build reads version {reads}; import the source heightmap again")]
+    Version {
+        path: PathBuf,
+        found: u32,
+        reads: u32,
+    },
+
+    #[error("{path}: corrupt tiled terrain header: {what}")]
+    Header { path: PathBuf, what: String },
+
+    #[error("{path}: corrupt tiled terrain directory: {what}")]
+    Directory { path: PathBuf, what: String },
+
+    #[error("{path}: corrupt tiled terrain error tables: {what}")]
+    Tables { path: PathBuf, what: String },
+
+    #[error("{path}: tile ({tx}, {tz}) level {level}: {what}")]
+    Tile {
+        path: PathBuf,
+        tx: u32,
+        tz: u32,
+        level: u32,
+        what: String,
+    },
+
+    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole (--max-samples raises it; streaming a terrain to the GPU a tile at a time is not built yet)")]
+    TooLarge {
+        path: PathBuf,
+        width: u64,
+        depth: u64,
+        samples: u64,
+        limit: u64,
+    },
+
+    #[error("cells per tile must be a power of two from {min} to {max}, got {got}")]
+    TileCells { got: u32, min: u32, max: u32 },
+
+    #[error("{path}: {what}")]
+    Input { path: PathBuf, what: String },
+
+    /// An input the heightmap loaders refused, with their reason.
+    #[error(transparent)]
+    Load(Box<HeightmapError>),
+}
+
+impl TiledError {
+    /// An I/O error on `path`; a missing file says so plainly.
+    pub fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        if source.kind() == std::io::ErrorKind::NotFound {
+            TiledError::Missing {
+                path: path.to_path_buf(),
+            }
+        } else {
+            TiledError::Io {
+                path: path.to_path_buf(),
+                source,
+            }
+        }
+    }
 }

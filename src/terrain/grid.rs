@@ -12,8 +12,9 @@
 
 use rayon::prelude::*;
 
+use super::error::TerrainError;
 use super::heightmap::{min_max_of, Heightmap};
-use super::info::TerrainInfo;
+use super::placement::Placement;
 
 /// A patch's place in the grid.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -44,6 +45,19 @@ impl SampleRect {
     }
 }
 
+/// Largest cells per patch: one patch at the maximum tessellation factor
+/// (64) then still has a vertex at every sample.
+pub const MAX_CELLS_PER_PATCH: u32 = 64;
+
+/// Cells per patch must be a power of two in 2..=64.
+pub fn validate_cells_per_patch(n: u32) -> Result<(), TerrainError> {
+    if n.is_power_of_two() && (2..=MAX_CELLS_PER_PATCH).contains(&n) {
+        Ok(())
+    } else {
+        Err(TerrainError::CellsPerPatch(n))
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PatchGrid {
     sample_rows: usize,
@@ -54,10 +68,6 @@ pub struct PatchGrid {
 }
 
 impl PatchGrid {
-    pub fn new(info: &TerrainInfo) -> Self {
-        Self::for_size(info.cols(), info.rows(), info.cells_per_patch())
-    }
-
     /// The grid of a `cols` x `rows` terrain (at least 2x2) in patches of
     /// `cells_per_patch` cells, whether or not its heights are in memory.
     pub fn for_size(cols: usize, rows: usize, cells_per_patch: u32) -> Self {
@@ -215,15 +225,15 @@ pub fn patch_y_bounds(heightmap: &Heightmap, grid: &PatchGrid, margin: f32) -> V
 /// bounds sit in its upper-left control point; points that are no patch's
 /// upper-left corner (the last row and column) carry zero bounds.
 pub fn control_points(
-    info: &TerrainInfo,
+    placement: &Placement,
     grid: &PatchGrid,
     y_bounds: &[[f32; 2]],
 ) -> Vec<[f32; 4]> {
     let mut points = Vec::with_capacity(grid.control_point_count());
     for i in 0..grid.control_rows() {
-        let z = info.local_z(grid.boundary_row(i)) as f32;
+        let z = placement.local_z(grid.boundary_row(i)) as f32;
         for j in 0..grid.control_cols() {
-            let x = info.local_x(grid.boundary_col(j)) as f32;
+            let x = placement.local_x(grid.boundary_col(j)) as f32;
             let [min_y, max_y] = if i < grid.patch_rows() && j < grid.patch_cols() {
                 y_bounds[grid.patch_index(PatchId { row: i, col: j })]
             } else {

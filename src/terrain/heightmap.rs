@@ -231,17 +231,11 @@ impl Heightmap {
         Heightmap::from_heights(width, depth, heights)
     }
 
-    /// Reads a heightmap file. Size limits are checked against the file's
-    /// length before its samples are read or allocated.
-    ///
-    /// A tiled terrain (`vkterrain import`) is recognised by its header
-    /// and loaded whole, within `max_samples`; its heights were fixed at
-    /// import, so the format, size and height mapping options are refused
-    /// for it rather than ignored.
-    pub fn load(path: &Path, opts: &LoadOptions) -> Result<Self, HeightmapError> {
-        if super::tiled::TiledHeightmap::is_tiled(path) {
-            return load_tiled(path, opts);
-        }
+    /// Reads a heightmap file of one of the formats of `HeightmapFormat`
+    /// (not a tiled terrain: `Heightmap::load` tells them apart). Size
+    /// limits are checked against the file's length before its samples
+    /// are read or allocated.
+    pub fn load_raster(path: &Path, opts: &LoadOptions) -> Result<Self, HeightmapError> {
         let format = match opts.format {
             Some(f) => f,
             None => HeightmapFormat::from_path(path)?,
@@ -581,35 +575,6 @@ pub(crate) fn headerless_shape(
         ..opts.clone()
     };
     raw_shape(path, format, &opts, len)
-}
-
-/// Refuses the load options that would change a tiled terrain's heights:
-/// they were fixed by `vkterrain import`.
-pub fn check_tiled_options(path: &Path, opts: &LoadOptions) -> Result<(), HeightmapError> {
-    let defaults = LoadOptions::default();
-    let refused = [
-        (opts.format.is_some(), "a format"),
-        (opts.size.is_some(), "a size"),
-        (opts.height_scale != defaults.height_scale, "a height scale"),
-        (
-            opts.height_offset != defaults.height_offset,
-            "a height offset",
-        ),
-        (opts.luminance, "luminance conversion"),
-    ];
-    if let Some((_, what)) = refused.iter().find(|(given, _)| *given) {
-        return Err(HeightmapError::TiledOption {
-            path: path.to_path_buf(),
-            option: what,
-        });
-    }
-    Ok(())
-}
-
-fn load_tiled(path: &Path, opts: &LoadOptions) -> Result<Heightmap, HeightmapError> {
-    check_tiled_options(path, opts)?;
-    let map = super::tiled::TiledHeightmap::open(path)?.to_heightmap(opts.max_samples)?;
-    Ok(if opts.smooth { map.smoothed() } else { map })
 }
 
 /// The exact square root of `n`, if `n` is a perfect square.

@@ -10,7 +10,9 @@ pub mod generate;
 pub mod grid;
 pub mod heightmap;
 pub mod info;
+pub mod load;
 pub mod lod_params;
+pub mod placement;
 mod query;
 pub mod shading;
 pub mod sight;
@@ -21,8 +23,9 @@ pub use error::{HeightmapError, TerrainError};
 pub use error_table::{ErrorTable, PatchErrors, ERROR_LEVELS};
 pub use grid::{PatchGrid, PatchId, SampleRect};
 pub use heightmap::{Heightmap, HeightmapFormat, LoadOptions};
-pub use info::{Placement, TerrainInfo, DEFAULT_CELLS_PER_PATCH};
+pub use info::{TerrainInfo, DEFAULT_CELLS_PER_PATCH};
 pub use lod_params::{DistanceLod, DistanceMode, LodError};
+pub use placement::Placement;
 
 use glam::Vec3;
 
@@ -94,7 +97,7 @@ impl Terrain {
         if !(y_margin >= 0.0 && y_margin.is_finite()) {
             return Err(TerrainError::Margin(y_margin));
         }
-        let grid = PatchGrid::new(&info);
+        let grid = info.patch_grid();
         let (y_bounds, control_heights) = match info.samples() {
             info::Samples::Whole(h) => (
                 grid::patch_y_bounds(h, &grid, y_margin),
@@ -113,7 +116,7 @@ impl Terrain {
                 )
             }
         };
-        let control_points = grid::control_points(&info, &grid, &y_bounds);
+        let control_points = grid::control_points(info.placement(), &grid, &y_bounds);
         let indices = grid.indices();
         let error_tables = match info.stored_error_tables_shared() {
             Some(tables) => std::sync::OnceLock::from(tables),
@@ -233,7 +236,8 @@ impl Terrain {
         for (p, b) in self.y_bounds.iter_mut().enumerate() {
             *b = blocks[block_of(p)];
         }
-        self.control_points = grid::control_points(&self.info, &self.grid, &self.y_bounds);
+        self.control_points =
+            grid::control_points(self.info.placement(), &self.grid, &self.y_bounds);
     }
 
     /// A patch's corners in local coordinates at their sample heights, in

@@ -19,7 +19,8 @@
 
 use glam::{DVec2, Vec3};
 
-use super::info::{Placement, Samples, TerrainInfo};
+use super::info::{Samples, TerrainInfo};
+use super::placement::Placement;
 
 /// How far outside the grid (in cells) a query may land and still count as
 /// on the terrain. It absorbs the rounding of world -> grid conversion, so the

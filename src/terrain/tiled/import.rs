@@ -359,7 +359,7 @@ impl RowSource for SrtmMosaic {
                 let lon = self.lon_min + i as i32;
                 maps.push(match self.tiles.get(&(lat, lon)) {
                     Some(path) => Some(
-                        Heightmap::load(path, &self.opts)
+                        Heightmap::load_raster(path, &self.opts)
                             .map_err(|e| TiledError::Load(Box::new(e)))?,
                     ),
                     None => None,
@@ -453,7 +453,7 @@ pub fn open_source(
     let loader_error = |e: crate::terrain::HeightmapError| TiledError::Load(Box::new(e));
     let whole =
         |mapping: Option<IntegerMapping>| -> Result<(Box<dyn RowSource>, SourceKind), TiledError> {
-            let map = Heightmap::load(path, opts).map_err(loader_error)?;
+            let map = Heightmap::load_raster(path, opts).map_err(loader_error)?;
             Ok((Box::new(MemoryRows::new(map, mapping)), SourceKind::Whole))
         };
     if opts.smooth {
@@ -463,8 +463,9 @@ pub fn open_source(
         });
     }
     if TiledHeightmap::is_tiled(path) {
-        // Re-tiling: the loader reads it whole (and refuses mapping options).
-        return whole(None);
+        // Re-tiling: read it whole (mapping options refused).
+        let map = super::load_whole(path, opts).map_err(loader_error)?;
+        return Ok((Box::new(MemoryRows::new(map, None)), SourceKind::Whole));
     }
     let format = match opts.format {
         Some(f) => f,

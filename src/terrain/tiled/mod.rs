@@ -58,8 +58,6 @@ pub use reader::{
     fuzz_open, fuzz_open_resealed, StoredTables, TileLevel, TiledHeightmap, DEFAULT_CACHE_BYTES,
 };
 
-use std::path::PathBuf;
-
 /// The first eight bytes of every tiled terrain. The CR LF catches a file
 /// mangled by a text-mode copy.
 pub const MAGIC: [u8; 8] = *b"VKTERR\r\n";
@@ -80,88 +78,43 @@ pub const DEFAULT_TILE_CELLS: u32 = 256;
 /// Largest side, in samples, of a tiled terrain.
 pub const MAX_SIDE: u64 = 1 << 24;
 
-/// Why a tiled terrain could not be read or written. Every variant names
-/// the file; those about one tile name the tile and level too.
-#[derive(Debug, thiserror::Error)]
-pub enum TiledError {
-    // The reason follows in the error's source chain.
-    #[error("{path}: cannot read")]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+pub use crate::terrain::error::TiledError;
 
-    #[error("{path}: file not found")]
-    Missing { path: PathBuf },
+use std::path::Path;
 
-    #[error("{path}: cannot write")]
-    Write {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
+use crate::terrain::error::HeightmapError;
+use crate::terrain::heightmap::{Heightmap, LoadOptions};
 
-    #[error("{path}: not a tiled terrain (no vkterrain tiled header)")]
-    NotTiled { path: PathBuf },
-
-    #[error("{path}: tiled terrain version {found}, but this build reads version {VERSION}; import the source heightmap again")]
-    Version { path: PathBuf, found: u32 },
-
-    #[error("{path}: corrupt tiled terrain header: {what}")]
-    Header { path: PathBuf, what: String },
-
-    #[error("{path}: corrupt tiled terrain directory: {what}")]
-    Directory { path: PathBuf, what: String },
-
-    #[error("{path}: corrupt tiled terrain error tables: {what}")]
-    Tables { path: PathBuf, what: String },
-
-    #[error("{path}: tile ({tx}, {tz}) level {level}: {what}")]
-    Tile {
-        path: PathBuf,
-        tx: u32,
-        tz: u32,
-        level: u32,
-        what: String,
-    },
-
-    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole (--max-samples raises it; streaming a terrain to the GPU a tile at a time is not built yet)")]
-    TooLarge {
-        path: PathBuf,
-        width: u64,
-        depth: u64,
-        samples: u64,
-        limit: u64,
-    },
-
-    #[error(
-        "cells per tile must be a power of two from {MIN_TILE_CELLS} to {MAX_TILE_CELLS}, got {0}"
-    )]
-    TileCells(u32),
-
-    #[error("{path}: {what}")]
-    Input { path: PathBuf, what: String },
-
-    /// An input the heightmap loaders refused, with their reason.
-    #[error(transparent)]
-    Load(Box<crate::terrain::HeightmapError>),
+/// Refuses the load options that would change a tiled terrain's heights:
+/// they were fixed by `vkterrain import`.
+pub fn check_tiled_options(path: &Path, opts: &LoadOptions) -> Result<(), HeightmapError> {
+    let defaults = LoadOptions::default();
+    let refused = [
+        (opts.format.is_some(), "a format"),
+        (opts.size.is_some(), "a size"),
+        (opts.height_scale != defaults.height_scale, "a height scale"),
+        (
+            opts.height_offset != defaults.height_offset,
+            "a height offset",
+        ),
+        (opts.luminance, "luminance conversion"),
+    ];
+    if let Some((_, what)) = refused.iter().find(|(given, _)| *given) {
+        return Err(HeightmapError::TiledOption {
+            path: path.to_path_buf(),
+            option: what,
+        });
+    }
+    Ok(())
 }
 
-impl TiledError {
-    /// An I/O error on `path`; a missing file says so plainly.
-    pub fn io(path: &std::path::Path, source: std::io::Error) -> Self {
-        if source.kind() == std::io::ErrorKind::NotFound {
-            TiledError::Missing {
-                path: path.to_path_buf(),
-            }
-        } else {
-            TiledError::Io {
-                path: path.to_path_buf(),
-                source,
-            }
-        }
-    }
+/// A tiled terrain read whole into memory, within `opts.max_samples`; the
+/// options that would change its heights are refused
+/// (`check_tiled_options`), not ignored.
+pub fn load_whole(path: &Path, opts: &LoadOptions) -> Result<Heightmap, HeightmapError> {
+    check_tiled_options(path, opts)?;
+    let map = TiledHeightmap::open(path)?.to_heightmap(opts.max_samples)?;
+    Ok(if opts.smooth { map.smoothed() } else { map })
 }
 
 /// The fixed-size header at the start of a tiled terrain.
@@ -288,6 +241,7 @@ impl Header {
             return Err(TiledError::Version {
                 path,
                 found: version,
+                reads: VERSION,
             });
         }
         if b.len() < HEADER_BYTES {
@@ -360,7 +314,7 @@ impl Header {
         };
         if let Some(t) = tables {
             let n = t.cells_per_patch;
-            if crate::terrain::info::validate_cells_per_patch(n).is_err()
+            if crate::terrain::grid::validate_cells_per_patch(n).is_err()
                 || header.tile_cells % n != 0
             {
                 return Err(bad(format!(
@@ -581,7 +535,11 @@ pub fn validate_tile_cells(n: u32) -> Result<(), TiledError> {
     if n.is_power_of_two() && (MIN_TILE_CELLS..=MAX_TILE_CELLS).contains(&n) {
         Ok(())
     } else {
-        Err(TiledError::TileCells(n))
+        Err(TiledError::TileCells {
+            got: n,
+            min: MIN_TILE_CELLS,
+            max: MAX_TILE_CELLS,
+        })
     }
 }
 
