@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use vkterrain::cli::args::fuzz_parse;
+use vkterrain::cli::fuzz_parse;
 use vkterrain::terrain::heightmap::fuzz_load;
 use vkterrain::terrain::tiled::{fuzz_open, fuzz_open_resealed};
 use vkterrain::terrain::HeightmapFormat;

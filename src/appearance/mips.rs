@@ -5,7 +5,7 @@
 use image::imageops::{resize, FilterType};
 use image::{DynamicImage, Rgba32FImage};
 
-use super::{to_linear, Content, TexelFormat};
+use super::texel::{Content, TexelFormat};
 
 pub fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {
@@ -78,6 +78,19 @@ pub fn chain(content: Content, img: &DynamicImage, width: u32, height: u32) -> V
             renormalise(&mut level);
         }
         out.push(encode(format, &level));
+    }
+    out
+}
+
+/// An image as linear floats: sRGB decoded for colour, raw for data.
+fn to_linear(format: TexelFormat, img: &DynamicImage) -> Rgba32FImage {
+    let mut out = img.to_rgba32f();
+    if format == TexelFormat::Srgba8 {
+        for p in out.pixels_mut() {
+            for c in &mut p.0[..3] {
+                *c = srgb_to_linear(*c);
+            }
+        }
     }
     out
 }

@@ -5,11 +5,13 @@
 
 pub mod generate;
 mod mips;
+mod texel;
 
 use glam::{Mat2, Vec2};
-use image::{DynamicImage, Rgba32FImage};
+use image::DynamicImage;
 
 pub use mips::{linear_to_srgb, srgb_to_linear};
+pub use texel::{Content, TexelFormat};
 
 use crate::scene::{Asset, AssetSource, MaterialSpec, Scene, WeightSource};
 use crate::terrain::shading::{bake_lightmap, Cliff, HeightBand};
@@ -65,40 +67,6 @@ pub enum MaterialError {
         first_width: u32,
         first_height: u32,
     },
-}
-
-/// How texels are stored and what they mean.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TexelFormat {
-    /// sRGB colour with alpha.
-    Srgba8,
-    /// Linear RGBA (normals, blend weights).
-    Rgba8,
-    /// One linear channel (heights, light).
-    R8,
-}
-
-/// What a texture holds, which decides its format and how levels are made.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Content {
-    /// sRGB colour.
-    Colour,
-    /// Tangent-space normals, renormalised on every level.
-    Normals,
-    /// Blend weights.
-    Weights,
-    /// Heights for displacement.
-    Heights,
-}
-
-impl Content {
-    pub fn format(self) -> TexelFormat {
-        match self {
-            Content::Colour => TexelFormat::Srgba8,
-            Content::Normals | Content::Weights => TexelFormat::Rgba8,
-            Content::Heights => TexelFormat::R8,
-        }
-    }
 }
 
 /// Same-sized images as the layers of a 2D array, each with a full mip
@@ -432,17 +400,4 @@ fn load_material(spec: &MaterialSpec, info: &TerrainInfo) -> Result<Material, Ma
         anisotropy: spec.anisotropy,
         triplanar: spec.triplanar,
     })
-}
-
-/// An image as linear floats: sRGB decoded for colour, raw for data.
-pub(crate) fn to_linear(format: TexelFormat, img: &DynamicImage) -> Rgba32FImage {
-    let mut out = img.to_rgba32f();
-    if format == TexelFormat::Srgba8 {
-        for p in out.pixels_mut() {
-            for c in &mut p.0[..3] {
-                *c = srgb_to_linear(*c);
-            }
-        }
-    }
-    out
 }

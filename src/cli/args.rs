@@ -321,7 +321,7 @@ pub fn parse_samples(s: &str) -> Result<u32, String> {
     }
 }
 
-fn parse_fault(s: &str) -> Result<crate::gpu::Fault, String> {
+pub fn parse_fault(s: &str) -> Result<crate::gpu::Fault, String> {
     let (kind, n) = match s.split_once('@') {
         Some((kind, n)) => {
             let n: u32 =
@@ -341,7 +341,7 @@ fn parse_fault(s: &str) -> Result<crate::gpu::Fault, String> {
     }
 }
 
-fn parse_budget(s: &str) -> Result<u64, String> {
+pub fn parse_budget(s: &str) -> Result<u64, String> {
     let mib: u64 = s
         .trim()
         .parse()
@@ -388,51 +388,6 @@ impl FeatureArgs {
             sampled_depth: off(Feature::SampledDepth),
         }
     }
-}
-
-/// Feeds untrusted `text` to every numeric argument parser, and as a whole
-/// command line (split at whitespace) to clap, checking that what parses is
-/// finite. The fuzz target (fuzz/) and its regression tests call this.
-pub fn fuzz_parse(text: &str) {
-    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-    if let Ok(v) = parse_finite(text) {
-        assert!(v.is_finite());
-    }
-    if let Ok((w, d)) = parse_size(text) {
-        assert!(w >= 2 && d >= 2);
-    }
-    for parsed in [parse_point(text), parse_spacing(text)]
-        .into_iter()
-        .flatten()
-    {
-        assert!(finite(&[parsed.x, parsed.y]));
-    }
-    if let Ok(p) = parse_dvec3(text) {
-        assert!(finite(&[p.x, p.y, p.z]));
-    }
-    if let Ok((a, b)) = parse_range(text) {
-        assert!(a.is_finite() && b.is_finite() && a <= b);
-    }
-    if let Ok(c) = parse_color(text) {
-        assert!(c.iter().all(|v| (0.0..=1.0).contains(v)));
-    }
-    if let Ok(f) = parse_fov(text) {
-        assert!(f > 0.0 && f < 180.0);
-    }
-    if let Ok(p) = parse_pixels(text) {
-        assert!(p > 0);
-    }
-    if let Ok(b) = parse_budget(text) {
-        assert!(b >= 1 << 20);
-    }
-    match parse_fault(text) {
-        Ok(crate::gpu::Fault::DeviceLost { submission: n })
-        | Ok(crate::gpu::Fault::OutOfDeviceMemory { allocation: n }) => assert!(n >= 1),
-        Err(_) => {}
-    }
-    use clap::Parser;
-    let args = std::iter::once("vkterrain").chain(text.split_whitespace());
-    let _ = super::Cli::try_parse_from(args);
 }
 
 /// Opens the device, runs `work` with it, then tears it down and counts

@@ -64,7 +64,7 @@ pub fn import(cmd: ImportCmd, out: &mut dyn Write) -> Result<()> {
     let cells_per_patch = cmd
         .cells_per_patch
         .unwrap_or_else(|| stored_cells_per_patch(source.width(), source.depth()));
-    let bar = super::progress_bar(source.depth() as u64, "rows");
+    let bar = super::progress::progress_bar(source.depth() as u64, "rows");
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         let written = tiled::import(

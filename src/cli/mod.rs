@@ -3,6 +3,7 @@
 
 pub mod args;
 pub mod assets;
+pub mod progress;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -301,14 +302,46 @@ fn inspect_report(
     }
 }
 
-/// A progress bar of `len` steps counted in `unit` (rows, frames), with
-/// the time taken and left.
-pub fn progress_bar(len: u64, unit: &str) -> indicatif::ProgressBar {
-    indicatif::ProgressBar::new(len).with_style(
-        indicatif::ProgressStyle::with_template(&format!(
-            "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit}, {{eta}} left"
-        ))
-        .expect("a valid template")
-        .progress_chars("=> "),
-    )
+/// Feeds untrusted `text` to every numeric argument parser, and as a whole
+/// command line (split at whitespace) to clap, checking that what parses is
+/// finite. The fuzz target (fuzz/) and its regression tests call this.
+pub fn fuzz_parse(text: &str) {
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if let Ok(v) = args::parse_finite(text) {
+        assert!(v.is_finite());
+    }
+    if let Ok((w, d)) = args::parse_size(text) {
+        assert!(w >= 2 && d >= 2);
+    }
+    for parsed in [args::parse_point(text), args::parse_spacing(text)]
+        .into_iter()
+        .flatten()
+    {
+        assert!(finite(&[parsed.x, parsed.y]));
+    }
+    if let Ok(p) = args::parse_dvec3(text) {
+        assert!(finite(&[p.x, p.y, p.z]));
+    }
+    if let Ok((a, b)) = args::parse_range(text) {
+        assert!(a.is_finite() && b.is_finite() && a <= b);
+    }
+    if let Ok(c) = args::parse_color(text) {
+        assert!(c.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+    if let Ok(f) = args::parse_fov(text) {
+        assert!(f > 0.0 && f < 180.0);
+    }
+    if let Ok(p) = args::parse_pixels(text) {
+        assert!(p > 0);
+    }
+    if let Ok(b) = args::parse_budget(text) {
+        assert!(b >= 1 << 20);
+    }
+    match args::parse_fault(text) {
+        Ok(crate::gpu::Fault::DeviceLost { submission: n })
+        | Ok(crate::gpu::Fault::OutOfDeviceMemory { allocation: n }) => assert!(n >= 1),
+        Err(_) => {}
+    }
+    let args = std::iter::once("vkterrain").chain(text.split_whitespace());
+    let _ = Cli::try_parse_from(args);
 }

@@ -782,7 +782,7 @@ pub fn generate(cmd: GenerateCmd, out: &mut dyn Write) -> Result<()> {
         });
         Box::new(BandedRows::new(cmd.size, cmd.seed, density, height_scale))
     };
-    let bar = super::progress_bar(cmd.size as u64, "rows");
+    let bar = super::progress::progress_bar(cmd.size as u64, "rows");
     let mut report = None;
     write_atomically(&cmd.out, |tmp| {
         report = Some(

@@ -184,7 +184,7 @@ pub fn stream(cmd: StreamCmd, out: &mut dyn Write) -> Result<()> {
             offscreen(gpu, &terrain, &Appearance::default(), &options, size)
                 .context("preparing the terrain for the GPU")?;
         headless.wait_for_residency = false;
-        let bar = super::progress_bar(cmd.frames as u64, "frames");
+        let bar = super::progress::progress_bar(cmd.frames as u64, "frames");
         let mut frames = Vec::with_capacity(cmd.frames);
         let mut gpu_memory_bytes = 0;
         for (i, camera) in cameras.iter().enumerate() {

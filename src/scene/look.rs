@@ -44,7 +44,7 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::check::Checker;
-use super::SceneFileError;
+use super::check::SceneFileError;
 use crate::terrain::shading::{Cliff, HeightBand, MAX_LAYERS};
 
 /// Most directional lights a scene may have.

@@ -15,50 +15,16 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::{
-    level_count, level_sample, level_side, validate_tile_cells, Encoding, Entry, Header,
-    TiledError, TiledHeightmap, HEADER_BYTES, MAX_SIDE,
+use super::format::{
+    level_count, level_error, level_sample, level_side, validate_tile_cells, Encoding, Entry,
+    Header, IntegerMapping, TablesAt, HEADER_BYTES, MAX_SIDE,
 };
+use super::reader::{load_whole, TiledHeightmap};
+use crate::terrain::error::TiledError;
 use crate::terrain::heightmap::{
-    check_finite, decode_raw_rows, headerless_shape, integer_height, Heightmap, HeightmapFormat,
-    LoadOptions,
+    check_finite, decode_raw_rows, headerless_shape, Heightmap, HeightmapFormat, LoadOptions,
 };
 use crate::terrain::{ErrorTable, PatchGrid};
-
-/// The mapping from integer samples to heights that the integer loaders
-/// use: `h = scale * v / divisor + offset`, in f64, rounded once to f32.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct IntegerMapping {
-    pub scale: f64,
-    pub divisor: f64,
-    pub offset: f64,
-}
-
-impl IntegerMapping {
-    /// The mapping of a format whose largest integer is `max`.
-    pub fn of(max: f64, opts: &LoadOptions) -> Self {
-        IntegerMapping {
-            scale: opts.height_scale,
-            divisor: max,
-            offset: opts.height_offset,
-        }
-    }
-
-    #[inline]
-    pub fn height(&self, v: i64) -> f32 {
-        integer_height(v as f64, self.divisor, self.scale, self.offset)
-    }
-
-    /// The integer whose height is exactly `h`, bit for bit, if there is one.
-    pub fn code_of(&self, h: f32) -> Option<i64> {
-        let v = ((f64::from(h) - self.offset) * self.divisor / self.scale).round();
-        if !(v.is_finite() && v.abs() < 1e15) {
-            return None;
-        }
-        let v = v as i64;
-        (self.height(v).to_bits() == h.to_bits()).then_some(v)
-    }
-}
 
 /// A heightmap read one row at a time, top to bottom.
 pub trait RowSource {
@@ -464,7 +430,7 @@ pub fn open_source(
     }
     if TiledHeightmap::is_tiled(path) {
         // Re-tiling: read it whole (mapping options refused).
-        let map = super::load_whole(path, opts).map_err(loader_error)?;
+        let map = load_whole(path, opts).map_err(loader_error)?;
         return Ok((Box::new(MemoryRows::new(map, None)), SourceKind::Whole));
     }
     let format = match opts.format {
@@ -602,7 +568,7 @@ fn tile_levels(
                 .map(|k| full[k])
                 .collect();
             EncodedLevel {
-                error: super::level_error(&full, (cells_x, cells_z), level),
+                error: level_error(&full, (cells_x, cells_z), level),
                 ..encode_level(&samples, mapping)
             }
         })
@@ -739,7 +705,7 @@ pub fn import(
             .collect();
         debug_assert_eq!(tables.len() as u64, header.tables_bytes(cells));
         file.write_all(&tables).map_err(io)?;
-        header.tables = Some(super::TablesAt {
+        header.tables = Some(TablesAt {
             offset,
             cells_per_patch: cells,
             crc: crc32fast::hash(&tables),

@@ -6,8 +6,9 @@ use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use super::{Encoding, Entry, Header, TiledError, ENTRY_BYTES, HEADER_BYTES};
-use crate::terrain::heightmap::{blend_cell, locate_cell, Heightmap};
+use super::format::{Encoding, Entry, Header, ENTRY_BYTES, HEADER_BYTES, MAGIC};
+use crate::terrain::error::{HeightmapError, TiledError};
+use crate::terrain::heightmap::{blend_cell, locate_cell, Heightmap, LoadOptions};
 use crate::terrain::ErrorTable;
 
 /// Decoded tile levels a reader keeps by default: 64 MiB, 256 full tiles
@@ -109,7 +110,7 @@ impl TiledHeightmap {
         let mut magic = [0u8; 8];
         std::fs::File::open(path)
             .and_then(|mut f| f.read_exact(&mut magic))
-            .is_ok_and(|()| magic == super::MAGIC)
+            .is_ok_and(|()| magic == MAGIC)
     }
 
     /// The patch size whose error tables the tiled terrain at `path`
@@ -119,9 +120,9 @@ impl TiledHeightmap {
     pub fn stored_patch_size(path: &Path) -> Option<u32> {
         let mut file = std::fs::File::open(path).ok()?;
         let len = file.metadata().ok()?.len();
-        let mut b = [0u8; super::HEADER_BYTES];
+        let mut b = [0u8; HEADER_BYTES];
         file.read_exact(&mut b).ok()?;
-        let header = super::Header::decode(&b, len, path).ok()?;
+        let header = Header::decode(&b, len, path).ok()?;
         header.tables.map(|t| t.cells_per_patch)
     }
 
@@ -567,7 +568,7 @@ pub fn fuzz_open(data: &[u8]) -> bool {
 /// sizes, offsets, encodings and samples.
 pub fn fuzz_open_resealed(data: &[u8]) -> bool {
     let mut b = data.to_vec();
-    if b.len() >= HEADER_BYTES && b[..8] == super::MAGIC {
+    if b.len() >= HEADER_BYTES && b[..8] == MAGIC {
         let crc_at = HEADER_BYTES - 4;
         let crc = crc32fast::hash(&b[..crc_at]);
         b[crc_at..HEADER_BYTES].copy_from_slice(&crc.to_le_bytes());
@@ -602,4 +603,35 @@ pub fn fuzz_open_resealed(data: &[u8]) -> bool {
         }
     }
     fuzz_open(&b)
+}
+/// Refuses the load options that would change a tiled terrain's heights:
+/// they were fixed by `vkterrain import`.
+pub fn check_tiled_options(path: &Path, opts: &LoadOptions) -> Result<(), HeightmapError> {
+    let defaults = LoadOptions::default();
+    let refused = [
+        (opts.format.is_some(), "a format"),
+        (opts.size.is_some(), "a size"),
+        (opts.height_scale != defaults.height_scale, "a height scale"),
+        (
+            opts.height_offset != defaults.height_offset,
+            "a height offset",
+        ),
+        (opts.luminance, "luminance conversion"),
+    ];
+    if let Some((_, what)) = refused.iter().find(|(given, _)| *given) {
+        return Err(HeightmapError::TiledOption {
+            path: path.to_path_buf(),
+            option: what,
+        });
+    }
+    Ok(())
+}
+
+/// A tiled terrain read whole into memory, within `opts.max_samples`; the
+/// options that would change its heights are refused
+/// (`check_tiled_options`), not ignored.
+pub fn load_whole(path: &Path, opts: &LoadOptions) -> Result<Heightmap, HeightmapError> {
+    check_tiled_options(path, opts)?;
+    let map = TiledHeightmap::open(path)?.to_heightmap(opts.max_samples)?;
+    Ok(if opts.smooth { map.smoothed() } else { map })
 }
