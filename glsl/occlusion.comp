@@ -32,8 +32,11 @@ layout(std430, set = 0, binding = BINDING_VISIBILITY) buffer Visibility {
     uint visibility[];
 };
 
+// Patches in view hidden now and last frame (so nothing drew them), and
+// patches in view hidden now, drawn in the first pass or not.
 layout(std430, set = 0, binding = BINDING_OCCLUSION_COUNT) buffer Count {
     uint occluded_count;
+    uint hidden_count;
 };
 
 // Texels of pyramid level l: each covers 2^(l+1) pixels a side.
@@ -124,6 +127,9 @@ void main() {
             // covers the rounding between this and the rasterised depths.
             visible = on_screen && nearest * (1.0 + 1e-5) >= farthest_over(p0, p1);
         }
+    }
+    if (in_frustum && !visible) {
+        atomicAdd(hidden_count, 1u);
     }
     uint state = 0u;
     if (visible) {

@@ -159,8 +159,18 @@ fn a_quick_run_measures_every_configuration() {
                 .expect("an occluded row has its counterpart");
             assert_eq!(r.differing_pixels, Some(0), "{}", r.config);
             assert!(r.figures.triangles <= off.figures.triangles, "{}", r.config);
-            assert!(r.patches_occluded.is_some(), "{}", r.config);
-            assert!(r.culling_gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config);
+            // Culling ran on the measured frames, or sat out after a
+            // frame where it hid nothing and drew what the row without it
+            // draws.
+            match r.patches_occluded {
+                Some(_) => {
+                    assert!(r.culling_gpu_ms.is_some_and(|ms| ms > 0.0), "{}", r.config)
+                }
+                None => {
+                    assert_eq!(r.culling_gpu_ms, None, "{}", r.config);
+                    assert_eq!(r.figures.triangles, off.figures.triangles, "{}", r.config);
+                }
+            }
             assert_eq!(
                 (r.max_px, r.p99_px, r.mismatched_pixels),
                 (off.max_px, off.p99_px, off.mismatched_pixels),

@@ -10,7 +10,7 @@ use common::*;
 use glam::DVec2;
 use vkterrain::bench::cameras::flythrough;
 use vkterrain::bench::error::differing_pixels;
-use vkterrain::render::occlusion::pyramid_levels;
+use vkterrain::render::occlusion::{pyramid_levels, IDLE_AFTER_NOTHING_HIDDEN};
 use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
@@ -50,9 +50,13 @@ fn flythrough_matches(samples: u32, frames: usize) {
     let mut scene = GpuScene::with_samples(terrain, 320, 180, samples);
     for path in [RenderPath::Tess, RenderPath::Geomip] {
         let mut hidden = 0;
+        let every_frame = RenderSettings {
+            occlusion_every_frame: true,
+            ..settings(path, true)
+        };
         for (i, camera) in cameras.iter().enumerate() {
             let off = scene.render(camera, &settings(path, false));
-            let on = scene.render(camera, &settings(path, true));
+            let on = scene.render(camera, &every_frame);
             assert!(off.measurements.occlusion.is_none());
             hidden += occluded(&on);
             assert_images_match(
@@ -274,4 +278,48 @@ fn a_new_target_is_never_taken_for_a_destroyed_one() {
     }
     let report = gpu.shutdown();
     assert_eq!(report.count, 0, "{:?}", report.messages);
+}
+
+/// Culling sits out the frames after one that found nothing hidden, then
+/// tries again; where it finds hidden patches it runs every frame. Images
+/// are the same either way.
+#[test]
+fn culling_sits_out_after_a_frame_that_hid_nothing() {
+    if skip_gpu() {
+        return;
+    }
+    // From high above the DEM's centre, looking straight down: no patch
+    // hides another.
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let mut scene = GpuScene::new(terrain, 128, 96, false);
+    let above = camera([0.0, 60000.0, 1.0], [0.0, 0.0, 0.0], 40.0);
+    let runs: Vec<Option<u32>> = (0..2 + IDLE_AFTER_NOTHING_HIDDEN as usize + 1)
+        .map(|_| {
+            let frame = scene.render(&above, &settings(RenderPath::Tess, true));
+            frame.measurements.occlusion.map(|o| o.patches_occluded)
+        })
+        .collect();
+    // The first frame culls and finds nothing hidden; the idle frames
+    // follow (one frame in flight: each frame knows the last one's
+    // result), then a try.
+    let idle = IDLE_AFTER_NOTHING_HIDDEN as usize;
+    assert_eq!(runs[0], Some(0), "{runs:?}");
+    assert!(runs[1..=idle].iter().all(Option::is_none), "{runs:?}");
+    assert_eq!(runs[idle + 1], Some(0), "{runs:?}");
+    let off = scene.render(&above, &settings(RenderPath::Tess, false));
+    let sat_out = scene.render(&above, &settings(RenderPath::Tess, true));
+    assert!(sat_out.measurements.occlusion.is_none());
+    assert_images_match(
+        "occlusion-idle",
+        &sat_out.rgba_image(),
+        &off.rgba_image(),
+        0,
+        0.0,
+    );
+    scene.finish();
+
+    // Behind the ridge, patches are hidden: every frame after the first
+    // culls.
+    let (culled, _, _) = ridge_view(0.0);
+    assert!(culled > 0);
 }

@@ -150,7 +150,16 @@ pub(super) struct Occlusion {
     /// otherwise (the listed draws read it through their commands).
     readers: (vk::PipelineStageFlags2, vk::AccessFlags2),
     culling: Option<Culling>,
+    /// Frames left that sit culling out (`IDLE_AFTER_NOTHING_HIDDEN`).
+    idle: u32,
 }
+
+/// Frames that culling sits out after a culled frame that hid no patch:
+/// its depth pyramid, patch test and second pass cost what they could not
+/// save. It tries again after them, so a view that turns towards hidden
+/// ground is culled again within this many frames; images are the same
+/// either way.
+pub const IDLE_AFTER_NOTHING_HIDDEN: u32 = 15;
 
 /// The compute side: pipelines and, per frame slot, the pyramid, the
 /// culled-patch count and a descriptor set.
@@ -218,12 +227,32 @@ impl Occlusion {
             patches,
             readers,
             culling,
+            idle: 0,
         })
     }
 
     /// Whether frames can be culled (the device reads depth attachments).
     pub(super) fn can_cull(&self) -> bool {
         self.culling.is_some()
+    }
+
+    /// What a culled frame found hidden (`hidden`): none, and culling
+    /// sits out the next `IDLE_AFTER_NOTHING_HIDDEN` frames that ask for
+    /// it.
+    pub(super) fn learn(&mut self, hidden: u32) {
+        if hidden == 0 {
+            self.idle = IDLE_AFTER_NOTHING_HIDDEN;
+        }
+    }
+
+    /// Whether a frame that asks for culling gets it: not while culling
+    /// sits out (each such frame counts one off).
+    pub(super) fn takes_turn(&mut self) -> bool {
+        if self.idle > 0 {
+            self.idle -= 1;
+            return false;
+        }
+        true
     }
 
     /// Points slot `slot`'s set at `target`'s depth and sizes its pyramid
@@ -525,14 +554,26 @@ impl Occlusion {
         Ok(Some(bytemuck::pod_collect_to_vec(&bytes[..size as usize])))
     }
 
-    /// The patches slot `slot`'s last frame culled; call after its fence.
+    /// The patches slot `slot`'s last frame culled (found hidden, and
+    /// hidden the frame before, so nothing drew them); call after its
+    /// fence.
     pub(super) fn culled(&self, slot: usize) -> Result<u32> {
+        Ok(self.counts(slot)?[0])
+    }
+
+    /// The patches in view slot `slot`'s last frame found hidden, drawn in
+    /// its first pass or not: what culling would save the next frame.
+    pub(super) fn hidden(&self, slot: usize) -> Result<u32> {
+        Ok(self.counts(slot)?[1])
+    }
+
+    fn counts(&self, slot: usize) -> Result<[u32; 2]> {
         let culling = self.culling.as_ref().ok_or_else(not_built)?;
         let bytes = culling.slots[slot]
             .count
             .mapped()
             .ok_or(RenderError::NotMapped("the culled count"))?;
-        Ok(bytemuck::pod_read_unaligned(&bytes[..4]))
+        Ok(bytemuck::pod_read_unaligned(&bytes[..8]))
     }
 }
 
@@ -593,9 +634,10 @@ impl Culling {
         )?;
         let mut slots = Vec::with_capacity(uniforms.len());
         for (i, (set, frame)) in sets.iter().zip(uniforms).enumerate() {
+            // Two words: the patches culled, and those found hidden.
             let count = device.create_buffer(
                 BufferDesc {
-                    size: 4,
+                    size: 8,
                     usage: vk::BufferUsageFlags::STORAGE_BUFFER
                         | vk::BufferUsageFlags::TRANSFER_DST,
                     location: MemoryLocation::GpuToCpu,

@@ -161,6 +161,11 @@ pub struct RenderSettings {
     /// Occlusion culling of patches (tess and geomip paths), where the
     /// device can read depth attachments.
     pub occlusion: bool,
+    /// Cull every frame, also the frames after one that found no patch
+    /// hidden, which otherwise sit culling out a while
+    /// (`occlusion::IDLE_AFTER_NOTHING_HIDDEN`): for checking culling
+    /// itself.
+    pub occlusion_every_frame: bool,
     /// Draw the patches occlusion culled over the frame, in one colour
     /// (tess path).
     pub show_culled: bool,
@@ -188,6 +193,7 @@ impl Default for RenderSettings {
             sky: false,
             cull: true,
             occlusion: true,
+            occlusion_every_frame: false,
             show_culled: false,
             merge_patches: true,
             lighting: Lighting::default(),
