@@ -22,6 +22,7 @@
 use std::mem::size_of;
 
 use ash::vk;
+use glam::Vec3;
 use gpu_allocator::MemoryLocation;
 
 use super::shaders;
@@ -119,6 +120,12 @@ fn list_capacity(patches: u64) -> u64 {
     (2 * patches).min(MAX_LISTED_DRAWS)
 }
 
+/// The wider side of a full-size patch, in world units.
+fn patch_width(terrain: &Terrain) -> f32 {
+    let spacing = terrain.info().spacing();
+    (terrain.grid().cells_per_patch() as f64 * spacing.x.max(spacing.y)) as f32
+}
+
 /// The pyramid's levels over a `width` x `height` depth: level l has
 /// ceil(size / 2^(l+1)) texels a side, down to 1x1. Mirror of
 /// `level_size` in glsl/occlusion.comp.
@@ -152,13 +159,20 @@ pub(super) struct Occlusion {
     culling: Option<Culling>,
     /// Frames left that sit culling out (`IDLE_AFTER_NOTHING_HIDDEN`).
     idle: u32,
+    /// The eye (terrain-local) of the frame being prepared, and of the
+    /// frame that found nothing hidden; a patch's width, the move that
+    /// ends the idle frames.
+    eye: Vec3,
+    idle_from: Vec3,
+    patch_width: f32,
 }
 
 /// Frames that culling sits out after a culled frame that hid no patch:
 /// its depth pyramid, patch test and second pass cost what they could not
 /// save. It tries again after them, so a view that turns towards hidden
-/// ground is culled again within this many frames; images are the same
-/// either way.
+/// ground is culled again within this many frames, and at once when the
+/// eye has moved by more than a patch's width (a cut, or a fast move);
+/// images are the same either way.
 pub const IDLE_AFTER_NOTHING_HIDDEN: u32 = 15;
 
 /// The compute side: pipelines and, per frame slot, the pyramid, the
@@ -228,6 +242,9 @@ impl Occlusion {
             readers,
             culling,
             idle: 0,
+            eye: Vec3::ZERO,
+            idle_from: Vec3::ZERO,
+            patch_width: patch_width(terrain),
         })
     }
 
@@ -242,6 +259,16 @@ impl Occlusion {
     pub(super) fn learn(&mut self, hidden: u32) {
         if hidden == 0 {
             self.idle = IDLE_AFTER_NOTHING_HIDDEN;
+            self.idle_from = self.eye;
+        }
+    }
+
+    /// The eye of the frame being prepared: more than a patch's width from
+    /// where culling found nothing hidden, and the idle frames end.
+    pub(super) fn look_from(&mut self, eye: Vec3) {
+        self.eye = eye;
+        if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
+            self.idle = 0;
         }
     }
 

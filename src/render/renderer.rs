@@ -527,6 +527,7 @@ impl TerrainRenderer {
             });
         }
         self.frames[slot].settings = Some(*settings);
+        self.occlusion.look_from(view.eye_local);
         if let Some(streamer) = self.streamer.as_mut() {
             streamer.prepare(slot, view)?;
         }
