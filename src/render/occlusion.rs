@@ -157,12 +157,10 @@ pub(super) struct Occlusion {
     /// otherwise (the listed draws read it through their commands).
     readers: (vk::PipelineStageFlags2, vk::AccessFlags2),
     culling: Option<Culling>,
-    /// Frames left that sit culling out (`IDLE_AFTER_NOTHING_HIDDEN`).
+    /// Frames left that sit culling out (`IDLE_AFTER_NOTHING_HIDDEN`),
+    /// the eye (terrain-local) they started from, and a patch's width, the
+    /// move that ends them.
     idle: u32,
-    /// The eye (terrain-local) of the frame being prepared, and of the
-    /// frame that found nothing hidden; a patch's width, the move that
-    /// ends the idle frames.
-    eye: Vec3,
     idle_from: Vec3,
     patch_width: f32,
 }
@@ -242,7 +240,6 @@ impl Occlusion {
             readers,
             culling,
             idle: 0,
-            eye: Vec3::ZERO,
             idle_from: Vec3::ZERO,
             patch_width: patch_width(terrain),
         })
@@ -253,21 +250,16 @@ impl Occlusion {
         self.culling.is_some()
     }
 
-    /// What a culled frame found hidden (`hidden`): none, and culling
-    /// sits out the next `IDLE_AFTER_NOTHING_HIDDEN` frames that ask for
-    /// it.
-    pub(super) fn learn(&mut self, hidden: u32) {
-        if hidden == 0 {
+    /// A frame about to be prepared from `eye`, and what the slot's last
+    /// frame found hidden where it was culled (`hidden`). Nothing hidden,
+    /// and culling sits out the next `IDLE_AFTER_NOTHING_HIDDEN` frames
+    /// that ask for it, from here; an eye more than a patch's width from
+    /// there ends them.
+    pub(super) fn look_from(&mut self, eye: Vec3, hidden: Option<u32>) {
+        if hidden == Some(0) {
             self.idle = IDLE_AFTER_NOTHING_HIDDEN;
-            self.idle_from = self.eye;
-        }
-    }
-
-    /// The eye of the frame being prepared: more than a patch's width from
-    /// where culling found nothing hidden, and the idle frames end.
-    pub(super) fn look_from(&mut self, eye: Vec3) {
-        self.eye = eye;
-        if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
+            self.idle_from = eye;
+        } else if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
             self.idle = 0;
         }
     }

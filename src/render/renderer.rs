@@ -527,7 +527,13 @@ impl TerrainRenderer {
             });
         }
         self.frames[slot].settings = Some(*settings);
-        self.occlusion.look_from(view.eye_local);
+        // What this slot's last frame found hidden, if it was culled: it
+        // completed before this one is prepared.
+        let hidden = match self.frames[slot].culled {
+            true => Some(self.occlusion.hidden(slot)?),
+            false => None,
+        };
+        self.occlusion.look_from(view.eye_local, hidden);
         if let Some(streamer) = self.streamer.as_mut() {
             streamer.prepare(slot, view)?;
         }

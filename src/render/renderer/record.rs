@@ -35,12 +35,6 @@ impl TerrainRenderer {
                 target.color_format, target.samples, self.color_format, self.samples
             )));
         }
-        // What this slot's last frame found hidden, if it was culled: it
-        // completed before this one was prepared.
-        if self.frames[slot].culled {
-            let hidden = self.occlusion.hidden(slot)?;
-            self.occlusion.learn(hidden);
-        }
         // Culling sits out a while after a frame where it found nothing
         // hidden (`IDLE_AFTER_NOTHING_HIDDEN`), unless asked to run every
         // frame or the culled patches are shown.
