@@ -417,7 +417,6 @@ struct Gathered {
     timed: Vec<FrameFigures>,
     counted: Vec<FrameFigures>,
     lod_ms_max: Option<f64>,
-    frame_ms: Vec<f64>,
     fragment_invocations: Vec<u64>,
     covered_pixels: Vec<u64>,
     predicted_max_px: Option<f64>,
@@ -597,9 +596,7 @@ impl<'a> Bench<'a> {
             if first_sample + r < self.warm_up {
                 continue;
             }
-            let figures = t.figures();
-            gathered.timed.push(figures);
-            gathered.frame_ms.extend(figures.frame_ms());
+            gathered.timed.push(t.figures());
             let culling = t.measurements.occlusion.and_then(|o| o.culling_ms);
             gathered.culling_ms.extend(culling);
         }
@@ -907,7 +904,13 @@ impl<'a> Bench<'a> {
                     config: config.label(),
                     figures: FrameFigures::summary(&g.timed, &g.counted),
                     lod_ms_max: g.lod_ms_max,
-                    frame_ms: median(&mut g.frame_ms),
+                    frame_ms: median(
+                        &mut g
+                            .timed
+                            .iter()
+                            .filter_map(FrameFigures::frame_ms)
+                            .collect::<Vec<_>>(),
+                    ),
                     fragment_invocations: mean_count(&g.fragment_invocations),
                     covered_pixels: mean_count(&g.covered_pixels),
                     gpu_memory_bytes: bytes,
