@@ -41,7 +41,7 @@
 //! sharing them, so both sides still agree.
 
 use std::cmp::Ordering;
-use std::collections::BinaryHeap;
+use std::collections::binary_heap::{BinaryHeap, PeekMut};
 
 use glam::{Vec2, Vec3};
 
@@ -198,7 +198,8 @@ impl Candidate {
             * if k >= self.full {
                 self.full_triangles
             } else {
-                2.0 * 4f32.powi(k as i32)
+                // 2^k x 2^k quads of two triangles.
+                (2u32 << (2 * k)) as f32
             }
     }
 
@@ -587,9 +588,10 @@ struct Pending {
 
 /// The candidates of `pending`, each block's pixels over tau read off the
 /// view model (`tau` pixels, `viewport` pixels at most a block). Every
-/// entry is copied out first, in a loop of independent reads, so the
-/// memory they come from is fetched many at a time. Returns them with
-/// the pixels the model sees of them all.
+/// entry is found first, and each memory line of its codes read once, in
+/// a loop of independent reads, so the lines are fetched many at a time
+/// (copying the codes out instead moved 200 bytes a view for it). Returns
+/// them with the pixels the model sees of them all.
 fn read_model(
     sight: &SightTable,
     (pending, parts): (&[Pending], &[Part]),
@@ -603,6 +605,7 @@ fn read_model(
         .zip(parts)
         .map(|(block, part)| sight.view(block, &part.at, tau / part.scale))
         .collect();
+    std::hint::black_box(views.iter().flatten().fold(0, |acc, v| acc ^ v.touch()));
     let mut frame_pixels = 0.0f64;
     let mut candidates = Vec::with_capacity(pending.len());
     let mut views = views.iter().zip(parts);
@@ -632,8 +635,11 @@ fn read_model(
 /// relieves the most pixels over tau per triangle added goes first, until
 /// what remains over tau fits `budget`.
 fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
+    /// A candidate's next step: its pixels relieved per triangle added,
+    /// the candidate, the level it goes to. Greater is taken first: the
+    /// larger relief, then the earlier candidate.
     #[derive(PartialEq)]
-    struct Step(f32, usize, usize);
+    struct Step(f32, u32, u8);
     impl Eq for Step {}
     impl PartialOrd for Step {
         fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
@@ -645,22 +651,28 @@ fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
             self.0.total_cmp(&other.0).then(other.1.cmp(&self.1))
         }
     }
+    let step = |i: usize, (g, k): (f32, usize)| Step(g, i as u32, k as u8);
     let mut levels = vec![0usize; candidates.len()];
     let mut over: f32 = candidates.iter().map(|c| c.over[0]).sum();
     let mut heap: BinaryHeap<Step> = candidates
         .iter()
         .enumerate()
-        .filter_map(|(i, c)| c.best_step(0).map(|(g, k)| Step(g, i, k)))
+        .filter_map(|(i, c)| c.best_step(0).map(|s| step(i, s)))
         .collect();
     while over > budget {
-        let Some(Step(_, i, k)) = heap.pop() else {
+        let Some(mut top) = heap.peek_mut() else {
             break;
         };
+        let (i, k) = (top.1 as usize, usize::from(top.2));
         let c = &candidates[i];
         over -= c.over[levels[i]] - c.over[k];
         levels[i] = k;
-        if let Some((g, next)) = c.best_step(k) {
-            heap.push(Step(g, i, next));
+        // The candidate's next step takes the place of the one taken.
+        match c.best_step(k) {
+            Some(next) => *top = step(i, next),
+            None => {
+                PeekMut::pop(top);
+            }
         }
     }
     levels

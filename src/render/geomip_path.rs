@@ -154,15 +154,15 @@ impl GeomipGeometry {
         // theirs; the coarsest constrains no neighbour.
         let mut levels = vec![(count - 1) as u8; grid.patch_count()];
         let mut morph = vec![0.0f32; grid.patch_count()];
-        let mut visible = Vec::new();
-        match tau {
+        let drawn = match tau {
             None => {
-                visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
+                let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
                 for &p in &visible {
                     let d = patch_distance(terrain, p as usize, view.eye_local);
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
+                drawn_flags(grid, &visible)
             }
             Some(pixels) => {
                 let sight = match settings.error_measure {
@@ -187,7 +187,7 @@ impl GeomipGeometry {
                 // as the block has come from where the bound accepts its
                 // level to where it accepts the next (none where the share
                 // chose it).
-                visible.reserve(frame_plan.patches_in_view);
+                let mut drawn = vec![false; grid.patch_count()];
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = count - 1 - k;
@@ -214,16 +214,21 @@ impl GeomipGeometry {
                     for p in block.patches(grid) {
                         levels[p] = level as u8;
                         morph[p] = glide;
-                        visible.push(p as u32);
+                        drawn[p] = true;
                     }
                 }
-                visible.sort_unstable();
+                drawn
             }
-        }
+        };
+        // In grid order, read off the flags: cheaper than sorting the
+        // blocks' patches.
+        let visible: Vec<u32> = (0..grid.patch_count() as u32)
+            .filter(|&p| drawn[p as usize])
+            .collect();
         // Culled patches beside drawn ones are refined to match them; then
         // only a patch at least two levels finer than the coarsest can
         // lower a neighbour.
-        let beside = geomip::refine_beside_drawn(&mut levels, grid, &drawn_flags(grid, &visible));
+        let beside = geomip::refine_beside_drawn(&mut levels, grid, &drawn);
         let lowered: Vec<u32> = visible
             .iter()
             .chain(&beside)

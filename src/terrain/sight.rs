@@ -373,8 +373,8 @@ impl SightTable {
 
     /// `block` seen from `at` against a vertical error `error` (in the
     /// heightmap's units, at the block): the entry's figures at the
-    /// lattice directions around `at`, copied out; None without an entry.
-    /// Copying first lets a frame fetch many blocks' entries at once.
+    /// lattice directions around `at`: their areas, and where their codes
+    /// lie (`BlockView::touch` fetches them); None without an entry.
     pub fn view(&self, block: Block, at: &LatticePoint, error: f32) -> Option<BlockView<'_>> {
         let (level, b) = self.entry(block)?;
         let corners = at.corners();
@@ -383,9 +383,10 @@ impl SightTable {
         Some(BlockView {
             area: corners.map(|(d, _)| level.area[at_direction(d)]),
             codes: corners.map(|(d, _)| {
-                level.codes[at_direction(d) * per_direction..][..per_direction]
-                    .try_into()
-                    .expect("a direction's codes")
+                <&[u8; LEVELS * FRACTIONS]>::try_from(
+                    &level.codes[at_direction(d) * per_direction..][..per_direction],
+                )
+                .expect("a direction's codes")
             }),
             weights: corners.map(|(_, w)| w),
             error,
@@ -399,7 +400,7 @@ impl SightTable {
 #[derive(Clone, Copy, Debug)]
 pub struct BlockView<'a> {
     area: [f32; 4],
-    codes: [[u8; LEVELS * FRACTIONS]; 4],
+    codes: [&'a [u8; LEVELS * FRACTIONS]; 4],
     weights: [f32; 4],
     /// The error the shares are over.
     error: f32,
@@ -407,6 +408,15 @@ pub struct BlockView<'a> {
 }
 
 impl BlockView<'_> {
+    /// A byte from each memory line its codes lie on, folded together:
+    /// reading every view's lines before any is used lets them be
+    /// fetched many at a time.
+    pub fn touch(&self) -> u8 {
+        self.codes
+            .iter()
+            .fold(0, |acc, c| acc ^ c[0] ^ c[LEVELS * FRACTIONS - 1])
+    }
+
     /// Its pixel area per `K^2 / d^2`: what it covers at distance d is
     /// this times `(K / d)^2`.
     pub fn area(&self) -> f32 {
