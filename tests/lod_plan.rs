@@ -5,8 +5,8 @@
 mod common;
 
 use common::*;
-use glam::{DVec2, DVec3};
-use vkterrain::lod::hierarchy::Hierarchy;
+use glam::{DVec2, DVec3, Vec3};
+use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
 use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs, SightReading};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
@@ -162,6 +162,67 @@ fn blocks_and_merged_nodes_cover_the_patches_in_view_once() {
 /// The share of pixels over tau only ever coarsens: no block is drawn finer
 /// than the bound's level from its nearest point, and a block the share
 /// chose is drawn coarser than that.
+/// The patches in view, found by taking nodes wholly inside the frustum
+/// whole, are those whose own boxes the frustum does not exclude, in grid
+/// order, and the walk visits fewer nodes than there are patches in view
+/// when most of the terrain is: on the DEM and the 512 x 512 grid, from
+/// low, high and outside, and every patch without culling.
+#[test]
+fn patches_in_view_are_those_whose_boxes_are_not_outside() {
+    for terrain in [dem_terrain(16, DVec2::ZERO), wide_grid()] {
+        let table = terrain.error_table();
+        let hierarchy = Hierarchy::new(&terrain, &table);
+        let grid = terrain.grid();
+        let (lo, hi) = terrain.info().min_max();
+        let size = terrain
+            .info()
+            .world_width()
+            .max(terrain.info().world_depth());
+        let mut fewer_visits = false;
+        for (eye, target) in [
+            (
+                DVec3::new(-0.4 * size, f64::from(hi) + 200.0, -0.3 * size),
+                DVec3::ZERO,
+            ),
+            (
+                DVec3::new(0.0, f64::from(hi) + size, -0.8 * size),
+                DVec3::new(0.0, f64::from(lo), 0.0),
+            ),
+            (
+                DVec3::new(0.1 * size, f64::from(hi) + 50.0, 0.05 * size),
+                DVec3::new(0.5 * size, f64::from(lo), 0.3 * size),
+            ),
+        ] {
+            let view = view_of(&terrain, eye, target, 1.0);
+            let (visible, visited) = patches_in_view(&terrain, &hierarchy, &view, true);
+            let expected: Vec<u32> = (0..grid.patch_count())
+                .filter(|&p| {
+                    let cols = grid.patch_cols();
+                    let node = hierarchy.node(NodeId {
+                        level: 0,
+                        col: (p % cols) as u32,
+                        row: (p / cols) as u32,
+                    });
+                    let [a, b] = node.footprint;
+                    let [y0, y1] = node.bounds;
+                    let (min, max) = (Vec3::new(a[0], y0, a[1]), Vec3::new(b[0], y1, b[1]));
+                    !view
+                        .frustum
+                        .aabb_outside(0.5 * (min + max) - view.eye_local, 0.5 * (max - min))
+                })
+                .map(|p| p as u32)
+                .collect();
+            assert!(!expected.is_empty(), "{eye}: nothing in view");
+            assert_eq!(visible, expected, "{eye}");
+            fewer_visits |= visited < visible.len();
+            let (all, visited) = patches_in_view(&terrain, &hierarchy, &view, false);
+            assert_eq!(all, (0..grid.patch_count() as u32).collect::<Vec<_>>());
+            assert_eq!(visited, 1);
+        }
+        assert!(fewer_visits, "no view took a node whole");
+    }
+}
+
 #[test]
 fn the_share_only_coarsens_the_bounds_choice() {
     let terrain = dem_terrain(16, DVec2::ZERO);

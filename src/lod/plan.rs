@@ -680,15 +680,16 @@ fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
 
 /// The patches whose boxes are not outside the frustum (all of them
 /// without `cull`), in grid order, found by walking the hierarchy; and
-/// the nodes visited.
+/// the nodes visited. A node wholly inside the frustum is taken whole,
+/// its patches unvisited.
 pub fn patches_in_view(
     terrain: &Terrain,
     hierarchy: &Hierarchy,
     view: &LodView,
     cull: bool,
 ) -> (Vec<u32>, usize) {
-    let cols = terrain.grid().patch_cols();
-    let mut patches = Vec::new();
+    // The patch rectangles (columns, rows) of the nodes taken whole.
+    let mut taken: Vec<([usize; 2], [usize; 2])> = Vec::new();
     let mut visited = 0;
     let mut stack = vec![NodeId {
         level: hierarchy.top(),
@@ -697,25 +698,59 @@ pub fn patches_in_view(
     }];
     while let Some(id) = stack.pop() {
         visited += 1;
+        let mut whole = !cull || id.level == 0;
         if cull {
             let bounds = NodeBox::of(hierarchy, id);
             let (centre, half) = (
-                0.5 * (bounds.min + bounds.max),
+                0.5 * (bounds.min + bounds.max) - view.eye_local,
                 0.5 * (bounds.max - bounds.min),
             );
-            if view.frustum.aabb_outside(centre - view.eye_local, half) {
+            if view.frustum.aabb_outside(centre, half) {
                 continue;
             }
+            whole = whole || view.frustum.aabb_inside(centre, half);
         }
-        let (pc, pr) = hierarchy.patch_range(id);
-        if id.level > 0 {
-            stack.extend(hierarchy.children(id));
-            continue;
+        match whole {
+            true => taken.push(hierarchy.patch_range(id)),
+            false => stack.extend(hierarchy.children(id)),
         }
-        patches.push((pr[0] * cols + pc[0]) as u32);
     }
-    patches.sort_unstable();
-    (patches, visited)
+    (in_grid_order(&taken, terrain.grid().patch_cols()), visited)
+}
+
+/// The patches of disjoint rectangles (columns, rows) of a grid `cols`
+/// patches wide, in grid order: marked over the rectangles' bounding box
+/// and read off it row by row, in time that grows with that box, not with
+/// the grid.
+fn in_grid_order(rects: &[([usize; 2], [usize; 2])], cols: usize) -> Vec<u32> {
+    let Some(&([c0, c1], [r0, r1])) = rects.first() else {
+        return Vec::new();
+    };
+    let (c0, c1, r0, r1) = rects
+        .iter()
+        .fold((c0, c1, r0, r1), |(a, b, c, d), (cs, rs)| {
+            (a.min(cs[0]), b.max(cs[1]), c.min(rs[0]), d.max(rs[1]))
+        });
+    let width = c1 - c0;
+    let mut marked = vec![false; width * (r1 - r0)];
+    let mut count = 0;
+    for &([a, b], [c, d]) in rects {
+        for r in c..d {
+            marked[(r - r0) * width + a - c0..][..b - a].fill(true);
+        }
+        count += (b - a) * (d - c);
+    }
+    let mut patches = Vec::with_capacity(count);
+    for (i, row) in marked.chunks_exact(width).enumerate() {
+        let first = (r0 + i) * cols + c0;
+        patches.extend(
+            row.iter()
+                .enumerate()
+                .filter(|&(_, &m)| m)
+                .map(|(j, _)| (first + j) as u32),
+        );
+    }
+    patches
 }
 
 #[cfg(test)]

@@ -154,11 +154,17 @@ impl GeomipGeometry {
         // theirs; the coarsest constrains no neighbour.
         let mut levels = vec![(count - 1) as u8; grid.patch_count()];
         let mut morph = vec![0.0f32; grid.patch_count()];
+        // The distance LOD's distances, one per patch in view in grid order.
+        let mut distances = Vec::new();
         let drawn = match tau {
             None => {
                 let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
-                for &p in &visible {
-                    let d = patch_distance(terrain, p as usize, view.eye_local);
+                distances.extend(
+                    visible
+                        .iter()
+                        .map(|&p| patch_distance(grid, hierarchy, p as usize, view.eye_local)),
+                );
+                for (&p, &d) in visible.iter().zip(&distances) {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
@@ -236,13 +242,10 @@ impl GeomipGeometry {
             .filter(|&p| usize::from(levels[p as usize]) + 2 < count)
             .collect();
         geomip::balance_from(&mut levels, grid, &lowered);
-        if tau.is_none() {
-            for &p in &visible {
-                let level = usize::from(levels[p as usize]);
-                if level + 1 < count {
-                    let d = patch_distance(terrain, p as usize, view.eye_local);
-                    morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
-                }
+        for (&p, &d) in visible.iter().zip(&distances) {
+            let level = usize::from(levels[p as usize]);
+            if level + 1 < count {
+                morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
             }
         }
         GeomipChoice::Levels {
@@ -438,9 +441,19 @@ fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
     )
 }
 
-/// Distance from `eye_local` to the nearest point of patch `p`'s box.
-fn patch_distance(terrain: &Terrain, p: usize, eye_local: glam::Vec3) -> f32 {
-    let (centre, extents) = terrain.patch_aabb(terrain.grid().patch_id(p));
+/// Distance from `eye_local` to the nearest point of patch `p`'s box (its
+/// node's in `hierarchy`: one read, where the terrain's box is three).
+fn patch_distance(grid: &PatchGrid, hierarchy: &Hierarchy, p: usize, eye_local: glam::Vec3) -> f32 {
+    let cols = grid.patch_cols();
+    let node = hierarchy.node(NodeId {
+        level: 0,
+        col: (p % cols) as u32,
+        row: (p / cols) as u32,
+    });
+    let ([x0, z0], [x1, z1]) = (node.footprint[0], node.footprint[1]);
+    let [y0, y1] = node.bounds;
+    let (lo, hi) = (glam::Vec3::new(x0, y0, z0), glam::Vec3::new(x1, y1, z1));
+    let (centre, extents) = (0.5 * (lo + hi), 0.5 * (hi - lo));
     ((eye_local - centre).abs() - extents)
         .max(glam::Vec3::ZERO)
         .length()

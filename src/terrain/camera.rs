@@ -73,6 +73,15 @@ impl Frustum {
     pub fn aabb_outside(&self, center: Vec3, extents: Vec3) -> bool {
         aabb_outside_frustum(center, extents, &self.planes)
     }
+
+    /// True when the box lies entirely inside the frustum: in front of
+    /// every plane, so every box within it is too.
+    pub fn aabb_inside(&self, center: Vec3, extents: Vec3) -> bool {
+        self.planes.iter().all(|&plane| {
+            let n = plane.truncate();
+            n.dot(center) + plane.w >= extents.dot(n.abs())
+        })
+    }
 }
 
 /// True when the box is entirely in the negative half-space of `plane`:
