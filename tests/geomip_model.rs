@@ -295,3 +295,50 @@ fn culled_patches_beside_drawn_ones_match_them() {
         0
     );
 }
+
+/// Drawn in blocks that share a level, only the patches on the blocks'
+/// sides can lower a neighbour: refining from them alone and balancing
+/// from them alone gives the levels that refining from every drawn
+/// patch and balancing the whole grid give.
+#[test]
+fn block_sides_alone_refine_and_balance_as_every_patch_does() {
+    // 16x16 patches of 16 cells: levels 0 to 4.
+    let grid = vkterrain::terrain::PatchGrid::for_size(257, 257, 16);
+    let cols = grid.patch_cols();
+    // (first column, first row, patches a side, level)
+    let blocks = [
+        (4, 4, 4, 1),
+        (8, 4, 2, 2),
+        (8, 6, 2, 0),
+        (2, 8, 1, 0),
+        (4, 8, 4, 3),
+    ];
+    let mut levels = vec![4u8; grid.patch_count()];
+    let mut drawn = vec![false; grid.patch_count()];
+    let mut edges = Vec::new();
+    for (c0, r0, span, level) in blocks {
+        for r in r0..r0 + span {
+            for c in c0..c0 + span {
+                let p = r * cols + c;
+                levels[p] = level;
+                drawn[p] = true;
+                if r == r0 || r + 1 == r0 + span || c == c0 || c + 1 == c0 + span {
+                    edges.push(p as u32);
+                }
+            }
+        }
+    }
+    let interior = drawn.iter().filter(|&&d| d).count() - edges.len();
+    assert!(interior >= 8, "{interior} patches inside blocks");
+    let mut every = levels.clone();
+    refine_beside_drawn(&mut every, &grid, &drawn);
+    balance(&mut every, &grid);
+    let beside = refine_beside(&mut levels, &grid, &drawn, &edges);
+    assert!(!beside.is_empty());
+    let seeds: Vec<u32> = edges.iter().chain(&beside).copied().collect();
+    balance_from(&mut levels, &grid, &seeds);
+    assert_eq!(levels, every);
+    // Something moved: culled patches were refined, and balancing lowered
+    // patches beyond them.
+    assert!(every.iter().filter(|&&l| l < 4).count() > drawn.iter().filter(|&&d| d).count());
+}

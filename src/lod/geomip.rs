@@ -266,27 +266,28 @@ pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[u32]) {
 /// choice made for it. Only ever lowers, so balancing afterwards keeps it;
 /// a patch lowered twice is listed twice.
 pub fn refine_beside_drawn(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool]) -> Vec<u32> {
+    let all: Vec<u32> = (0..grid.patch_count() as u32)
+        .filter(|&p| drawn[p as usize])
+        .collect();
+    refine_beside(levels, grid, drawn, &all)
+}
+
+/// `refine_beside_drawn` from `edges`, the drawn patches that can have a
+/// neighbour not drawn (all of them, or only those on the sides of drawn
+/// blocks): the same levels, in time that grows with the edges.
+pub fn refine_beside(
+    levels: &mut [u8],
+    grid: &PatchGrid,
+    drawn: &[bool],
+    edges: &[u32],
+) -> Vec<u32> {
     let mut lowered = Vec::new();
-    let (cols, rows) = (grid.patch_cols(), grid.patch_rows());
-    // Row by row, so each neighbour is found without dividing (the
-    // sides in `PatchGrid::neighbours`' order).
-    for r in 0..rows {
-        for c in 0..cols {
-            let p = r * cols + c;
-            if !drawn[p] {
-                continue;
-            }
-            let sides = [
-                (c > 0).then(|| p - 1),
-                (r > 0).then(|| p - cols),
-                (c + 1 < cols).then(|| p + 1),
-                (r + 1 < rows).then(|| p + cols),
-            ];
-            for q in sides.into_iter().flatten() {
-                if !drawn[q] && levels[q] > levels[p] {
-                    levels[q] = levels[p];
-                    lowered.push(q as u32);
-                }
+    for &p in edges {
+        let p = p as usize;
+        for q in grid.neighbours(p).into_iter().flatten() {
+            if !drawn[q] && levels[q] > levels[p] {
+                levels[q] = levels[p];
+                lowered.push(q as u32);
             }
         }
     }

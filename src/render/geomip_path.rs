@@ -156,6 +156,10 @@ impl GeomipGeometry {
         let mut morph = vec![0.0f32; grid.patch_count()];
         // The distance LOD's distances, one per patch in view in grid order.
         let mut distances = Vec::new();
+        // The drawn patches that can lower a neighbour: every one by
+        // distance; by error, those on the sides of their blocks (a
+        // block's patches share its level).
+        let mut edges: Vec<u32> = Vec::new();
         let drawn = match tau {
             None => {
                 let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
@@ -168,7 +172,9 @@ impl GeomipGeometry {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
-                drawn_flags(grid, &visible)
+                let drawn = drawn_flags(grid, &visible);
+                edges = visible;
+                drawn
             }
             Some(pixels) => {
                 let sight = match settings.error_measure {
@@ -217,10 +223,22 @@ impl GeomipGeometry {
                             crate::lod::saturate((d - from) / (to - from))
                         }
                     };
-                    for p in block.patches(grid) {
-                        levels[p] = level as u8;
-                        morph[p] = glide;
-                        drawn[p] = true;
+                    let (cols, rows) = (grid.patch_cols(), grid.patch_rows());
+                    let (c0, r0, span) = (block.col as usize, block.row as usize, block.span());
+                    let (c1, r1) = (
+                        (c0 + span as usize).min(cols),
+                        (r0 + span as usize).min(rows),
+                    );
+                    for r in r0..r1 {
+                        for c in c0..c1 {
+                            let p = r * cols + c;
+                            levels[p] = level as u8;
+                            morph[p] = glide;
+                            drawn[p] = true;
+                            if r == r0 || r + 1 == r1 || c == c0 || c + 1 == c1 {
+                                edges.push(p as u32);
+                            }
+                        }
                     }
                 }
                 drawn
@@ -234,8 +252,8 @@ impl GeomipGeometry {
         // Culled patches beside drawn ones are refined to match them; then
         // only a patch at least two levels finer than the coarsest can
         // lower a neighbour.
-        let beside = geomip::refine_beside_drawn(&mut levels, grid, &drawn);
-        let lowered: Vec<u32> = visible
+        let beside = geomip::refine_beside(&mut levels, grid, &drawn, &edges);
+        let lowered: Vec<u32> = edges
             .iter()
             .chain(&beside)
             .copied()
