@@ -136,12 +136,21 @@ impl PlannedBlock {
         1 << self.level
     }
 
+    /// The columns and rows of its patches in `grid` (a block at the
+    /// grid's far sides may be cut by them).
+    pub fn patch_range(&self, grid: &PatchGrid) -> ([usize; 2], [usize; 2]) {
+        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
+        (
+            [c0, (c0 + s).min(grid.patch_cols())],
+            [r0, (r0 + s).min(grid.patch_rows())],
+        )
+    }
+
     /// Its patches' indices in `grid`, row by row (a patch-level block
     /// has one).
     pub fn patches<'g>(&self, grid: &'g PatchGrid) -> impl Iterator<Item = usize> + 'g {
         let cols = grid.patch_cols();
-        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
-        let (c1, r1) = ((c0 + s).min(cols), (r0 + s).min(grid.patch_rows()));
+        let ([c0, c1], [r0, r1]) = self.patch_range(grid);
         (r0..r1).flat_map(move |r| (c0..c1).map(move |c| r * cols + c))
     }
 }

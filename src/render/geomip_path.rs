@@ -223,12 +223,8 @@ impl GeomipGeometry {
                             crate::lod::saturate((d - from) / (to - from))
                         }
                     };
-                    let (cols, rows) = (grid.patch_cols(), grid.patch_rows());
-                    let (c0, r0, span) = (block.col as usize, block.row as usize, block.span());
-                    let (c1, r1) = (
-                        (c0 + span as usize).min(cols),
-                        (r0 + span as usize).min(rows),
-                    );
+                    let cols = grid.patch_cols();
+                    let ([c0, c1], [r0, r1]) = block.patch_range(grid);
                     for r in r0..r1 {
                         for c in c0..c1 {
                             let p = r * cols + c;
