@@ -140,8 +140,8 @@ impl GeomipGeometry {
         if let Some(given) = &self.given {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
             let mut chosen = given.clone();
-            let lowered =
-                geomip::refine_beside_drawn(&mut chosen.levels, grid, &drawn_flags(grid, &visible));
+            let drawn = drawn_flags(grid, &visible);
+            let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &visible);
             geomip::balance_from(&mut chosen.levels, grid, &lowered);
             self.set_draws(terrain, settings, &visible, &chosen, draws);
             return GeomipChoice::Drawn(None);
@@ -156,11 +156,11 @@ impl GeomipGeometry {
         let mut morph = vec![0.0f32; grid.patch_count()];
         // The distance LOD's distances, one per patch in view in grid order.
         let mut distances = Vec::new();
-        // The drawn patches that can lower a neighbour: every one by
-        // distance; by error, those on the sides of their blocks (a
-        // block's patches share its level).
-        let mut edges: Vec<u32> = Vec::new();
-        let drawn = match tau {
+        // The patches drawn (flags, and in grid order), and, by error, the
+        // drawn patches on the sides of their blocks: a block's patches
+        // share its level, so only those can lower a neighbour (by
+        // distance every drawn patch can).
+        let (drawn, visible, block_sides) = match tau {
             None => {
                 let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
                 distances.extend(
@@ -172,9 +172,7 @@ impl GeomipGeometry {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
-                let drawn = drawn_flags(grid, &visible);
-                edges = visible;
-                drawn
+                (drawn_flags(grid, &visible), visible, None)
             }
             Some(pixels) => {
                 let sight = match settings.error_measure {
@@ -200,6 +198,7 @@ impl GeomipGeometry {
                 // level to where it accepts the next (none where the share
                 // chose it).
                 let mut drawn = vec![false; grid.patch_count()];
+                let mut sides = Vec::new();
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = count - 1 - k;
@@ -232,23 +231,24 @@ impl GeomipGeometry {
                             morph[p] = glide;
                             drawn[p] = true;
                             if r == r0 || r + 1 == r1 || c == c0 || c + 1 == c1 {
-                                edges.push(p as u32);
+                                sides.push(p as u32);
                             }
                         }
                     }
                 }
-                drawn
+                // In grid order, read off the flags: cheaper than sorting
+                // the blocks' patches.
+                let visible = (0..grid.patch_count() as u32)
+                    .filter(|&p| drawn[p as usize])
+                    .collect();
+                (drawn, visible, Some(sides))
             }
         };
-        // In grid order, read off the flags: cheaper than sorting the
-        // blocks' patches.
-        let visible: Vec<u32> = (0..grid.patch_count() as u32)
-            .filter(|&p| drawn[p as usize])
-            .collect();
+        let edges = block_sides.as_deref().unwrap_or(&visible);
         // Culled patches beside drawn ones are refined to match them; then
         // only a patch at least two levels finer than the coarsest can
         // lower a neighbour.
-        let beside = geomip::refine_beside(&mut levels, grid, &drawn, &edges);
+        let beside = geomip::refine_beside(&mut levels, grid, &drawn, edges);
         let lowered: Vec<u32> = edges
             .iter()
             .chain(&beside)
