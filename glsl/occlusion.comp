@@ -32,11 +32,13 @@ layout(std430, set = 0, binding = BINDING_VISIBILITY) buffer Visibility {
     uint visibility[];
 };
 
-// Patches in view hidden now and last frame (so nothing drew them), and
-// patches in view hidden now, drawn in the first pass or not.
+// Patches in view hidden now and last frame (so nothing drew them),
+// patches in view hidden now, drawn in the first pass or not, and every
+// patch in view.
 layout(std430, set = 0, binding = BINDING_OCCLUSION_COUNT) buffer Count {
     uint occluded_count;
     uint hidden_count;
+    uint in_view_count;
 };
 
 // Texels of pyramid level l: each covers 2^(l+1) pixels a side.
@@ -128,8 +130,11 @@ void main() {
             visible = on_screen && nearest * (1.0 + 1e-5) >= farthest_over(p0, p1);
         }
     }
-    if (in_frustum && !visible) {
-        atomicAdd(hidden_count, 1u);
+    if (in_frustum) {
+        atomicAdd(in_view_count, 1u);
+        if (!visible) {
+            atomicAdd(hidden_count, 1u);
+        }
     }
     uint state = 0u;
     if (visible) {

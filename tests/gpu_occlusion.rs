@@ -10,7 +10,7 @@ use common::*;
 use glam::DVec2;
 use vkterrain::bench::cameras::flythrough;
 use vkterrain::bench::error::differing_pixels;
-use vkterrain::render::occlusion::{pyramid_levels, IDLE_AFTER_NOTHING_HIDDEN};
+use vkterrain::render::occlusion::{pyramid_levels, IDLE_AFTER_NOTHING_HIDDEN, WORTH_CULLING};
 use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
@@ -98,6 +98,60 @@ fn ridge_terrain(pillar: f32) -> Terrain {
     .expect("valid size");
     let info = TerrainInfo::new(map, DVec2::ONE, 8, DVec2::ZERO).expect("valid terrain");
     Terrain::new(info, 0.0).expect("valid margin")
+}
+
+/// The ridge scene's plain with its wall cut to columns `cols`, and no
+/// pillar.
+fn wall_terrain(cols: std::ops::RangeInclusive<usize>) -> Terrain {
+    let map = Heightmap::from_fn(129, 129, |r, c| {
+        if (40..=44).contains(&r) && cols.contains(&c) {
+            30.0
+        } else {
+            0.0
+        }
+    })
+    .expect("valid size");
+    let info = TerrainInfo::new(map, DVec2::ONE, 8, DVec2::ZERO).expect("valid terrain");
+    Terrain::new(info, 0.0).expect("valid margin")
+}
+
+/// Culling goes on where it hides at least `WORTH_CULLING` of the patches
+/// in view, and sits out after a frame that hid fewer, though it hid
+/// some: a wall across the whole plain hides most of what lies behind it,
+/// a short stretch of it a narrow wedge.
+#[test]
+fn culling_sits_out_where_it_hides_too_little_to_pay() {
+    if skip_gpu() {
+        return;
+    }
+    let camera = camera([-2.5, 5.0, 54.0], [-2.5, 20.0, -38.0], 50.0);
+    let every_frame = RenderSettings {
+        occlusion_every_frame: true,
+        ..settings(RenderPath::Tess, true)
+    };
+    for (cols, worth) in [(0..=128, true), (60..=67, false)] {
+        let mut scene = GpuScene::new(wall_terrain(cols.clone()), 256, 192, false);
+        scene.render(&camera, &every_frame);
+        let culled = scene.render(&camera, &every_frame);
+        let found = culled
+            .measurements
+            .occlusion
+            .expect("culled every frame")
+            .found;
+        assert!(found.hidden > 0, "wall {cols:?}: {found:?}");
+        assert!(found.hidden < found.in_view, "wall {cols:?}: {found:?}");
+        let share = found.hidden as f32 / found.in_view as f32;
+        assert_eq!(share >= WORTH_CULLING, worth, "wall {cols:?}: {found:?}");
+        assert_eq!(found.worth_culling(), worth, "wall {cols:?}: {found:?}");
+        // The next frame knows what the last one found.
+        let next = scene.render(&camera, &settings(RenderPath::Tess, true));
+        assert_eq!(
+            next.measurements.occlusion.is_some(),
+            worth,
+            "wall {cols:?}: {found:?}"
+        );
+        scene.finish();
+    }
 }
 
 /// Renders the ridge scene from low on the near side (row 10), looking

@@ -156,6 +156,10 @@ pub struct FrameMeasurements {
 pub struct OcclusionMeasurements {
     /// Patches in the view that the test found hidden and nothing drew.
     pub patches_occluded: u32,
+    /// Patches in the view the test found hidden, drawn by the first
+    /// pass or not, and every patch in the view: whether culling goes on
+    /// (`occlusion::HiddenCount::worth_culling`).
+    pub found: super::occlusion::HiddenCount,
     /// GPU milliseconds of building the pyramid and testing the patches.
     pub culling_ms: Option<f64>,
 }

@@ -161,9 +161,10 @@ pub struct RenderSettings {
     /// Occlusion culling of patches (tess and geomip paths), where the
     /// device can read depth attachments.
     pub occlusion: bool,
-    /// Cull every frame, also the frames after one that found no patch
-    /// hidden, which otherwise sit culling out a while
-    /// (`occlusion::IDLE_AFTER_NOTHING_HIDDEN`): for checking culling
+    /// Cull every frame, also the frames after one that found too few
+    /// patches hidden to pay for culling, which otherwise sit culling out
+    /// a while (`occlusion::WORTH_CULLING`,
+    /// `occlusion::IDLE_AFTER_NOTHING_HIDDEN`): for checking culling
     /// itself.
     pub occlusion_every_frame: bool,
     /// Draw the patches occlusion culled over the frame, in one colour

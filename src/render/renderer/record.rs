@@ -35,9 +35,9 @@ impl TerrainRenderer {
                 target.color_format, target.samples, self.color_format, self.samples
             )));
         }
-        // Culling sits out a while after a frame where it found nothing
-        // hidden (`IDLE_AFTER_NOTHING_HIDDEN`), unless asked to run every
-        // frame or the culled patches are shown.
+        // Culling sits out a while after a frame where it found too little
+        // hidden to pay for it (`WORTH_CULLING`, `IDLE_AFTER_NOTHING_HIDDEN`),
+        // unless asked to run every frame or the culled patches are shown.
         let mut cull = settings.occlusion
             && settings.path != RenderPath::Brute
             && target.depth_readable
@@ -282,6 +282,7 @@ impl TerrainRenderer {
         let occlusion = match frame.culled {
             true => Some(OcclusionMeasurements {
                 patches_occluded: self.occlusion.culled(slot)?,
+                found: self.occlusion.hidden(slot)?,
                 culling_ms: frame.queries.span_ms()?,
             }),
             false => None,
