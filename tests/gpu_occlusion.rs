@@ -82,11 +82,19 @@ fn occlusion_culling_changes_no_pixel_when_multisampled() {
     flythrough_matches(4, 4);
 }
 
-/// A flat 129x129 plain (1 m spacing) with a 30 m wall across it at rows
-/// 40 to 44, and a pillar of `pillar` m on rows 100 to 103, columns 60 to
-/// 63, behind the wall as the camera sees it.
+/// A flat 129x129 plain (1 m spacing) in 8-cell patches, with heights
+/// `height(row, column)`.
+fn plain(height: impl Fn(usize, usize) -> f32 + Sync) -> Terrain {
+    let map = Heightmap::from_fn(129, 129, height).expect("valid size");
+    let info = TerrainInfo::new(map, DVec2::ONE, 8, DVec2::ZERO).expect("valid terrain");
+    Terrain::new(info, 0.0).expect("valid margin")
+}
+
+/// The plain with a 30 m wall across it at rows 40 to 44, and a pillar of
+/// `pillar` m on rows 100 to 103, columns 60 to 63, behind the wall as the
+/// camera sees it.
 fn ridge_terrain(pillar: f32) -> Terrain {
-    let map = Heightmap::from_fn(129, 129, |r, c| {
+    plain(|r, c| {
         if (40..=44).contains(&r) {
             30.0
         } else if (100..=103).contains(&r) && (60..=63).contains(&c) {
@@ -95,24 +103,18 @@ fn ridge_terrain(pillar: f32) -> Terrain {
             0.0
         }
     })
-    .expect("valid size");
-    let info = TerrainInfo::new(map, DVec2::ONE, 8, DVec2::ZERO).expect("valid terrain");
-    Terrain::new(info, 0.0).expect("valid margin")
 }
 
 /// The ridge scene's plain with its wall cut to columns `cols`, and no
 /// pillar.
 fn wall_terrain(cols: std::ops::RangeInclusive<usize>) -> Terrain {
-    let map = Heightmap::from_fn(129, 129, |r, c| {
+    plain(|r, c| {
         if (40..=44).contains(&r) && cols.contains(&c) {
             30.0
         } else {
             0.0
         }
     })
-    .expect("valid size");
-    let info = TerrainInfo::new(map, DVec2::ONE, 8, DVec2::ZERO).expect("valid terrain");
-    Terrain::new(info, 0.0).expect("valid margin")
 }
 
 /// Culling goes on where it hides at least `WORTH_CULLING` of the patches

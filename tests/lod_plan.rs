@@ -159,9 +159,6 @@ fn blocks_and_merged_nodes_cover_the_patches_in_view_once() {
     }
 }
 
-/// The share of pixels over tau only ever coarsens: no block is drawn finer
-/// than the bound's level from its nearest point, and a block the share
-/// chose is drawn coarser than that.
 /// The patches in view, found by taking nodes wholly inside the frustum
 /// whole, are those whose own boxes the frustum does not exclude, in grid
 /// order, and the walk visits fewer nodes than there are patches in view
@@ -223,6 +220,9 @@ fn patches_in_view_are_those_whose_boxes_are_not_outside() {
     }
 }
 
+/// The share of pixels over tau only ever coarsens: no block is drawn finer
+/// than the bound's level from its nearest point, and a block the share
+/// chose is drawn coarser than that.
 #[test]
 fn the_share_only_coarsens_the_bounds_choice() {
     let terrain = dem_terrain(16, DVec2::ZERO);

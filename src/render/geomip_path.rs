@@ -459,18 +459,12 @@ fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
 /// node's in `hierarchy`: one read, where the terrain's box is three).
 fn patch_distance(grid: &PatchGrid, hierarchy: &Hierarchy, p: usize, eye_local: glam::Vec3) -> f32 {
     let cols = grid.patch_cols();
-    let node = hierarchy.node(NodeId {
+    let id = NodeId {
         level: 0,
         col: (p % cols) as u32,
         row: (p / cols) as u32,
-    });
-    let ([x0, z0], [x1, z1]) = (node.footprint[0], node.footprint[1]);
-    let [y0, y1] = node.bounds;
-    let (lo, hi) = (glam::Vec3::new(x0, y0, z0), glam::Vec3::new(x1, y1, z1));
-    let (centre, extents) = (0.5 * (lo + hi), 0.5 * (hi - lo));
-    ((eye_local - centre).abs() - extents)
-        .max(glam::Vec3::ZERO)
-        .length()
+    };
+    block_distance(hierarchy, id, eye_local)
 }
 
 /// One flag per patch of `grid`: whether it is among `visible`.
