@@ -263,11 +263,14 @@ fn culled_patches_beside_drawn_ones_match_them() {
     levels[at(1, 2)] = 1;
     drawn[at(1, 1)] = true;
     drawn[at(1, 2)] = true;
-    let mut lowered = refine_beside_drawn(&mut levels, &grid, &drawn);
+    let mut lowered: Vec<usize> = refine_beside_drawn(&mut levels, &grid, &drawn)
+        .into_iter()
+        .map(|q| grid.patch_index(q))
+        .collect();
     lowered.sort_unstable();
     lowered.dedup();
-    let mut expected: Vec<u32> = [(0, 1), (2, 1), (1, 0), (0, 2), (2, 2), (1, 3)]
-        .map(|(r, c)| at(r, c) as u32)
+    let mut expected: Vec<usize> = [(0, 1), (2, 1), (1, 0), (0, 2), (2, 2), (1, 3)]
+        .map(|(r, c)| at(r, c))
         .to_vec();
     expected.sort_unstable();
     assert_eq!(lowered, expected);
@@ -312,6 +315,9 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
         (8, 6, 2, 0),
         (2, 8, 1, 0),
         (4, 8, 4, 3),
+        // At the grid's near and far corners.
+        (0, 0, 2, 2),
+        (12, 12, 4, 0),
     ];
     let mut levels = vec![4u8; grid.patch_count()];
     let mut drawn = vec![false; grid.patch_count()];
@@ -323,7 +329,7 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
                 levels[p] = level;
                 drawn[p] = true;
                 if r == r0 || r + 1 == r0 + span || c == c0 || c + 1 == c0 + span {
-                    edges.push(p as u32);
+                    edges.push(vkterrain::terrain::PatchId { row: r, col: c });
                 }
             }
         }
@@ -331,13 +337,21 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
     let interior = drawn.iter().filter(|&&d| d).count() - edges.len();
     assert!(interior >= 8, "{interior} patches inside blocks");
     let mut every = levels.clone();
+    let mut by_blocks = levels.clone();
     refine_beside_drawn(&mut every, &grid, &drawn);
     balance(&mut every, &grid);
     let beside = refine_beside(&mut levels, &grid, &drawn, &edges);
     assert!(!beside.is_empty());
-    let seeds: Vec<u32> = edges.iter().chain(&beside).copied().collect();
+    let seeds: Vec<_> = edges.iter().chain(&beside).copied().collect();
     balance_from(&mut levels, &grid, &seeds);
     assert_eq!(levels, every);
+    // Looking only beyond the blocks' sides gives them too.
+    let rects: Vec<_> = blocks
+        .iter()
+        .map(|&(c0, r0, span, _)| ([c0, c0 + span], [r0, r0 + span]))
+        .collect();
+    refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects);
+    assert_eq!(by_blocks, every);
     // Something moved: culled patches were refined, and balancing lowered
     // patches beyond them.
     assert!(every.iter().filter(|&&l| l < 4).count() > drawn.iter().filter(|&&d| d).count());

@@ -245,14 +245,15 @@ pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
 /// time that grows with the patches listed and the levels, not the grid.
 /// A lowered patch lowers its neighbours to one level above it, and so on
 /// outwards, which ends within `level_count` steps of it.
-pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[u32]) {
-    let mut queue: Vec<u32> = lowered.to_vec();
+pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[PatchId]) {
+    let mut queue: Vec<PatchId> = lowered.to_vec();
     while let Some(p) = queue.pop() {
-        let limit = levels[p as usize] + 1;
-        for q in grid.neighbours(p as usize).into_iter().flatten() {
-            if levels[q] > limit {
-                levels[q] = limit;
-                queue.push(q as u32);
+        let limit = levels[grid.patch_index(p)] + 1;
+        for q in grid.neighbours_of(p).into_iter().flatten() {
+            let at = &mut levels[grid.patch_index(q)];
+            if *at > limit {
+                *at = limit;
+                queue.push(q);
             }
         }
     }
@@ -265,9 +266,10 @@ pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[u32]) {
 /// neighbour would have the drawn patch stitch the side to a level no
 /// choice made for it. Only ever lowers, so balancing afterwards keeps it;
 /// a patch lowered twice is listed twice.
-pub fn refine_beside_drawn(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool]) -> Vec<u32> {
-    let all: Vec<u32> = (0..grid.patch_count() as u32)
-        .filter(|&p| drawn[p as usize])
+pub fn refine_beside_drawn(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool]) -> Vec<PatchId> {
+    let all: Vec<PatchId> = (0..grid.patch_count())
+        .filter(|&p| drawn[p])
+        .map(|p| grid.patch_id(p))
         .collect();
     refine_beside(levels, grid, drawn, &all)
 }
@@ -279,19 +281,91 @@ pub fn refine_beside(
     levels: &mut [u8],
     grid: &PatchGrid,
     drawn: &[bool],
-    edges: &[u32],
-) -> Vec<u32> {
+    edges: &[PatchId],
+) -> Vec<PatchId> {
     let mut lowered = Vec::new();
     for &p in edges {
-        let p = p as usize;
-        for q in grid.neighbours(p).into_iter().flatten() {
-            if !drawn[q] && levels[q] > levels[p] {
-                levels[q] = levels[p];
-                lowered.push(q as u32);
+        let level = levels[grid.patch_index(p)];
+        for q in grid.neighbours_of(p).into_iter().flatten() {
+            let i = grid.patch_index(q);
+            if !drawn[i] && levels[i] > level {
+                levels[i] = level;
+                lowered.push(q);
             }
         }
     }
     lowered
+}
+
+/// `refine_beside` and `balance_from` for patches drawn in blocks that
+/// each share one level (`blocks`: columns and rows of patches, end
+/// exclusive, each block's patches at its level in `levels`), the rest at
+/// the coarsest: the same levels, in time that grows with the blocks'
+/// sides. Inside a block no side changes level, so only the patches just
+/// beyond a block's sides are looked at, once to refine the culled ones
+/// and once to seed the balancing.
+pub fn refine_and_balance_blocks(
+    levels: &mut [u8],
+    grid: &PatchGrid,
+    drawn: &[bool],
+    blocks: &[([usize; 2], [usize; 2])],
+) {
+    let mut queue = Vec::new();
+    // The blocks' own levels: balancing may lower a block's patches one by
+    // one, and those it lowers go on the queue themselves.
+    let own: Vec<u8> = blocks
+        .iter()
+        .map(|&([c0, _], [r0, _])| levels[grid.patch_index(PatchId { row: r0, col: c0 })])
+        .collect();
+    for (block, &level) in blocks.iter().zip(&own) {
+        for_each_beyond(grid, block, |i, q| {
+            if !drawn[i] && levels[i] > level {
+                levels[i] = level;
+                queue.push(q);
+            }
+        });
+    }
+    for (block, &level) in blocks.iter().zip(&own) {
+        for_each_beyond(grid, block, |i, q| {
+            if levels[i] > level + 1 {
+                levels[i] = level + 1;
+                queue.push(q);
+            }
+        });
+    }
+    balance_from(levels, grid, &queue);
+}
+
+/// Calls `f` with the index and place of each patch just beyond a side of
+/// the block of columns `c0..c1` and rows `r0..r1` of `grid`.
+fn for_each_beyond(
+    grid: &PatchGrid,
+    &([c0, c1], [r0, r1]): &([usize; 2], [usize; 2]),
+    mut f: impl FnMut(usize, PatchId),
+) {
+    let cols = grid.patch_cols();
+    let mut column = |col: usize| {
+        for row in r0..r1 {
+            f(row * cols + col, PatchId { row, col });
+        }
+    };
+    if c0 > 0 {
+        column(c0 - 1);
+    }
+    if c1 < cols {
+        column(c1);
+    }
+    let mut row = |row: usize| {
+        for col in c0..c1 {
+            f(row * cols + col, PatchId { row, col });
+        }
+    };
+    if r0 > 0 {
+        row(r0 - 1);
+    }
+    if r1 < grid.patch_rows() {
+        row(r1);
+    }
 }
 
 /// Sides of `id` whose neighbour is coarser (`.0`) and finer (`.1`), for

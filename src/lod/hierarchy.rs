@@ -161,6 +161,15 @@ impl Hierarchy {
         (self.levels.len() - 1) as u32
     }
 
+    /// The top level's one node, where a walk starts.
+    pub fn root(&self) -> NodeId {
+        NodeId {
+            level: self.top(),
+            col: 0,
+            row: 0,
+        }
+    }
+
     /// The terrain's lowest and highest height.
     pub fn height_range(&self) -> [f32; 2] {
         self.height_range

@@ -22,7 +22,7 @@ use crate::lod::plan::{patches_in_view, plan, PlanInputs, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
-use crate::terrain::grid::PatchGrid;
+use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::{ErrorTable, Terrain};
 
 pub(super) struct GeomipGeometry {
@@ -141,7 +141,8 @@ impl GeomipGeometry {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
             let mut chosen = given.clone();
             let drawn = drawn_flags(grid, &visible);
-            let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &visible);
+            let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
+            let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &edges);
             geomip::balance_from(&mut chosen.levels, grid, &lowered);
             self.set_draws(terrain, settings, &visible, &chosen, draws);
             return GeomipChoice::Drawn(None);
@@ -156,23 +157,36 @@ impl GeomipGeometry {
         let mut morph = vec![0.0f32; grid.patch_count()];
         // The distance LOD's distances, one per patch in view in grid order.
         let mut distances = Vec::new();
-        // The patches drawn (flags, and in grid order), and, by error, the
-        // drawn patches on the sides of their blocks: a block's patches
-        // share its level, so only those can lower a neighbour (by
-        // distance every drawn patch can).
-        let (drawn, visible, block_sides) = match tau {
+        // The patches drawn (flags, and in grid order). Culled patches
+        // beside drawn ones are refined to match them, and the levels
+        // balanced.
+        let visible = match tau {
             None => {
                 let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
+                let edges: Vec<PatchId> =
+                    visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
                 distances.extend(
-                    visible
+                    edges
                         .iter()
-                        .map(|&p| patch_distance(grid, hierarchy, p as usize, view.eye_local)),
+                        .map(|&id| patch_distance(hierarchy, id, view.eye_local)),
                 );
                 for (&p, &d) in visible.iter().zip(&distances) {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
-                (drawn_flags(grid, &visible), visible, None)
+                // Every drawn patch can lower a neighbour; after the
+                // refining, only one at least two levels finer than the
+                // coarsest.
+                let drawn = drawn_flags(grid, &visible);
+                let beside = geomip::refine_beside(&mut levels, grid, &drawn, &edges);
+                let lowered: Vec<PatchId> = edges
+                    .iter()
+                    .chain(&beside)
+                    .copied()
+                    .filter(|&p| usize::from(levels[grid.patch_index(p)]) + 2 < count)
+                    .collect();
+                geomip::balance_from(&mut levels, grid, &lowered);
+                visible
             }
             Some(pixels) => {
                 let sight = match settings.error_measure {
@@ -198,7 +212,7 @@ impl GeomipGeometry {
                 // level to where it accepts the next (none where the share
                 // chose it).
                 let mut drawn = vec![false; grid.patch_count()];
-                let mut sides = Vec::new();
+                let mut rects = Vec::with_capacity(frame_plan.blocks.len());
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = count - 1 - k;
@@ -225,37 +239,23 @@ impl GeomipGeometry {
                     let cols = grid.patch_cols();
                     let ([c0, c1], [r0, r1]) = block.patch_range(grid);
                     for r in r0..r1 {
-                        for c in c0..c1 {
-                            let p = r * cols + c;
-                            levels[p] = level as u8;
-                            morph[p] = glide;
-                            drawn[p] = true;
-                            if r == r0 || r + 1 == r1 || c == c0 || c + 1 == c1 {
-                                sides.push(p as u32);
-                            }
-                        }
+                        let row = r * cols + c0..r * cols + c1;
+                        levels[row.clone()].fill(level as u8);
+                        morph[row.clone()].fill(glide);
+                        drawn[row].fill(true);
                     }
+                    rects.push(([c0, c1], [r0, r1]));
                 }
+                // A block's patches share its level: only its sides can
+                // lower a neighbour.
+                geomip::refine_and_balance_blocks(&mut levels, grid, &drawn, &rects);
                 // In grid order, read off the flags: cheaper than sorting
                 // the blocks' patches.
-                let visible = (0..grid.patch_count() as u32)
+                (0..grid.patch_count() as u32)
                     .filter(|&p| drawn[p as usize])
-                    .collect();
-                (drawn, visible, Some(sides))
+                    .collect()
             }
         };
-        let edges = block_sides.as_deref().unwrap_or(&visible);
-        // Culled patches beside drawn ones are refined to match them; then
-        // only a patch at least two levels finer than the coarsest can
-        // lower a neighbour.
-        let beside = geomip::refine_beside(&mut levels, grid, &drawn, edges);
-        let lowered: Vec<u32> = edges
-            .iter()
-            .chain(&beside)
-            .copied()
-            .filter(|&p| usize::from(levels[p as usize]) + 2 < count)
-            .collect();
-        geomip::balance_from(&mut levels, grid, &lowered);
         for (&p, &d) in visible.iter().zip(&distances) {
             let level = usize::from(levels[p as usize]);
             if level + 1 < count {
@@ -457,12 +457,11 @@ fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
 
 /// Distance from `eye_local` to the nearest point of patch `p`'s box (its
 /// node's in `hierarchy`: one read, where the terrain's box is three).
-fn patch_distance(grid: &PatchGrid, hierarchy: &Hierarchy, p: usize, eye_local: glam::Vec3) -> f32 {
-    let cols = grid.patch_cols();
+fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: glam::Vec3) -> f32 {
     let id = NodeId {
         level: 0,
-        col: (p % cols) as u32,
-        row: (p / cols) as u32,
+        col: p.col as u32,
+        row: p.row as u32,
     };
     block_distance(hierarchy, id, eye_local)
 }

@@ -128,13 +128,19 @@ impl PatchGrid {
     /// right and bottom, in the order of the geomip side bits; None past
     /// the grid's edge.
     pub fn neighbours(&self, index: usize) -> [Option<usize>; 4] {
-        let PatchId { row, col } = self.patch_id(index);
-        let cols = self.patch_cols;
+        self.neighbours_of(self.patch_id(index))
+            .map(|q| q.map(|q| self.patch_index(q)))
+    }
+
+    /// `neighbours` of a patch known by its place, found without dividing
+    /// by the grid's width: for walks that visit many patches a frame.
+    pub fn neighbours_of(&self, id: PatchId) -> [Option<PatchId>; 4] {
+        let PatchId { row, col } = id;
         [
-            (col > 0).then(|| index - 1),
-            (row > 0).then(|| index - cols),
-            (col + 1 < cols).then(|| index + 1),
-            (row + 1 < self.patch_rows).then(|| index + cols),
+            (col > 0).then(|| PatchId { row, col: col - 1 }),
+            (row > 0).then(|| PatchId { row: row - 1, col }),
+            (col + 1 < self.patch_cols).then(|| PatchId { row, col: col + 1 }),
+            (row + 1 < self.patch_rows).then(|| PatchId { row: row + 1, col }),
         ]
     }
 

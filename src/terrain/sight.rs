@@ -437,25 +437,35 @@ impl BlockView<'_> {
         if k >= LEVELS {
             return 0.0;
         }
-        let mut row = [0.0f32; FRACTIONS];
-        for (codes, &w) in self.codes.iter().zip(&self.weights) {
-            for (r, &c) in row
-                .iter_mut()
-                .zip(&codes[k * FRACTIONS..(k + 1) * FRACTIONS])
-            {
-                *r += w * self.decoded[usize::from(c)];
-            }
-        }
-        fraction_over(&row, self.error)
+        // The row's errors are found one at a time, as the search reaches
+        // them: at the finer levels it stops at the first.
+        let error_at = |j: usize| {
+            self.codes
+                .iter()
+                .zip(&self.weights)
+                .fold(0.0f32, |e, (codes, &w)| {
+                    e + w * self.decoded[usize::from(codes[k * FRACTIONS + j])]
+                })
+        };
+        fraction_over(error_at, self.error)
     }
 }
 
 /// The share of pixels over `error` of a row of errors at
-/// `FRACTION_EXPONENTS` (non-increasing: errors fall as the share grows),
-/// interpolated between them in log-log.
-fn fraction_over(row: &[f32], error: f32) -> f32 {
-    // The first stored error at or below the given one.
-    let Some(j) = row.iter().position(|&e| e <= error) else {
+/// `FRACTION_EXPONENTS` (`error_at(j)`, non-increasing: errors fall as the
+/// share grows), interpolated between them in log-log.
+fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
+    // The first stored error at or below the given one, and the one
+    // before it.
+    let mut above = f32::INFINITY;
+    let Some((j, e1)) = (0..FRACTIONS).find_map(|j| {
+        let e = error_at(j);
+        if e <= error {
+            return Some((j, e));
+        }
+        above = e;
+        None
+    }) else {
         return 1.0;
     };
     if j == 0 {
@@ -465,7 +475,7 @@ fn fraction_over(row: &[f32], error: f32) -> f32 {
     if lo == i32::MIN {
         return (hi as f32).exp2();
     }
-    let (e0, e1) = (row[j - 1], row[j]);
+    let e0 = above;
     let w = if e1 <= 0.0 || e0 <= e1 {
         1.0
     } else {
