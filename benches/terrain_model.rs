@@ -2,20 +2,23 @@
 //! (all cores), height_at (one core), and a memcpy of the heightmap's bytes
 //! in the same run so the figures read as ratios to memory bandwidth. Then
 //! the error LOD's frame plan on the default scene's bench views, with the
-//! view model and with the bound alone (one core, 1280x720, tau 1 px).
+//! view model and with the bound alone (one core, 1280x720, tau 1 px), and
+//! the geomip path's refining and balancing of that plan's blocks, from
+//! beyond the blocks' sides beside from every side patch's neighbours.
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
+use vkterrain::lod::geomip;
 use vkterrain::lod::hierarchy::Hierarchy;
 use vkterrain::lod::plan::{plan, PlanInputs, SightReading};
 use vkterrain::lod::view::Tau;
 use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
-use vkterrain::terrain::{ErrorTable, Heightmap, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchId, TerrainInfo};
 
 const SIZE: usize = 4097;
 
@@ -138,5 +141,75 @@ fn frame_plan(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, frame_plan);
+/// The geomip path's levels after its plan: each block's patches at its
+/// level, then culled patches beside drawn ones refined and the levels
+/// balanced, by `refine_and_balance_blocks` and, in the same run, by
+/// `refine_beside` and `balance_from` from every patch on a block's side.
+fn geomip_levels(c: &mut Criterion) {
+    let scene = Scene::default_scene();
+    let terrain = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)
+        .expect("the default scene loads")
+        .terrain;
+    let (table, _) = terrain.error_tables();
+    let hierarchy = Hierarchy::new(&terrain, table);
+    let grid = terrain.grid();
+    let count = geomip::level_count(grid.cells_per_patch());
+    let mut group = c.benchmark_group("geomip_levels");
+    for view in named_views(terrain.info()) {
+        let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
+        let inputs = PlanInputs {
+            table,
+            sight: terrain.sight_table(),
+            merge: false,
+            cull: true,
+            reading: SightReading::Template,
+        };
+        let frame_plan = plan(&terrain, &hierarchy, &lod_view, &inputs);
+        let mut levels = vec![(count - 1) as u8; grid.patch_count()];
+        let mut drawn = vec![false; grid.patch_count()];
+        let mut rects = Vec::new();
+        let mut sides = Vec::new();
+        for block in &frame_plan.blocks {
+            let k = usize::from(block.patch_level).min(count - 1);
+            let ([c0, c1], [r0, r1]) = block.patch_range(grid);
+            for row in r0..r1 {
+                for col in c0..c1 {
+                    let p = grid.patch_index(PatchId { row, col });
+                    levels[p] = (count - 1 - k) as u8;
+                    drawn[p] = true;
+                    if row == r0 || row + 1 == r1 || col == c0 || col + 1 == c1 {
+                        sides.push(PatchId { row, col });
+                    }
+                }
+            }
+            rects.push(([c0, c1], [r0, r1]));
+        }
+        group.bench_function(format!("blocks/{}", view.name), |b| {
+            b.iter_batched_ref(
+                || levels.clone(),
+                |l| geomip::refine_and_balance_blocks(l, grid, &drawn, &rects),
+                BatchSize::SmallInput,
+            )
+        });
+        group.bench_function(format!("side_patches/{}", view.name), |b| {
+            b.iter_batched_ref(
+                || levels.clone(),
+                |l| {
+                    let beside = geomip::refine_beside(l, grid, &drawn, &sides);
+                    let lowered: Vec<PatchId> = sides
+                        .iter()
+                        .chain(&beside)
+                        .copied()
+                        .filter(|&p| usize::from(l[grid.patch_index(p)]) + 2 < count)
+                        .collect();
+                    geomip::balance_from(l, grid, &lowered);
+                },
+                BatchSize::SmallInput,
+            )
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, frame_plan, geomip_levels);
 criterion_main!(benches);
