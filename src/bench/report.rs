@@ -721,9 +721,10 @@ on different hills, and its error is large even when both surfaces are close: su
 counted as they are, never filtered out.\n\n\
 **Speed.** `gpu_ms` is the time between timestamps written before and after the terrain draw, \
 the median of {TIMED_FRAMES} frames after {WARM_UP} untimed ones for a fixed view, and of all \
-frames but the first {WARM_UP} for the flythrough. A fixed view's frames are drawn back to \
-back, nothing read back or measured between them; its error and counts come from one more \
-frame, drawn and read back after them. A flythrough frame is timed and read back at once (the \
+frames but the first {WARM_UP} for the flythrough. A fixed view's frames are timed in \
+rounds, one frame of every row (brute included) a round, nothing read back or measured \
+between them, so that whatever slows the machine during the run slows every row alike; each \
+row's error and counts come from one more frame, drawn and read back after the rounds. A flythrough frame is timed and read back at once (the \
 readback is recorded after the second timestamp). {GPU_CLOCK_NOTE} `cpu_ms` is the median time to choose \
 levels, write uniforms and record the frame's commands; `lod_ms` is the level choice alone \
 (its median over the timed frames), and `lod_ms_max` its largest in any frame of the row, \

@@ -557,48 +557,28 @@ impl<'a> Bench<'a> {
         )?)
     }
 
-    /// Renders `config` `repeats` times from `camera`; timings of samples
-    /// past the warm-up go into `gathered`. With more than one repeat the
-    /// timed frames run back to back, nothing read back or measured
-    /// between them, and one more frame is drawn and read back for the
-    /// error and the counts; a single repeat is timed and read back at once.
-    #[allow(clippy::too_many_arguments)]
-    fn render_gathered(
+    /// Renders `config` once from `camera`, reads it back and counts it,
+    /// and with `timed_sample` (its index in the configuration's
+    /// sequence) times it too: a single-frame view's or a flythrough's
+    /// frame. Fixed views with several samples time theirs in rounds
+    /// (`time_sample`) and read back one more frame here.
+    fn render_counted(
         &mut self,
         camera: &Camera,
         config: &Config,
         levels: Option<&[u8]>,
-        first_sample: usize,
-        repeats: usize,
+        timed_sample: Option<usize>,
         gathered: &mut Gathered,
-        progress: &mut dyn Progress,
-        message: &str,
     ) -> anyhow::Result<HeadlessFrame> {
-        let mut timed = Vec::with_capacity(repeats);
-        if repeats > 1 {
-            for _ in 0..repeats {
-                timed.push(self.time(camera, config, levels)?);
-                self.gather_choice(config, timed.last().and_then(|f| f.lod_ms), gathered);
-                progress.advance(message);
-            }
-        }
         let frame = self.render(camera, config, levels)?;
         self.gather_choice(config, frame.lod_ms, gathered);
-        progress.advance(message);
-        if repeats == 1 {
-            timed.push(TimedFrame {
+        if let Some(sample) = timed_sample {
+            let timed = TimedFrame {
                 measurements: frame.measurements,
                 cpu_ms: frame.cpu_ms,
                 lod_ms: frame.lod_ms,
-            });
-        }
-        for (r, t) in timed.iter().enumerate() {
-            if first_sample + r < self.warm_up {
-                continue;
-            }
-            gathered.timed.push(t.figures());
-            let culling = t.measurements.occlusion.and_then(|o| o.culling_ms);
-            gathered.culling_ms.extend(culling);
+            };
+            self.keep_timed(sample, &timed, gathered);
         }
         gathered.counted.push(frame.figures());
         if let Some(s) = frame.measurements.statistics {
@@ -612,6 +592,33 @@ impl<'a> Bench<'a> {
                 .push(u64::from(o.patches_occluded));
         }
         Ok(frame)
+    }
+
+    /// Times one frame of `config` from `camera`, nothing read back: sample
+    /// `sample` of its sequence, kept past the warm-up.
+    fn time_sample(
+        &mut self,
+        camera: &Camera,
+        config: &Config,
+        levels: Option<&[u8]>,
+        sample: usize,
+        gathered: &mut Gathered,
+    ) -> anyhow::Result<()> {
+        let timed = self.time(camera, config, levels)?;
+        self.gather_choice(config, timed.lod_ms, gathered);
+        self.keep_timed(sample, &timed, gathered);
+        Ok(())
+    }
+
+    /// A timed frame's figures, unless sample `sample` of its sequence is
+    /// a warm-up one.
+    fn keep_timed(&self, sample: usize, timed: &TimedFrame, gathered: &mut Gathered) {
+        if sample < self.warm_up {
+            return;
+        }
+        gathered.timed.push(timed.figures());
+        let culling = timed.measurements.occlusion.and_then(|o| o.culling_ms);
+        gathered.culling_ms.extend(culling);
     }
 
     /// What the level choice of `config`'s last frame expected, and took.
@@ -718,21 +725,27 @@ impl<'a> Bench<'a> {
             } else {
                 name.to_string()
             };
+            // Several samples of a fixed view are timed in rounds, one frame
+            // of every configuration (brute included) a round, so that
+            // whatever slows the machine down over the run slows every row
+            // alike, and the rows' ratios hold; each configuration then
+            // draws one more frame, read back for its error and counts. A
+            // single sample is timed as it is read back.
+            let rounds = repeats > 1;
+            let timed_sample = (!rounds).then_some(first_sample);
             // The reference first; its own error row is measured too (0).
             let brute = gathered
                 .iter()
                 .position(|(c, _)| *c == Config::Brute)
                 .expect("brute is always configured");
-            let reference = self.render_gathered(
+            let reference = self.render_counted(
                 camera,
                 &Config::Brute,
                 None,
-                first_sample,
-                repeats,
+                timed_sample,
                 &mut gathered[brute].1,
-                progress,
-                &message,
             )?;
+            progress.advance(&message);
             let reference_view = DepthView::of(&reference);
             let k = f64::from(reference.view.pixels_per_radian);
             gathered[brute]
@@ -758,6 +771,38 @@ impl<'a> Bench<'a> {
                     &message,
                 )?
             };
+            let levels_of = |config: &Config| match config {
+                Config::Oracle(t) => {
+                    let i = oracle_taus.iter().position(|x| x == t).expect("listed");
+                    Some(oracle[i].as_slice())
+                }
+                _ => None,
+            };
+            // A fixed view is a camera cut for an occluded row: its first
+            // frame starts from the last view's visibility. That frame is
+            // compared too, and not timed.
+            let mut cuts: Vec<Option<HeadlessFrame>> = Vec::with_capacity(gathered.len());
+            for (config, g) in gathered.iter_mut() {
+                let cut = match config.occlusion() && cameras.len() == 1 {
+                    true => Some(self.render(camera, config, levels_of(config))?),
+                    false => None,
+                };
+                if let Some(cut) = &cut {
+                    progress.advance(&message);
+                    if let Some(ms) = cut.lod_ms {
+                        g.lod_ms_max = Some(g.lod_ms_max.map_or(ms, |m| m.max(ms)));
+                    }
+                }
+                cuts.push(cut);
+            }
+            if rounds {
+                for r in 0..repeats {
+                    for (config, g) in gathered.iter_mut() {
+                        self.time_sample(camera, config, levels_of(config), first_sample + r, g)?;
+                        progress.advance(&message);
+                    }
+                }
+            }
             // The last image of each configuration an occluded one must
             // equal, from this camera.
             let mut unoccluded: Vec<(Config, Vec<u8>)> = Vec::new();
@@ -768,38 +813,13 @@ impl<'a> Bench<'a> {
                 }
                 seen.iter().filter(|&&s| s).count() as u64
             };
-            for (config, g) in gathered.iter_mut() {
-                let levels = match config {
-                    Config::Brute => continue,
-                    Config::Oracle(t) => {
-                        let i = oracle_taus.iter().position(|x| x == t).expect("listed");
-                        Some(oracle[i].as_slice())
-                    }
-                    _ => None,
-                };
-                // A fixed view is a camera cut for an occluded row: its
-                // first frame starts from the last view's visibility. That
-                // frame is compared too, and not timed.
-                let cut = match config.occlusion() && cameras.len() == 1 {
-                    true => Some(self.render(camera, config, levels)?),
-                    false => None,
-                };
-                if let Some(cut) = &cut {
-                    progress.advance(&message);
-                    if let Some(ms) = cut.lod_ms {
-                        g.lod_ms_max = Some(g.lod_ms_max.map_or(ms, |m| m.max(ms)));
-                    }
+            for ((config, g), cut) in gathered.iter_mut().zip(&cuts) {
+                if *config == Config::Brute {
+                    continue;
                 }
-                let frame = self.render_gathered(
-                    camera,
-                    config,
-                    levels,
-                    first_sample,
-                    repeats,
-                    g,
-                    progress,
-                    &message,
-                )?;
+                let levels = levels_of(config);
+                let frame = self.render_counted(camera, config, levels, timed_sample, g)?;
+                progress.advance(&message);
                 g.errors
                     .add(&pixel_errors(&DepthView::of(&frame), &reference_view, k));
                 if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
