@@ -18,7 +18,7 @@ use vkterrain::lod::view::Tau;
 use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
-use vkterrain::terrain::{ErrorTable, Heightmap, PatchId, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchId, Terrain, TerrainInfo};
 
 const SIZE: usize = 4097;
 
@@ -114,11 +114,15 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-fn frame_plan(c: &mut Criterion) {
-    let scene = Scene::default_scene();
-    let terrain = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)
+/// The default scene's terrain, held whole.
+fn default_scene_terrain() -> Terrain {
+    LoadedScene::load(&Scene::default_scene(), Loading::WHOLE_TERRAIN)
         .expect("the default scene loads")
-        .terrain;
+        .terrain
+}
+
+fn frame_plan(c: &mut Criterion) {
+    let terrain = default_scene_terrain();
     let (table, _) = terrain.error_tables();
     let sight = terrain.sight_table();
     let hierarchy = Hierarchy::new(&terrain, table);
@@ -144,12 +148,9 @@ fn frame_plan(c: &mut Criterion) {
 /// The geomip path's levels after its plan: each block's patches at its
 /// level, then culled patches beside drawn ones refined and the levels
 /// balanced, by `refine_and_balance_blocks` and, in the same run, by
-/// `refine_beside` and `balance_from` from every patch on a block's side.
+/// `refine_and_balance` from every patch on a block's side.
 fn geomip_levels(c: &mut Criterion) {
-    let scene = Scene::default_scene();
-    let terrain = LoadedScene::load(&scene, Loading::WHOLE_TERRAIN)
-        .expect("the default scene loads")
-        .terrain;
+    let terrain = default_scene_terrain();
     let (table, _) = terrain.error_tables();
     let hierarchy = Hierarchy::new(&terrain, table);
     let grid = terrain.grid();
@@ -194,16 +195,7 @@ fn geomip_levels(c: &mut Criterion) {
         group.bench_function(format!("side_patches/{}", view.name), |b| {
             b.iter_batched_ref(
                 || levels.clone(),
-                |l| {
-                    let beside = geomip::refine_beside(l, grid, &drawn, &sides);
-                    let lowered: Vec<PatchId> = sides
-                        .iter()
-                        .chain(&beside)
-                        .copied()
-                        .filter(|&p| usize::from(l[grid.patch_index(p)]) + 2 < count)
-                        .collect();
-                    geomip::balance_from(l, grid, &lowered);
-                },
+                |l| geomip::refine_and_balance(l, grid, &drawn, &sides),
                 BatchSize::SmallInput,
             )
         });

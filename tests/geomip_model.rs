@@ -338,6 +338,7 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
     assert!(interior >= 8, "{interior} patches inside blocks");
     let mut every = levels.clone();
     let mut by_blocks = levels.clone();
+    let mut by_sides = levels.clone();
     refine_beside_drawn(&mut every, &grid, &drawn);
     balance(&mut every, &grid);
     let beside = refine_beside(&mut levels, &grid, &drawn, &edges);
@@ -352,6 +353,9 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
         .collect();
     refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects);
     assert_eq!(by_blocks, every);
+    // So does balancing only from the sides finer than the coarsest but one.
+    refine_and_balance(&mut by_sides, &grid, &drawn, &edges);
+    assert_eq!(by_sides, every);
     // Something moved: culled patches were refined, and balancing lowered
     // patches beyond them.
     assert!(every.iter().filter(|&&l| l < 4).count() > drawn.iter().filter(|&&d| d).count());

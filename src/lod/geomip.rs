@@ -297,6 +297,23 @@ pub fn refine_beside(
     lowered
 }
 
+/// `refine_beside` from `edges`, then `balance_from` the edges and the
+/// patches it refined, each only where it is at least two levels finer
+/// than the coarsest (a coarser one lowers no neighbour): the levels of
+/// `refine_beside_drawn` and `balance` where every patch but those drawn
+/// is at the coarsest.
+pub fn refine_and_balance(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool], edges: &[PatchId]) {
+    let count = level_count(grid.cells_per_patch());
+    let beside = refine_beside(levels, grid, drawn, edges);
+    let lowered: Vec<PatchId> = edges
+        .iter()
+        .chain(&beside)
+        .copied()
+        .filter(|&p| usize::from(levels[grid.patch_index(p)]) + 2 < count)
+        .collect();
+    balance_from(levels, grid, &lowered);
+}
+
 /// `refine_beside` and `balance_from` for patches drawn in blocks that
 /// each share one level (`blocks`: columns and rows of patches, end
 /// exclusive, each block's patches at its level in `levels`), the rest at
@@ -343,23 +360,15 @@ fn for_each_beyond(
     &([c0, c1], [r0, r1]): &([usize; 2], [usize; 2]),
     mut f: impl FnMut(usize, PatchId),
 ) {
-    let cols = grid.patch_cols();
-    let mut column = |col: usize| {
-        for row in r0..r1 {
-            f(row * cols + col, PatchId { row, col });
-        }
-    };
+    let mut visit = |id: PatchId| f(grid.patch_index(id), id);
+    let mut column = |col: usize| (r0..r1).for_each(|row| visit(PatchId { row, col }));
     if c0 > 0 {
         column(c0 - 1);
     }
-    if c1 < cols {
+    if c1 < grid.patch_cols() {
         column(c1);
     }
-    let mut row = |row: usize| {
-        for col in c0..c1 {
-            f(row * cols + col, PatchId { row, col });
-        }
-    };
+    let mut row = |row: usize| (c0..c1).for_each(|col| visit(PatchId { row, col }));
     if r0 > 0 {
         row(r0 - 1);
     }

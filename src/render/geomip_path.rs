@@ -174,18 +174,9 @@ impl GeomipGeometry {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
                 }
-                // Every drawn patch can lower a neighbour; after the
-                // refining, only one at least two levels finer than the
-                // coarsest.
+                // Every drawn patch can lower a neighbour.
                 let drawn = drawn_flags(grid, &visible);
-                let beside = geomip::refine_beside(&mut levels, grid, &drawn, &edges);
-                let lowered: Vec<PatchId> = edges
-                    .iter()
-                    .chain(&beside)
-                    .copied()
-                    .filter(|&p| usize::from(levels[grid.patch_index(p)]) + 2 < count)
-                    .collect();
-                geomip::balance_from(&mut levels, grid, &lowered);
+                geomip::refine_and_balance(&mut levels, grid, &drawn, &edges);
                 visible
             }
             Some(pixels) => {
