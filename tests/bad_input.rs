@@ -346,6 +346,18 @@ fn missing_file() {
     .unwrap_err();
     assert!(matches!(err, HeightmapError::Missing { .. }), "{err}");
     assert!(err.to_string().contains("/nonexistent/dem.r16"));
+    // A missing file is missing whatever its name says it holds.
+    for name in ["/nonexistent/big.vkt", "/nonexistent/map.tiff"] {
+        let err = Heightmap::load(std::path::Path::new(name), &LoadOptions::default()).unwrap_err();
+        assert!(matches!(err, HeightmapError::Missing { .. }), "{err}");
+    }
+}
+
+#[test]
+fn vkt_without_a_tiled_header() {
+    let err = load_bytes("half.vkt", &[7u8; 64], &LoadOptions::default());
+    assert!(matches!(err, HeightmapError::NotTiled { .. }), "{err}");
+    assert!(err.to_string().contains("not a tiled terrain"), "{err}");
 }
 
 #[test]

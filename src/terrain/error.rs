@@ -19,6 +19,9 @@ pub enum HeightmapError {
     #[error("{path}: file is empty")]
     Empty { path: PathBuf },
 
+    #[error("{path}: not a tiled terrain: a .vkt file starts with the header that `vkterrain import` and `generate` write")]
+    NotTiled { path: PathBuf },
+
     #[error("{path}: unknown heightmap format {name:?} (expected raw8, raw16, raw16be, png, hgt or f32)")]
     UnknownFormat { path: PathBuf, name: String },
 

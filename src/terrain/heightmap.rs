@@ -77,6 +77,13 @@ impl HeightmapFormat {
             "png" => HeightmapFormat::Png,
             "hgt" => HeightmapFormat::Hgt,
             "f32" | "r32" => HeightmapFormat::F32,
+            // A tiled terrain is told by its header, not its name
+            // (`Heightmap::load`); a `.vkt` that reaches here has none.
+            "vkt" => {
+                return Err(HeightmapError::NotTiled {
+                    path: path.to_path_buf(),
+                })
+            }
             _ => {
                 return Err(HeightmapError::UnknownFormat {
                     path: path.to_path_buf(),
@@ -236,10 +243,6 @@ impl Heightmap {
     /// limits are checked against the file's length before its samples
     /// are read or allocated.
     pub fn load_raster(path: &Path, opts: &LoadOptions) -> Result<Self, HeightmapError> {
-        let format = match opts.format {
-            Some(f) => f,
-            None => HeightmapFormat::from_path(path)?,
-        };
         let io_err = |source: std::io::Error| {
             if source.kind() == std::io::ErrorKind::NotFound {
                 HeightmapError::Missing {
@@ -252,7 +255,13 @@ impl Heightmap {
                 }
             }
         };
+        // A missing file is reported as missing before its name is read
+        // for a format.
         let len = std::fs::metadata(path).map_err(io_err)?.len();
+        let format = match opts.format {
+            Some(f) => f,
+            None => HeightmapFormat::from_path(path)?,
+        };
         if len == 0 {
             return Err(HeightmapError::Empty {
                 path: path.to_path_buf(),
