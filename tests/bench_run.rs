@@ -51,6 +51,7 @@ fn a_quick_run_measures_every_configuration() {
         flythrough_frames: 3,
         single_frame: false,
         views: Vec::new(),
+        gpu_warm_ms: 0,
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 96, 64).expect("bench objects");
     let mut progress = Count(0, 0);
@@ -351,6 +352,7 @@ fn a_single_frame_run_renders_each_view_once() {
         flythrough_frames: 0,
         single_frame: true,
         views: Vec::new(),
+        gpu_warm_ms: 0,
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 64, 48).expect("bench objects");
     let mut progress = Count(0, 0);

@@ -327,6 +327,11 @@ pub struct BenchOptions {
     /// Only these views (named views and the flythrough); empty: all of
     /// them (the first named view alone with `quick`).
     pub views: Vec<String>,
+    /// Before each timed frame of a fixed view, the same frame is drawn
+    /// untimed for this long, so that a GPU that lowers its clock when
+    /// lightly loaded draws the timed one at the clock a busy application
+    /// would see (0: not drawn).
+    pub gpu_warm_ms: u32,
 }
 
 /// One configuration seen from one camera (or the whole flythrough).
@@ -448,6 +453,9 @@ pub struct Bench<'a> {
     renderers: Vec<PathRenderer>,
     /// Untimed samples at the start of each configuration's sequence.
     warm_up: usize,
+    /// How long a fixed view's frame is drawn untimed before it is timed
+    /// (`BenchOptions::gpu_warm_ms`).
+    gpu_warm: std::time::Duration,
 }
 
 impl<'a> Bench<'a> {
@@ -473,6 +481,7 @@ impl<'a> Bench<'a> {
             target_bytes: gpu.device.memory_in_use() - before,
             renderers: Vec::new(),
             warm_up: WARM_UP,
+            gpu_warm: std::time::Duration::ZERO,
         };
         for (path, occlusion) in [
             (RenderPath::Brute, false),
@@ -592,6 +601,25 @@ impl<'a> Bench<'a> {
                 .push(u64::from(o.patches_occluded));
         }
         Ok(frame)
+    }
+
+    /// Draws `config` from `camera` untimed, frame after frame, for the
+    /// run's `gpu_warm` (nothing with none): the GPU is kept busy just
+    /// before a frame is timed. The choices it makes count towards the
+    /// row's largest.
+    fn hold_clock(
+        &mut self,
+        camera: &Camera,
+        config: &Config,
+        levels: Option<&[u8]>,
+        gathered: &mut Gathered,
+    ) -> anyhow::Result<()> {
+        let start = std::time::Instant::now();
+        while start.elapsed() < self.gpu_warm {
+            let timed = self.time(camera, config, levels)?;
+            self.gather_choice(config, timed.lod_ms, gathered);
+        }
+        Ok(())
     }
 
     /// Times one frame of `config` from `camera`, nothing read back: sample
@@ -738,6 +766,9 @@ impl<'a> Bench<'a> {
                 .iter()
                 .position(|(c, _)| *c == Config::Brute)
                 .expect("brute is always configured");
+            if timed_sample.is_some() && cameras.len() == 1 {
+                self.hold_clock(camera, &Config::Brute, None, &mut gathered[brute].1)?;
+            }
             let reference = self.render_counted(
                 camera,
                 &Config::Brute,
@@ -798,6 +829,7 @@ impl<'a> Bench<'a> {
             if rounds {
                 for r in 0..repeats {
                     for (config, g) in gathered.iter_mut() {
+                        self.hold_clock(camera, config, levels_of(config), g)?;
                         self.time_sample(camera, config, levels_of(config), first_sample + r, g)?;
                         progress.advance(&message);
                     }
@@ -818,6 +850,9 @@ impl<'a> Bench<'a> {
                     continue;
                 }
                 let levels = levels_of(config);
+                if timed_sample.is_some() && cameras.len() == 1 {
+                    self.hold_clock(camera, config, levels, g)?;
+                }
                 let frame = self.render_counted(camera, config, levels, timed_sample, g)?;
                 progress.advance(&message);
                 g.errors
@@ -860,6 +895,7 @@ impl<'a> Bench<'a> {
             WARM_UP + TIMED_FRAMES
         };
         self.warm_up = if options.single_frame { 0 } else { WARM_UP };
+        self.gpu_warm = std::time::Duration::from_millis(u64::from(options.gpu_warm_ms));
         let mut views: Vec<(String, Vec<Camera>, usize)> = named_views(info)
             .into_iter()
             .map(|v| (v.name.to_string(), vec![v.camera], repeats))

@@ -54,6 +54,15 @@ pub struct BenchCmd {
     #[arg(long = "view", value_name = "NAME", value_parser = ["grazing", "overview", "valley", "flythrough"])]
     pub views: Vec<String>,
 
+    /// Before each timed frame of a fixed view, draw the same frame untimed
+    /// for this many milliseconds: for a GPU that lowers its clock when
+    /// lightly loaded (an NVIDIA data-centre card drops to a sixth of it
+    /// between one-at-a-time frames), so that rows are timed at the clock
+    /// of a busy application. The flythrough is not warmed. 0 (the
+    /// default) draws nothing extra.
+    #[arg(long, value_name = "MS", default_value = "0", value_parser = clap::value_parser!(u32).range(0..=10_000))]
+    pub gpu_warm_ms: u32,
+
     /// Frames of the flythrough (0 leaves it out).
     #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
     pub frames: usize,
@@ -295,6 +304,7 @@ fn measure(
         },
         single_frame: cmd.single_frame,
         views: cmd.views.clone(),
+        gpu_warm_ms: cmd.gpu_warm_ms,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
