@@ -197,7 +197,9 @@ pub(super) struct ChoiceBuffers {
     pub(super) merged_indices: Buffer,
     /// Patches whose error row the last frame wrote.
     written_rows: Vec<u32>,
-    /// Patches whose full-resolution bit the last frame set.
+    /// The full-resolution bits, built here and copied whole: the mapped
+    /// memory may be write-combined (device-local, host-visible), where a
+    /// read-modify-write of single words reads across the bus each time.
     full_bits: Vec<u32>,
     /// The merged nodes whose level bytes the last frame set.
     merged: Vec<MergedNode>,
@@ -257,7 +259,7 @@ impl ChoiceBuffers {
             choice,
             merged_indices,
             written_rows: Vec::new(),
-            full_bits: Vec::new(),
+            full_bits: vec![0; patches.div_ceil(32)],
             merged: Vec::new(),
             chosen: Vec::new(),
         })
@@ -307,16 +309,13 @@ impl ChoiceBuffers {
         let (merged_levels, chosen_levels) = bytes.split_at_mut(patches.div_ceil(4));
         let merged_levels: &mut [u8] = bytemuck::cast_slice_mut(merged_levels);
         let chosen_levels: &mut [u8] = bytemuck::cast_slice_mut(chosen_levels);
-        for &p in &self.full_bits {
-            bits[p as usize / 32] &= !(1 << (p % 32));
-        }
-        self.full_bits.clear();
+        self.full_bits.fill(0);
         for block in plan.blocks.iter().filter(|b| b.full_resolution) {
             for p in block.patches(grid) {
-                bits[p / 32] |= 1 << (p % 32);
-                self.full_bits.push(p as u32);
+                self.full_bits[p / 32] |= 1 << (p % 32);
             }
         }
+        bits.copy_from_slice(&self.full_bits);
         // The first patch in the low byte of each word: the bytes in
         // memory order on a little-endian host, as the shader reads them.
         let fill = |bytes: &mut [u8], (col, row, span): (u32, u32, u32), value: u8| {
