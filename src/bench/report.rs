@@ -686,10 +686,11 @@ fn results_section(w: &mut String, rows: &[Row]) {
 pub const GPU_CLOCK_NOTE: &str = "Each frame is submitted alone and waited for, as one frame in \
 flight: a GPU that lowers its clocks when lightly loaded draws it at that clock, and an absolute \
 GPU time can read several times what the same frame costs at full clock. On lavapipe ratios \
-between rows of one run are fair. On an NVIDIA GPU they are not always: an H200, sampled once a \
-second during its run, drew at 1,980 MHz in each scene's first seconds (where the grazing view's \
-brute row is drawn) and mostly at 345 MHz after, so its GPU times bound a row's cost from above \
-and its CPU times (`lod_ms`, `cpu_ms`) are the figures to compare.";
+between rows of one run are fair. An NVIDIA H100 run this way sat at 345 of its 1,980 MHz for most \
+of a run; its rows were measured with `--gpu-warm-ms 50` (each timed frame of a fixed view follows \
+50 ms of the same frame drawn untimed), under which its SM clock, sampled every 50 ms, read \
+1,980 MHz in 68 % of the samples, the rest mostly in the CPU-bound view-measure rows and the error \
+read-backs.";
 
 /// Fragment shader invocations per pixel the terrain covers.
 pub fn overdraw(r: &Row) -> Option<f64> {
