@@ -176,7 +176,7 @@ pub enum TiledError {
         what: String,
     },
 
-    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole (--max-samples raises it; streaming a terrain to the GPU a tile at a time is not built yet)")]
+    #[error("{path}: tiled terrain of {width}x{depth} samples is {samples} samples, over the limit of {limit} for loading it whole, which this command does (--max-samples raises it; the window, `render`, `soak` and `stream` read a tiled terrain a tile at a time unless given --no-streaming)")]
     TooLarge {
         path: PathBuf,
         width: u64,
