@@ -327,6 +327,14 @@ fn bench_refuses_bad_arguments() {
     );
     fail(&["bench"], "--out");
     fail(
+        &["bench", "--out", "o", "--gpu-warm-ms", "20000"],
+        "--gpu-warm-ms",
+    );
+    fail(
+        &["bench", "--out", "o", "--gpu-warm-ms=-5"],
+        "--gpu-warm-ms",
+    );
+    fail(
         &["bench", "--out", "q", "--quick", "--view", "flythrough"],
         "leave the flythrough out",
     );
