@@ -120,7 +120,9 @@ fn wall_terrain(cols: std::ops::RangeInclusive<usize>) -> Terrain {
 /// Culling goes on where it hides at least `WORTH_CULLING` of the patches
 /// in view, and sits out after a frame that hid fewer, though it hid
 /// some: a wall across the whole plain hides most of what lies behind it,
-/// a short stretch of it a narrow wedge.
+/// a short stretch of it a narrow wedge. Without timestamps, the share
+/// alone decides (with them, the frame after two culled ones is drawn
+/// unculled to be timed: `culling_is_timed_unculled_after_two_culled_frames`).
 #[test]
 fn culling_sits_out_where_it_hides_too_little_to_pay() {
     if skip_gpu() {
@@ -132,7 +134,7 @@ fn culling_sits_out_where_it_hides_too_little_to_pay() {
         ..settings(RenderPath::Tess, true)
     };
     for (cols, worth) in [(0..=128, true), (60..=67, false)] {
-        let mut scene = GpuScene::new(wall_terrain(cols.clone()), 256, 192, false);
+        let mut scene = GpuScene::without_timestamps(wall_terrain(cols.clone()), 256, 192);
         scene.render(&camera, &every_frame);
         let culled = scene.render(&camera, &every_frame);
         let found = culled
@@ -154,6 +156,37 @@ fn culling_sits_out_where_it_hides_too_little_to_pay() {
         );
         scene.finish();
     }
+}
+
+/// With timestamps, culling is also judged by its time: after two culled
+/// frames in a row, one frame that asks for culling is drawn without it,
+/// and timed (`CullingTurns`); what follows depends on the two times. The
+/// image is the same.
+#[test]
+fn culling_is_timed_unculled_after_two_culled_frames() {
+    if skip_gpu() {
+        return;
+    }
+    let camera = camera([-2.5, 5.0, 54.0], [-2.5, 20.0, -38.0], 50.0);
+    let mut scene = GpuScene::new(wall_terrain(0..=128), 256, 192, false);
+    let on = settings(RenderPath::Tess, true);
+    let frames: Vec<HeadlessFrame> = (0..3).map(|_| scene.render(&camera, &on)).collect();
+    let culled: Vec<bool> = frames
+        .iter()
+        .map(|f| f.measurements.occlusion.is_some())
+        .collect();
+    assert_eq!(culled, vec![true, true, false]);
+    assert!(frames.iter().all(|f| f.measurements.gpu_ms.is_some()));
+    let found = frames[1].measurements.occlusion.expect("culled").found;
+    assert!(found.worth_culling(), "{found:?}");
+    assert_images_match(
+        "occlusion-timed",
+        &frames[2].rgba_image(),
+        &frames[1].rgba_image(),
+        0,
+        0.0,
+    );
+    scene.finish();
 }
 
 /// Renders the ridge scene from low on the near side (row 10), looking

@@ -44,6 +44,8 @@ pub(super) struct FrameSlot {
     /// Whether the slot's last recorded frame was drawn in two passes
     /// with occlusion culling between them.
     pub(super) culled: bool,
+    /// Whether it asked for culling, culled or not (`CullingTurns`).
+    pub(super) asked_to_cull: bool,
     /// The tess path's draws this frame, (first index, index count): the
     /// runs of patches the CPU's frustum test keeps (and the error LOD
     /// does not draw at full resolution), split where the driver limits
@@ -104,6 +106,7 @@ pub(super) fn build_frames(
             merged_batches: Vec::new(),
             settings: None,
             culled: false,
+            asked_to_cull: false,
             tess_batches: Vec::new(),
             prepared: PreparedFrame::default(),
         });

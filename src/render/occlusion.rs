@@ -157,16 +157,13 @@ pub(super) struct Occlusion {
     /// otherwise (the listed draws read it through their commands).
     readers: (vk::PipelineStageFlags2, vk::AccessFlags2),
     culling: Option<Culling>,
-    /// Frames left that sit culling out (`IDLE_AFTER_NOTHING_HIDDEN`),
-    /// the eye (terrain-local) they started from, and a patch's width, the
-    /// move that ends them.
-    idle: u32,
-    idle_from: Vec3,
-    patch_width: f32,
+    /// Which frames that ask for culling get it.
+    turns: CullingTurns,
 }
 
 /// Frames that culling sits out after a culled frame that hid no patch,
-/// or too few to pay for it (`WORTH_CULLING`): its depth pyramid, patch
+/// or too few to pay for it (`WORTH_CULLING`), or that took longer than
+/// the frame drawn without it (`CullingTurns`): its depth pyramid, patch
 /// test and second pass cost what they could not save. It tries again
 /// after them, so a view that turns towards hidden ground is culled again
 /// within this many frames, and at once when the eye has moved by more
@@ -199,6 +196,148 @@ impl HiddenCount {
     /// `WORTH_CULLING` of the patches in view were hidden.
     pub fn worth_culling(&self) -> bool {
         self.hidden > 0 && self.hidden as f32 >= WORTH_CULLING * self.in_view as f32
+    }
+}
+
+/// Culled frames after which one frame that asks for culling is drawn
+/// without it, to time the frame unculled again (`CullingTurns`).
+pub const PROBE_AFTER_CULLED: u32 = 15;
+
+/// What a frame slot's last frame was, as culling's turns see it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LastFrame {
+    /// It did not ask for culling, or the slot has drawn nothing yet.
+    Unasked,
+    /// It asked for culling and was drawn in one pass (culling sat out, or
+    /// the frame timed the view unculled), taking `gpu_ms` where the
+    /// device has timestamps.
+    Plain { gpu_ms: Option<f32> },
+    /// It was culled, found `hidden`, and took `gpu_ms`.
+    Culled {
+        hidden: HiddenCount,
+        gpu_ms: Option<f32>,
+    },
+}
+
+/// Which frames that ask for occlusion culling get it. Culling pays
+/// where what it hides costs more to draw than its depth pyramid, patch
+/// test and second pass; that balance differs by device (on lavapipe a
+/// frame drawing half the patches it would have was still slower
+/// culled; on a GPU that draws the whole view in a millisecond, culling
+/// is the larger part). So besides the share of patches a culled frame
+/// found hidden (`HiddenCount::worth_culling`), culling is judged by its
+/// time: after two culled frames in a row (the first may start from
+/// another view's visibility), one frame is drawn unculled, and where
+/// the culled frame took longer than the unculled one, culling sits out
+/// `IDLE_AFTER_NOTHING_HIDDEN` frames. While culling pays, the unculled
+/// time is taken again every `PROBE_AFTER_CULLED` culled frames. Times
+/// are compared only between frames seen from within a patch's width of
+/// each other; a device without timestamps is judged by the share
+/// alone. Images are the same whichever frames are culled.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CullingTurns {
+    /// Frames left that sit culling out, the eye (terrain-local) they
+    /// started from, and a patch's width, the move that ends them.
+    idle: u32,
+    idle_from: Vec3,
+    patch_width: f32,
+    /// The last frame drawn unculled while asking for culling: its GPU
+    /// milliseconds and eye.
+    plain: Option<(f32, Vec3)>,
+    /// The last culled frame that followed another culled one: its GPU
+    /// milliseconds and eye.
+    culled: Option<(f32, Vec3)>,
+    /// Culled frames since the last one drawn unculled.
+    culled_run: u32,
+    /// The next frame that asks is drawn unculled, to be timed.
+    probe: bool,
+    /// The last frame was that one.
+    probing: bool,
+    /// The eye of the frame prepared last, which the next `look_from`
+    /// reports on.
+    last_eye: Option<Vec3>,
+}
+
+impl CullingTurns {
+    /// Turns for a terrain whose patches are `patch_width` wide.
+    pub fn new(patch_width: f32) -> Self {
+        CullingTurns {
+            idle: 0,
+            idle_from: Vec3::ZERO,
+            patch_width,
+            plain: None,
+            culled: None,
+            culled_run: 0,
+            probe: false,
+            probing: false,
+            last_eye: None,
+        }
+    }
+
+    /// A frame about to be prepared from `eye`, after `last`, the frame
+    /// prepared before it.
+    pub fn look_from(&mut self, eye: Vec3, last: LastFrame) {
+        if let Some(seen_from) = self.last_eye.replace(eye) {
+            self.judge(seen_from, last);
+        }
+        if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
+            self.idle = 0;
+        }
+    }
+
+    /// What `last`, seen from `eye`, says of culling here.
+    fn judge(&mut self, eye: Vec3, last: LastFrame) {
+        let width = self.patch_width;
+        let near = |seen: Option<(f32, Vec3)>| seen.filter(|&(_, at)| eye.distance(at) <= width);
+        match last {
+            LastFrame::Unasked => {}
+            LastFrame::Culled { hidden, gpu_ms } => {
+                self.probing = false;
+                self.culled_run += 1;
+                if !hidden.worth_culling() {
+                    self.sit_out(eye);
+                } else if let (Some(ms), true) = (gpu_ms, self.culled_run >= 2) {
+                    self.culled = Some((ms, eye));
+                    match near(self.plain) {
+                        Some((plain, _)) if ms > plain => self.sit_out(eye),
+                        Some(_) => self.probe |= self.culled_run >= PROBE_AFTER_CULLED,
+                        None => self.probe = true,
+                    }
+                }
+            }
+            LastFrame::Plain { gpu_ms } => {
+                self.culled_run = 0;
+                if let Some(ms) = gpu_ms {
+                    self.plain = Some((ms, eye));
+                    if std::mem::take(&mut self.probing)
+                        && near(self.culled).is_some_and(|(culled, _)| culled > ms)
+                    {
+                        self.sit_out(eye);
+                    }
+                }
+            }
+        }
+    }
+
+    fn sit_out(&mut self, eye: Vec3) {
+        self.idle = IDLE_AFTER_NOTHING_HIDDEN;
+        self.idle_from = eye;
+        self.probe = false;
+    }
+
+    /// Whether a frame that asks for culling gets it: not while culling
+    /// sits out (each such frame counts one off), nor when the frame is
+    /// to be timed unculled.
+    pub fn takes_turn(&mut self) -> bool {
+        if self.idle > 0 {
+            self.idle -= 1;
+            return false;
+        }
+        if std::mem::take(&mut self.probe) {
+            self.probing = true;
+            return false;
+        }
+        true
     }
 }
 
@@ -268,9 +407,7 @@ impl Occlusion {
             patches,
             readers,
             culling,
-            idle: 0,
-            idle_from: Vec3::ZERO,
-            patch_width: patch_width(terrain),
+            turns: CullingTurns::new(patch_width(terrain)),
         })
     }
 
@@ -280,28 +417,15 @@ impl Occlusion {
     }
 
     /// A frame about to be prepared from `eye`, and what the slot's last
-    /// frame found hidden where it was culled (`hidden`). Too little
-    /// hidden to pay for culling (`HiddenCount::worth_culling`), and
-    /// culling sits out the next `IDLE_AFTER_NOTHING_HIDDEN` frames that
-    /// ask for it, from here; an eye more than a patch's width from there
-    /// ends them.
-    pub(super) fn look_from(&mut self, eye: Vec3, hidden: Option<HiddenCount>) {
-        if hidden.is_some_and(|h| !h.worth_culling()) {
-            self.idle = IDLE_AFTER_NOTHING_HIDDEN;
-            self.idle_from = eye;
-        } else if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
-            self.idle = 0;
-        }
+    /// frame was (`CullingTurns::look_from`).
+    pub(super) fn look_from(&mut self, eye: Vec3, last: LastFrame) {
+        self.turns.look_from(eye, last);
     }
 
-    /// Whether a frame that asks for culling gets it: not while culling
-    /// sits out (each such frame counts one off).
+    /// Whether a frame that asks for culling gets it
+    /// (`CullingTurns::takes_turn`).
     pub(super) fn takes_turn(&mut self) -> bool {
-        if self.idle > 0 {
-            self.idle -= 1;
-            return false;
-        }
-        true
+        self.turns.takes_turn()
     }
 
     /// Points slot `slot`'s set at `target`'s depth and sizes its pyramid
@@ -771,6 +895,109 @@ fn not_built() -> RenderError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    const WORTH: HiddenCount = HiddenCount {
+        in_view: 100,
+        hidden: 40,
+    };
+
+    /// Which of `frames` frames from `eye` are culled, when a culled frame
+    /// finds `hidden` and takes `culled_ms`, and an unculled one takes
+    /// `plain_ms` (None: no timestamps). The turns are asked as the
+    /// renderer asks them: the last frame told, then this one's turn.
+    fn culled_frames(
+        turns: &mut CullingTurns,
+        eye: Vec3,
+        frames: usize,
+        (hidden, culled_ms, plain_ms): (HiddenCount, Option<f32>, Option<f32>),
+    ) -> Vec<bool> {
+        let mut last = LastFrame::Unasked;
+        (0..frames)
+            .map(|_| {
+                turns.look_from(eye, last);
+                let culled = turns.takes_turn();
+                last = match culled {
+                    true => LastFrame::Culled {
+                        hidden,
+                        gpu_ms: culled_ms,
+                    },
+                    false => LastFrame::Plain { gpu_ms: plain_ms },
+                };
+                culled
+            })
+            .collect()
+    }
+
+    #[test]
+    fn culling_that_pays_in_time_goes_on_and_is_timed_unculled_now_and_then() {
+        let mut turns = CullingTurns::new(10.0);
+        let frames = culled_frames(&mut turns, Vec3::ZERO, 40, (WORTH, Some(5.0), Some(8.0)));
+        // Two culled frames, one timed unculled, then PROBE_AFTER_CULLED
+        // culled frames between unculled ones.
+        let plain: Vec<usize> = (0..40).filter(|&i| !frames[i]).collect();
+        assert_eq!(plain, vec![2, 18, 34], "{frames:?}");
+    }
+
+    #[test]
+    fn culling_slower_than_drawing_everything_sits_out() {
+        let mut turns = CullingTurns::new(10.0);
+        let frames = culled_frames(&mut turns, Vec3::ZERO, 40, (WORTH, Some(9.0), Some(8.0)));
+        // Culled twice, timed unculled, then it sits out; it tries again
+        // after IDLE_AFTER_NOTHING_HIDDEN frames, with two culled frames,
+        // compared with the unculled time it holds.
+        let culled: Vec<usize> = (0..40).filter(|&i| frames[i]).collect();
+        let retry = 3 + IDLE_AFTER_NOTHING_HIDDEN as usize;
+        assert_eq!(
+            culled,
+            vec![0, 1, retry, retry + 1, retry + 17, retry + 18],
+            "{frames:?}"
+        );
+    }
+
+    #[test]
+    fn without_timestamps_the_share_alone_decides() {
+        let mut turns = CullingTurns::new(10.0);
+        let frames = culled_frames(&mut turns, Vec3::ZERO, 40, (WORTH, None, None));
+        assert!(frames.iter().all(|&c| c), "{frames:?}");
+        let few = HiddenCount {
+            in_view: 100,
+            hidden: 10,
+        };
+        let mut turns = CullingTurns::new(10.0);
+        let frames = culled_frames(&mut turns, Vec3::ZERO, 20, (few, None, None));
+        let culled: Vec<usize> = (0..20).filter(|&i| frames[i]).collect();
+        assert_eq!(culled, vec![0, 1 + IDLE_AFTER_NOTHING_HIDDEN as usize]);
+    }
+
+    #[test]
+    fn times_from_elsewhere_are_not_compared() {
+        // Sitting out at one place, then a cut: the new view culls at once,
+        // and its culled frames are not judged by the old unculled time.
+        let mut turns = CullingTurns::new(10.0);
+        culled_frames(&mut turns, Vec3::ZERO, 4, (WORTH, Some(9.0), Some(8.0)));
+        assert!(turns.idle > 0);
+        let far = Vec3::new(25.0, 0.0, 0.0);
+        let frames = culled_frames(&mut turns, far, 4, (WORTH, Some(5.0), Some(1.0)));
+        assert_eq!(frames, vec![true, true, false, false], "{frames:?}");
+        // The frame before a cut is reported from the eye that drew it:
+        // its unculled time stays there, and the new view, culled
+        // cheaper than that, goes on culling.
+        let mut turns = CullingTurns::new(10.0);
+        culled_frames(&mut turns, Vec3::ZERO, 4, (WORTH, Some(9.0), Some(2.0)));
+        turns.look_from(far, LastFrame::Plain { gpu_ms: Some(2.0) });
+        let mut culled = Vec::new();
+        for _ in 0..3 {
+            culled.push(turns.takes_turn());
+            turns.look_from(
+                far,
+                LastFrame::Culled {
+                    hidden: WORTH,
+                    gpu_ms: Some(5.0),
+                },
+            );
+        }
+        assert_eq!(culled, vec![true, true, false], "probed, not sat out");
+    }
 
     #[test]
     fn pyramid_levels_halve_rounding_up_down_to_one_texel() {

@@ -34,7 +34,7 @@ use ash::vk;
 use super::appearance::GpuAppearance;
 use super::frame::{build_frames, DescriptorPlan, FrameSlot};
 use super::geomip_path::GeomipGeometry;
-use super::occlusion::Occlusion;
+use super::occlusion::{LastFrame, Occlusion};
 use super::pipelines::{
     build_pipelines, create_culled_pipeline, create_sky_pipeline, CulledPipelines, PathPipelines,
     PipelineTarget,
@@ -531,13 +531,19 @@ impl TerrainRenderer {
             });
         }
         self.frames[slot].settings = Some(*settings);
-        // What this slot's last frame found hidden, if it was culled: it
-        // completed before this one is prepared.
-        let hidden = match self.frames[slot].culled {
-            true => Some(self.occlusion.hidden(slot)?),
-            false => None,
+        // What this slot's last frame found hidden, if it was culled, and
+        // its GPU time: it completed before this one is prepared.
+        let last = &self.frames[slot];
+        let gpu_ms = || -> Result<Option<f32>> { Ok(last.queries.gpu_ms()?.map(|ms| ms as f32)) };
+        let last = match (last.culled, last.asked_to_cull) {
+            (true, _) => LastFrame::Culled {
+                hidden: self.occlusion.hidden(slot)?,
+                gpu_ms: gpu_ms()?,
+            },
+            (false, true) => LastFrame::Plain { gpu_ms: gpu_ms()? },
+            (false, false) => LastFrame::Unasked,
         };
-        self.occlusion.look_from(view.eye_local, hidden);
+        self.occlusion.look_from(view.eye_local, last);
         if let Some(streamer) = self.streamer.as_mut() {
             streamer.prepare(slot, view)?;
         }

@@ -162,9 +162,9 @@ pub struct RenderSettings {
     /// device can read depth attachments.
     pub occlusion: bool,
     /// Cull every frame, also the frames after one that found too few
-    /// patches hidden to pay for culling, which otherwise sit culling out
-    /// a while (`occlusion::WORTH_CULLING`,
-    /// `occlusion::IDLE_AFTER_NOTHING_HIDDEN`): for checking culling
+    /// patches hidden, or took longer than a frame drawn without culling,
+    /// which otherwise sit culling out a while, and the frames that time
+    /// the view unculled (`occlusion::CullingTurns`): for checking culling
     /// itself.
     pub occlusion_every_frame: bool,
     /// Draw the patches occlusion culled over the frame, in one colour

@@ -102,6 +102,27 @@ impl GpuScene {
         Self::on(gpu, terrain, appearance, (width, height, wireframe, 1))
     }
 
+    /// A plain scene on a device treated as having no timestamp queries:
+    /// no GPU times, so occlusion culling's turns follow the share of
+    /// patches it hides alone (`CullingTurns`).
+    pub fn without_timestamps(terrain: Terrain, width: u32, height: u32) -> Self {
+        let gpu = Gpu::open(&GpuOptions {
+            validate: true,
+            disabled: vkterrain::gpu::DisabledFeatures {
+                timestamps: true,
+                ..Default::default()
+            },
+            ..GpuOptions::default()
+        })
+        .expect("a Vulkan device with the validation layer");
+        Self::on(
+            gpu,
+            terrain,
+            &Appearance::default(),
+            (width, height, false, 1),
+        )
+    }
+
     /// A plain scene drawn with `samples` samples per pixel.
     pub fn with_samples(terrain: Terrain, width: u32, height: u32, samples: u32) -> Self {
         let gpu = open_gpu(None);

@@ -36,12 +36,14 @@ impl TerrainRenderer {
             )));
         }
         // Culling sits out a while after a frame where it found too little
-        // hidden to pay for it (`WORTH_CULLING`, `IDLE_AFTER_NOTHING_HIDDEN`),
+        // hidden, or took longer than without it, and now and then a frame
+        // is drawn unculled to time it (`CullingTurns`),
         // unless asked to run every frame or the culled patches are shown.
-        let mut cull = settings.occlusion
+        let asked = settings.occlusion
             && settings.path != RenderPath::Brute
             && target.depth_readable
-            && self.occlusion.can_cull()
+            && self.occlusion.can_cull();
+        let mut cull = asked
             && (settings.occlusion_every_frame
                 || settings.show_culled
                 || self.occlusion.takes_turn());
@@ -91,6 +93,7 @@ impl TerrainRenderer {
             }
         }
         self.frames[slot].culled = cull;
+        self.frames[slot].asked_to_cull = asked;
         let frame = &self.frames[slot];
         let clear_color = settings.clear_color;
         frame.queries.reset(rec);
