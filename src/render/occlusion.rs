@@ -279,6 +279,12 @@ impl CullingTurns {
     pub fn look_from(&mut self, eye: Vec3, last: LastFrame) {
         if let Some(seen_from) = self.last_eye.replace(eye) {
             self.judge(seen_from, last);
+            if eye.distance(seen_from) > self.patch_width {
+                // A cut: this view starts its own run of culled frames
+                // before it is timed unculled.
+                self.probe = false;
+                self.culled_run = 0;
+            }
         }
         if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
             self.idle = 0;
@@ -997,6 +1003,20 @@ mod tests {
             );
         }
         assert_eq!(culled, vec![true, true, false], "probed, not sat out");
+        // Two culled frames here would time the next one unculled; after a
+        // cut the new view is culled first.
+        let mut turns = CullingTurns::new(10.0);
+        culled_frames(&mut turns, Vec3::ZERO, 2, (WORTH, Some(5.0), Some(8.0)));
+        let culled = LastFrame::Culled {
+            hidden: WORTH,
+            gpu_ms: Some(5.0),
+        };
+        turns.look_from(far, culled);
+        assert!(turns.takes_turn(), "the cut's first frame is culled");
+        turns.look_from(far, culled);
+        assert!(turns.takes_turn());
+        turns.look_from(far, culled);
+        assert!(!turns.takes_turn(), "then timed unculled");
     }
 
     #[test]
