@@ -761,12 +761,15 @@ impl<'a> Bench<'a> {
             // single sample is timed as it is read back.
             let rounds = repeats > 1;
             let timed_sample = (!rounds).then_some(first_sample);
+            // A fixed view's frame timed as it is read back is drawn after
+            // the warm frames (`hold_clock`); the flythrough's are not.
+            let hold_before_read = timed_sample.is_some() && cameras.len() == 1;
             // The reference first; its own error row is measured too (0).
             let brute = gathered
                 .iter()
                 .position(|(c, _)| *c == Config::Brute)
                 .expect("brute is always configured");
-            if timed_sample.is_some() && cameras.len() == 1 {
+            if hold_before_read {
                 self.hold_clock(camera, &Config::Brute, None, &mut gathered[brute].1)?;
             }
             let reference = self.render_counted(
@@ -829,8 +832,9 @@ impl<'a> Bench<'a> {
             if rounds {
                 for r in 0..repeats {
                     for (config, g) in gathered.iter_mut() {
-                        self.hold_clock(camera, config, levels_of(config), g)?;
-                        self.time_sample(camera, config, levels_of(config), first_sample + r, g)?;
+                        let levels = levels_of(config);
+                        self.hold_clock(camera, config, levels, g)?;
+                        self.time_sample(camera, config, levels, first_sample + r, g)?;
                         progress.advance(&message);
                     }
                 }
@@ -850,7 +854,7 @@ impl<'a> Bench<'a> {
                     continue;
                 }
                 let levels = levels_of(config);
-                if timed_sample.is_some() && cameras.len() == 1 {
+                if hold_before_read {
                     self.hold_clock(camera, config, levels, g)?;
                 }
                 let frame = self.render_counted(camera, config, levels, timed_sample, g)?;

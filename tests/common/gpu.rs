@@ -61,10 +61,17 @@ pub fn open_golden_gpu() -> Gpu {
 /// Opens the GPU for a test: validation on, the device named by
 /// `device` or VKTERRAIN_DEVICE (otherwise the best one).
 pub fn open_gpu(device: Option<&str>) -> Gpu {
-    Gpu::open(&GpuOptions {
-        validate: true,
+    open_gpu_with(GpuOptions {
         device: device.map(str::to_string),
         ..GpuOptions::default()
+    })
+}
+
+/// Opens the GPU for a test with `options`, validation on.
+fn open_gpu_with(options: GpuOptions) -> Gpu {
+    Gpu::open(&GpuOptions {
+        validate: true,
+        ..options
     })
     .unwrap_or_else(|e| {
         panic!(
@@ -106,15 +113,13 @@ impl GpuScene {
     /// no GPU times, so occlusion culling's turns follow the share of
     /// patches it hides alone (`CullingTurns`).
     pub fn without_timestamps(terrain: Terrain, width: u32, height: u32) -> Self {
-        let gpu = Gpu::open(&GpuOptions {
-            validate: true,
+        let gpu = open_gpu_with(GpuOptions {
             disabled: vkterrain::gpu::DisabledFeatures {
                 timestamps: true,
                 ..Default::default()
             },
             ..GpuOptions::default()
-        })
-        .expect("a Vulkan device with the validation layer");
+        });
         Self::on(
             gpu,
             terrain,
