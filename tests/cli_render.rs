@@ -404,7 +404,7 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
         .as_bytes(),
     );
     let anisotropic = anisotropic.to_str().unwrap();
-    let cases: [(&str, &[&str], &str); 6] = [
+    let cases: [(&str, &[&str], &str); 7] = [
         ("tessellation", &[], "falling back to the geomip path"),
         (
             "fill-mode-non-solid",
@@ -423,6 +423,11 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
         ),
         ("timestamps", &[], "GPU time is not measured"),
         ("sampled-depth", &[], "drawing without occlusion culling"),
+        (
+            "multi-draw-indirect",
+            &[],
+            "each patch batch is its own draw call",
+        ),
     ];
     for (feature, extra, note) in cases {
         let mut args = vec![
@@ -480,6 +485,7 @@ fn each_missing_feature_still_renders_and_says_what_is_off() {
             "pipeline-statistics" => "pipelineStatisticsQuery",
             "sampler-anisotropy" => "samplerAnisotropy",
             "sampled-depth" => "sampled depth attachments",
+            "multi-draw-indirect" => "multiDrawIndirect",
             _ => "timestamps",
         };
         assert!(missing.contains(name), "{feature}: {missing}");

@@ -72,6 +72,66 @@ fn flythrough_matches(samples: u32, frames: usize) {
     scene.finish();
 }
 
+/// The tess path's batches drawn in one indirect call (multiDrawIndirect)
+/// and one call each give the same frames, culled and unculled, with the
+/// error LOD and the distance LOD, along a flythrough.
+#[test]
+fn batches_drawn_in_one_call_match_batches_drawn_one_by_one() {
+    if skip_gpu() {
+        return;
+    }
+    let terrain = || dem_terrain(16, DVec2::ZERO);
+    let cameras = flythrough(terrain().info(), 96);
+    let mut at_once = GpuScene::new(terrain(), 320, 180, false);
+    assert!(
+        at_once.gpu().device.caps.multi_draw_indirect,
+        "this check needs a device with multiDrawIndirect"
+    );
+    let mut one_by_one = GpuScene::without(
+        vkterrain::gpu::DisabledFeatures {
+            multi_draw_indirect: true,
+            ..Default::default()
+        },
+        terrain(),
+        (320, 180),
+    );
+    assert!(!one_by_one.gpu().device.caps.multi_draw_indirect);
+    let mut culled = 0;
+    for (i, camera) in cameras.iter().step_by(12).enumerate() {
+        for lod_metric in [LodMetric::Error(1.0), LodMetric::Distance] {
+            for occlusion_every_frame in [false, true] {
+                let settings = RenderSettings {
+                    lod_metric,
+                    occlusion: occlusion_every_frame,
+                    occlusion_every_frame,
+                    ..settings(RenderPath::Tess, false)
+                };
+                let a = at_once.render(camera, &settings);
+                let b = one_by_one.render(camera, &settings);
+                culled += u32::from(a.measurements.occlusion.is_some());
+                assert_eq!(
+                    a.figures().triangles,
+                    b.figures().triangles,
+                    "frame {i}, {lod_metric:?}"
+                );
+                assert_images_match(
+                    &format!("batches-{lod_metric:?}-{occlusion_every_frame}-frame{i}"),
+                    &a.rgba_image(),
+                    &b.rgba_image(),
+                    0,
+                    0.0,
+                );
+            }
+        }
+    }
+    assert_eq!(
+        culled, 16,
+        "every frame asked to cull every frame was culled"
+    );
+    at_once.finish();
+    one_by_one.finish();
+}
+
 #[test]
 fn occlusion_culling_changes_no_pixel_along_a_flythrough_with_a_cut() {
     flythrough_matches(1, 12);

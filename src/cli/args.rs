@@ -279,6 +279,8 @@ pub enum Feature {
     Timestamps,
     /// Sampled depth attachments: no occlusion culling.
     SampledDepth,
+    /// multiDrawIndirect: each patch batch is its own draw call.
+    MultiDrawIndirect,
 }
 
 /// Features to treat as missing, to run the fallbacks on any device.
@@ -386,6 +388,7 @@ impl FeatureArgs {
             sampler_anisotropy: off(Feature::SamplerAnisotropy),
             timestamps: off(Feature::Timestamps),
             sampled_depth: off(Feature::SampledDepth),
+            multi_draw_indirect: off(Feature::MultiDrawIndirect),
         }
     }
 }

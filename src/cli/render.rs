@@ -655,6 +655,10 @@ pub fn info(cmd: InfoCmd, out: &mut dyn Write) -> Result<()> {
             "sampled depth attachments (occlusion culling)",
             !caps.occlusion_sample_counts.is_empty(),
         ),
+        (
+            "multiDrawIndirect (a frame's patch batches in one draw call)",
+            caps.multi_draw_indirect,
+        ),
     ];
     let mut used = vec!["dynamicRendering", "synchronization2"];
     used.extend(optional.iter().filter(|o| o.1).map(|o| o.0));

@@ -595,6 +595,25 @@ impl<'a> Recorder<'a> {
         };
     }
 
+    /// `count` consecutive commands from `offset` in one call: the device
+    /// must have multiDrawIndirect enabled where `count` > 1, and
+    /// `count` must not pass its maxDrawIndirectCount.
+    pub fn draw_indexed_indirect_many(&self, buffer: &Buffer, offset: u64, count: u32) {
+        let stride = std::mem::size_of::<vk::DrawIndexedIndirectCommand>() as u32;
+        // SAFETY: as `draw_indexed_indirect`, with `count` commands at
+        // `offset`, tightly packed; the caller checked the feature and
+        // the limit.
+        unsafe {
+            self.device.ash().cmd_draw_indexed_indirect(
+                self.cmd,
+                buffer.raw(),
+                offset,
+                count,
+                stride,
+            )
+        };
+    }
+
     pub fn draw_indexed(&self, first_index: u32, index_count: u32) {
         // SAFETY: geometry and pipeline are bound, inside rendering; the
         // caller keeps the range inside the index buffer.

@@ -26,6 +26,10 @@ pub struct Capabilities {
     /// Anisotropic texture filtering (enabled when present; for textured
     /// materials).
     pub sampler_anisotropy: bool,
+    /// multiDrawIndirect: one indirect draw call reads many commands
+    /// (at most `max_draw_indirect_count`).
+    pub multi_draw_indirect: bool,
+    pub max_draw_indirect_count: u32,
     /// Nanoseconds per timestamp tick, when the graphics queue has
     /// timestamps.
     pub timestamp_period_ns: Option<f32>,
@@ -196,6 +200,7 @@ pub struct DisabledFeatures {
     pub fill_mode_non_solid: bool,
     pub pipeline_statistics_query: bool,
     pub sampler_anisotropy: bool,
+    pub multi_draw_indirect: bool,
     pub timestamps: bool,
     /// Sampling depth attachments (occlusion culling).
     pub sampled_depth: bool,
@@ -208,6 +213,7 @@ impl DisabledFeatures {
         caps.fill_mode_non_solid &= !self.fill_mode_non_solid;
         caps.pipeline_statistics_query &= !self.pipeline_statistics_query;
         caps.sampler_anisotropy &= !self.sampler_anisotropy;
+        caps.multi_draw_indirect &= !self.multi_draw_indirect;
         if self.timestamps {
             caps.timestamp_period_ns = None;
         }
@@ -296,6 +302,8 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 fill_mode_non_solid: features.fill_mode_non_solid != 0,
                 pipeline_statistics_query: features.pipeline_statistics_query != 0,
                 sampler_anisotropy: features.sampler_anisotropy != 0,
+                multi_draw_indirect: features.multi_draw_indirect != 0,
+                max_draw_indirect_count: props.limits.max_draw_indirect_count,
                 timestamp_period_ns: timestamps.then_some(props.limits.timestamp_period),
                 timestamp_valid_bits: family.timestamp_valid_bits,
                 max_tessellation_level: props.limits.max_tessellation_generation_level,
@@ -385,7 +393,8 @@ impl Device {
             .tessellation_shader(caps.tessellation_shader)
             .fill_mode_non_solid(caps.fill_mode_non_solid)
             .pipeline_statistics_query(caps.pipeline_statistics_query)
-            .sampler_anisotropy(caps.sampler_anisotropy);
+            .sampler_anisotropy(caps.sampler_anisotropy)
+            .multi_draw_indirect(caps.multi_draw_indirect);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)
             .synchronization2(true);

@@ -67,26 +67,129 @@ impl DrawOrder {
     /// their nearest patch, ties in index order.
     pub fn runs(&self, patches: impl IntoIterator<Item = u32>) -> Vec<(u32, u32)> {
         let cols = self.grid.patch_cols() as u32;
+        let mut rows: Vec<(u32, u32)> = Vec::new();
+        for p in patches {
+            match rows.last_mut() {
+                Some((first, n)) if *first + *n == p && p % cols != 0 => *n += 1,
+                _ => rows.push((p, 1)),
+            }
+        }
+        self.order_runs(rows)
+    }
+
+    /// The runs of `runs`, as `runs` orders them, for the patches `marks`
+    /// holds: found a word of the grid's rows at a time, not sorted.
+    pub fn marked_runs(&self, marks: &PatchMarks) -> Vec<(u32, u32)> {
+        self.order_runs(marks.runs())
+    }
+
+    /// `rows` (each a run of consecutive patches within one row, none
+    /// touching the next in the same row), split at the eye's column and
+    /// into runs of at most `MAX_RUN`, nearest first.
+    fn order_runs(&self, rows: Vec<(u32, u32)>) -> Vec<(u32, u32)> {
+        let cols = self.grid.patch_cols() as u32;
         // The patch column the eye is over (outside the grid: its nearest).
         let eye_col = (self.eye.x / self.grid.cells_per_patch() as f64)
             .floor()
             .clamp(0.0, f64::from(cols - 1)) as u32;
-        let mut runs: Vec<(u32, u32)> = Vec::new();
-        for p in patches {
-            let joins = runs.last().is_some_and(|&(first, n)| {
-                first + n == p && p % cols != 0 && n < MAX_RUN && p % cols != eye_col
-            });
-            match joins {
-                true => runs.last_mut().expect("joins a run").1 += 1,
-                false => runs.push((p, 1)),
+        let mut keyed: Vec<(u32, (u32, u32))> = Vec::with_capacity(rows.len());
+        let mut push = |first: u32, n: u32| {
+            let key = self.key(first).min(self.key(first + n - 1));
+            keyed.push((key, (first, n)));
+        };
+        for (first, n) in rows {
+            let col = first % cols;
+            // The eye's column starts a run of its own.
+            let split = if col < eye_col && eye_col < col + n {
+                eye_col - col
+            } else {
+                n
+            };
+            for (start, len) in [(first, split), (first + split, n - split)] {
+                let mut at = 0;
+                while at < len {
+                    let take = (len - at).min(MAX_RUN);
+                    push(start + at, take);
+                    at += take;
+                }
             }
         }
-        let mut keyed: Vec<(u32, (u32, u32))> = runs
-            .into_iter()
-            .map(|(first, n)| (self.key(first).min(self.key(first + n - 1)), (first, n)))
-            .collect();
         keyed.sort_unstable();
         keyed.into_iter().map(|(_, run)| run).collect()
+    }
+}
+
+/// A set of a patch grid's patches as bits, each row of the grid starting
+/// a word: marked by rectangles, read back as each row's runs in index
+/// order, so a frame's patches are listed without sorting them.
+#[derive(Clone, Debug)]
+pub struct PatchMarks {
+    cols: usize,
+    words_per_row: usize,
+    words: Vec<u64>,
+}
+
+impl PatchMarks {
+    /// No patch of `grid` marked.
+    pub fn new(grid: &PatchGrid) -> Self {
+        let words_per_row = grid.patch_cols().div_ceil(64);
+        PatchMarks {
+            cols: grid.patch_cols(),
+            words_per_row,
+            words: vec![0; words_per_row * grid.patch_rows()],
+        }
+    }
+
+    /// Marks the patches of columns `cols[0]..cols[1]` in rows
+    /// `rows[0]..rows[1]` (within the grid).
+    pub fn mark(&mut self, [c0, c1]: [usize; 2], [r0, r1]: [usize; 2]) {
+        debug_assert!(c1 <= self.cols && r1 * self.words_per_row <= self.words.len());
+        for r in r0..r1 {
+            let row = &mut self.words[r * self.words_per_row..][..self.words_per_row];
+            let mut c = c0;
+            while c < c1 {
+                let (w, b) = (c / 64, c % 64);
+                let n = (c1 - c).min(64 - b);
+                let bits = if n == 64 {
+                    u64::MAX
+                } else {
+                    ((1u64 << n) - 1) << b
+                };
+                row[w] |= bits;
+                c += n;
+            }
+        }
+    }
+
+    /// Each row's maximal runs of marked patches, (first index, count),
+    /// in index order.
+    pub fn runs(&self) -> Vec<(u32, u32)> {
+        let mut runs = Vec::new();
+        for (r, row) in self.words.chunks_exact(self.words_per_row).enumerate() {
+            let mut c = 0;
+            while c < self.cols {
+                let (w, b) = (c / 64, c % 64);
+                let ahead = row[w] >> b;
+                if ahead == 0 {
+                    c = (w + 1) * 64;
+                    continue;
+                }
+                let start = c + ahead.trailing_zeros() as usize;
+                // The marked bits from `start` on, a word at a time.
+                let mut end = start;
+                while end < self.cols {
+                    let (w, b) = (end / 64, end % 64);
+                    let ones = ((!(row[w] >> b)).trailing_zeros() as usize).min(64 - b);
+                    end += ones;
+                    if ones < 64 - b {
+                        break;
+                    }
+                }
+                runs.push(((r * self.cols + start) as u32, (end - start) as u32));
+                c = end;
+            }
+        }
+        runs
     }
 }
 
@@ -126,6 +229,47 @@ mod tests {
             assert!(n <= MAX_RUN && f / 8 == (f + n - 1) / 8);
             assert!(!(f % 8 < 5 && 5 < f % 8 + n), "{f} {n} spans column 5");
         }
+    }
+
+    #[test]
+    fn marked_runs_are_the_runs_of_the_same_patches() {
+        // Patch sets of a 70 x 5 grid (rows wider than a word), made of
+        // rectangles, against the runs of their indices listed in order.
+        let heightmap = Heightmap::from_heights(141, 11, vec![0.0; 141 * 11]).expect("valid");
+        let info = TerrainInfo::new(heightmap, DVec2::ONE, 2, DVec2::ZERO).expect("valid");
+        let grid = info.patch_grid();
+        assert_eq!((grid.patch_cols(), grid.patch_rows()), (70, 5));
+        let mut seed = 7u64;
+        let mut next = |n: usize| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) as usize % n
+        };
+        for case in 0..200 {
+            let eye = Vec3::new(next(160) as f32 - 80.0, 5.0, next(16) as f32 - 8.0);
+            let order = DrawOrder::new(&info, &grid, eye);
+            let mut marks = PatchMarks::new(&grid);
+            let mut set = vec![false; 70 * 5];
+            for _ in 0..next(6) + 1 {
+                let (c0, r0) = (next(70), next(5));
+                let (c1, r1) = (c0 + 1 + next(70 - c0), r0 + 1 + next(5 - r0));
+                marks.mark([c0, c1], [r0, r1]);
+                for r in r0..r1 {
+                    set[r * 70 + c0..r * 70 + c1].fill(true);
+                }
+            }
+            let listed = (0..70 * 5).filter(|&p| set[p]).map(|p| p as u32);
+            assert_eq!(order.marked_runs(&marks), order.runs(listed), "case {case}");
+        }
+        // Whole rows, and runs that end on a word's last bit.
+        let order = DrawOrder::new(&info, &grid, Vec3::ZERO);
+        let mut marks = PatchMarks::new(&grid);
+        marks.mark([0, 70], [1, 2]);
+        marks.mark([10, 64], [3, 4]);
+        let listed = (70..140).chain(3 * 70 + 10..3 * 70 + 64);
+        assert_eq!(order.marked_runs(&marks), order.runs(listed));
+        assert_eq!(marks.runs(), vec![(70, 70), (220, 54)]);
     }
 
     #[test]

@@ -8,6 +8,7 @@ use ash::vk;
 
 use super::appearance::GpuAppearance;
 use super::geomip_path::GeomipDraw;
+use super::occlusion::{DrawCommand, DRAW_COMMAND_BYTES, MAX_LISTED_DRAWS};
 use super::settings::RenderSettings;
 use super::tess_path::ChoiceBuffers;
 use super::uniforms::FrameUniforms;
@@ -51,8 +52,75 @@ pub(super) struct FrameSlot {
     /// does not draw at full resolution), split where the driver limits
     /// patches per draw.
     pub(super) tess_batches: Vec<(u32, u32)>,
+    /// `tess_batches` as indirect commands, drawn in one call where the
+    /// device has multiDrawIndirect.
+    pub(super) batch_commands: BatchCommands,
     /// What `prepare` chose for this slot's frame.
     pub(super) prepared: PreparedFrame,
+}
+
+/// A frame's tess batches as indirect commands, for a device with
+/// multiDrawIndirect: one draw call then records every batch, so
+/// recording costs the same for ten batches or ten thousand (the 4097^2
+/// terrain's overview draws about 2,000). Sized when the renderer is
+/// built, for one batch a patch up to `MAX_LISTED_DRAWS`, so it never
+/// allocates during a run; a frame of more batches records them one by
+/// one.
+pub(super) struct BatchCommands {
+    buffer: Option<Buffer>,
+    capacity: usize,
+    /// Commands written for the frame, None where its batches were not
+    /// written (no multiDrawIndirect, or more than fit).
+    written: Option<u32>,
+}
+
+impl BatchCommands {
+    /// Room for `patches` commands (capped), on a device with
+    /// multiDrawIndirect; nothing otherwise.
+    fn new(device: &Device, slot: usize, patches: usize) -> Result<Self> {
+        let capacity = match device.caps.multi_draw_indirect {
+            true => patches.clamp(1, MAX_LISTED_DRAWS as usize),
+            false => 0,
+        };
+        let buffer = match capacity {
+            0 => None,
+            n => Some(device.create_host_buffer(
+                &format!("terrain.batch_commands[{slot}]"),
+                vk::BufferUsageFlags::INDIRECT_BUFFER,
+                &vec![0; n * DRAW_COMMAND_BYTES as usize],
+            )?),
+        };
+        Ok(BatchCommands {
+            buffer,
+            capacity,
+            written: None,
+        })
+    }
+
+    /// Writes `batches` ((first index, index count) each) as commands,
+    /// where they fit.
+    pub(super) fn write(&mut self, batches: &[(u32, u32)]) -> Result<()> {
+        self.written = None;
+        let Some(buffer) = self
+            .buffer
+            .as_mut()
+            .filter(|_| batches.len() <= self.capacity)
+        else {
+            return Ok(());
+        };
+        let commands: Vec<DrawCommand> = batches
+            .iter()
+            .map(|&(first, count)| DrawCommand::once(first, count))
+            .collect();
+        buffer.write(bytemuck::cast_slice(&commands))?;
+        self.written = Some(batches.len() as u32);
+        Ok(())
+    }
+
+    /// The commands written for the frame, and how many.
+    pub(super) fn written(&self) -> Option<(&Buffer, u32)> {
+        self.buffer.as_ref().zip(self.written)
+    }
 }
 
 /// What a prepared frame chose to draw and what it expects; the renderer
@@ -83,6 +151,7 @@ pub(super) fn build_frames(
     sets: &DescriptorSets,
     (heightmap, sampler): (&Image, &Sampler),
     appearance: &GpuAppearance,
+    patches: usize,
 ) -> Result<Vec<FrameSlot>> {
     let mut frames = Vec::new();
     for (i, set) in sets.iter().enumerate() {
@@ -108,6 +177,7 @@ pub(super) fn build_frames(
             culled: false,
             asked_to_cull: false,
             tess_batches: Vec::new(),
+            batch_commands: BatchCommands::new(device, i, patches)?,
             prepared: PreparedFrame::default(),
         });
     }

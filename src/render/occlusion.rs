@@ -94,13 +94,27 @@ pub struct ListedDraw {
 /// One VkDrawIndexedIndirectCommand.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
-struct DrawCommand {
+pub(super) struct DrawCommand {
     index_count: u32,
     instance_count: u32,
     first_index: u32,
     vertex_offset: i32,
     first_instance: u32,
 }
+const _: () = assert!(size_of::<DrawCommand>() == size_of::<ash::vk::DrawIndexedIndirectCommand>());
+
+impl DrawCommand {
+    /// One instance of `index_count` indices from `first_index`.
+    pub(super) fn once(first_index: u32, index_count: u32) -> Self {
+        DrawCommand {
+            index_count,
+            instance_count: 1,
+            first_index,
+            ..DrawCommand::default()
+        }
+    }
+}
+
 /// Bytes of one indirect command.
 pub const DRAW_COMMAND_BYTES: u64 = size_of::<DrawCommand>() as u64;
 const _: () = assert!(DRAW_COMMAND_BYTES == 20);

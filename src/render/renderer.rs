@@ -271,7 +271,13 @@ impl TerrainRenderer {
             "terrain.frame_set",
         )?;
         let sky = create_sky_pipeline(device, &pipeline_layout, color_format, samples)?;
-        let frames = build_frames(device, &sets, (&heightmap, &sampler), &appearance)?;
+        let frames = build_frames(
+            device,
+            &sets,
+            (&heightmap, &sampler),
+            &appearance,
+            terrain.grid().patch_count(),
+        )?;
         let no_stream = NoStream::new(device, "terrain.stream")?;
         for frame in &frames {
             no_stream.write_bindings(device, frame.set, &sampler);
@@ -606,6 +612,8 @@ impl TerrainRenderer {
                 self.frames[slot].prepared.patches_in_view = terrain.grid().patch_count()
             }
         }
+        let frame = &mut self.frames[slot];
+        frame.batch_commands.write(&frame.tess_batches)?;
         // A streamed tile drawn from a coarser page than its level needs
         // is off by up to that page's error besides the level's.
         if let Some(streamer) = &self.streamer {

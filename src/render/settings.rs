@@ -226,8 +226,8 @@ impl RenderSettings {
     }
 }
 
-/// What this device cannot measure or filter for `appearance`: notes for
-/// the user, beside those of `with_fallback`.
+/// What this device cannot measure, filter for `appearance` or draw in one
+/// call: notes for the user, beside those of `with_fallback`.
 pub fn measurement_notes(
     caps: &crate::gpu::Capabilities,
     appearance: &crate::appearance::Appearance,
@@ -242,6 +242,11 @@ pub fn measurement_notes(
     if caps.timestamp_period_ns.is_none() {
         notes.push(format!(
             "{name}: timestamp queries are unavailable, so GPU time is not measured"
+        ));
+    }
+    if !caps.multi_draw_indirect {
+        notes.push(format!(
+            "{name}: multiDrawIndirect is unavailable, so each patch batch is its own draw call"
         ));
     }
     let with_feature = crate::gpu::Capabilities {

@@ -24,7 +24,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::PipelineLayout;
 use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
-use crate::lod::order::DrawOrder;
+use crate::lod::order::{DrawOrder, PatchMarks};
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock, SightReading};
 use crate::lod::view::Tau;
@@ -387,15 +387,12 @@ fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
 /// (see `run_batches`), nearest first (`DrawOrder`).
 fn block_batches(plan: &FramePlan, order: &DrawOrder, max_patches: Option<u32>) -> Vec<(u32, u32)> {
     let grid = order.grid();
-    let mut patches: Vec<u32> = plan
-        .blocks
-        .iter()
-        .filter(|b| !b.full_resolution)
-        .flat_map(|b| b.patches(grid))
-        .map(|p| p as u32)
-        .collect();
-    patches.sort_unstable();
-    run_batches(order.runs(patches), max_patches)
+    let mut marks = PatchMarks::new(grid);
+    for block in plan.blocks.iter().filter(|b| !b.full_resolution) {
+        let (cols, rows) = block.patch_range(grid);
+        marks.mark(cols, rows);
+    }
+    run_batches(order.marked_runs(&marks), max_patches)
 }
 
 /// The tess path's draws of the patches `drawn` (indices in increasing

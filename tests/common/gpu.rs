@@ -113,11 +113,25 @@ impl GpuScene {
     /// no GPU times, so occlusion culling's turns follow the share of
     /// patches it hides alone (`CullingTurns`).
     pub fn without_timestamps(terrain: Terrain, width: u32, height: u32) -> Self {
-        let gpu = open_gpu_with(GpuOptions {
-            disabled: vkterrain::gpu::DisabledFeatures {
+        Self::without(
+            vkterrain::gpu::DisabledFeatures {
                 timestamps: true,
                 ..Default::default()
             },
+            terrain,
+            (width, height),
+        )
+    }
+
+    /// A plain scene on a device treated as lacking the `disabled`
+    /// features.
+    pub fn without(
+        disabled: vkterrain::gpu::DisabledFeatures,
+        terrain: Terrain,
+        (width, height): (u32, u32),
+    ) -> Self {
+        let gpu = open_gpu_with(GpuOptions {
+            disabled,
             ..GpuOptions::default()
         });
         Self::on(

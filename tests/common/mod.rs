@@ -83,6 +83,8 @@ pub fn test_capabilities() -> vkterrain::gpu::Capabilities {
         fill_mode_non_solid: true,
         pipeline_statistics_query: true,
         sampler_anisotropy: true,
+        multi_draw_indirect: true,
+        max_draw_indirect_count: u32::MAX,
         timestamp_period_ns: None,
         timestamp_valid_bits: 0,
         max_tessellation_level: 64,

@@ -245,13 +245,37 @@ impl TerrainRenderer {
             bytemuck::bytes_of(&phase),
         );
         rec.bind_geometry(&tess.control_points, &tess.indices);
-        for (b, &(first, count)) in frame.tess_batches.iter().enumerate() {
-            match indirect {
-                Some((commands, base)) => {
-                    rec.draw_indexed_indirect(commands, (base + b as u64) * DRAW_COMMAND_BYTES)
+        let batches = frame.tess_batches.len() as u32;
+        match (indirect, frame.batch_commands.written()) {
+            (Some((commands, base)), _) => self.draw_commands(rec, commands, base, batches),
+            (None, Some((commands, written))) => self.draw_commands(rec, commands, 0, written),
+            (None, None) => {
+                for &(first, count) in &frame.tess_batches {
+                    rec.draw_indexed(first, count);
                 }
-                None => rec.draw_indexed(first, count),
             }
+        }
+    }
+
+    /// Draws `count` consecutive indirect commands of `buffer` from
+    /// command `first`: in as few calls as maxDrawIndirectCount allows
+    /// where the device has multiDrawIndirect, one call a command
+    /// otherwise.
+    fn draw_commands(&self, rec: &Recorder, buffer: &Buffer, first: u64, count: u32) {
+        let caps = &self.device.caps;
+        let per_call = match caps.multi_draw_indirect {
+            true => caps.max_draw_indirect_count.max(1),
+            false => 1,
+        };
+        let mut drawn = 0;
+        while drawn < count {
+            let n = (count - drawn).min(per_call);
+            let offset = (first + u64::from(drawn)) * DRAW_COMMAND_BYTES;
+            match n {
+                1 => rec.draw_indexed_indirect(buffer, offset),
+                _ => rec.draw_indexed_indirect_many(buffer, offset, n),
+            }
+            drawn += n;
         }
     }
 
