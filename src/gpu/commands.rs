@@ -583,26 +583,15 @@ impl<'a> Recorder<'a> {
         unsafe { self.device.ash().cmd_draw(self.cmd, vertex_count, 1, 0, 0) };
     }
 
-    /// One indexed draw whose parameters (a VkDrawIndexedIndirectCommand)
-    /// the GPU reads from `buffer` at `offset`.
-    pub fn draw_indexed_indirect(&self, buffer: &Buffer, offset: u64) {
-        // SAFETY: geometry and pipeline are bound, inside rendering; the
-        // buffer has INDIRECT_BUFFER usage and holds a command at `offset`.
-        unsafe {
-            self.device
-                .ash()
-                .cmd_draw_indexed_indirect(self.cmd, buffer.raw(), offset, 1, 0)
-        };
-    }
-
-    /// `count` consecutive commands from `offset` in one call: the device
-    /// must have multiDrawIndirect enabled where `count` > 1, and
-    /// `count` must not pass its maxDrawIndirectCount.
-    pub fn draw_indexed_indirect_many(&self, buffer: &Buffer, offset: u64, count: u32) {
+    /// `count` indexed draws whose parameters (tightly packed
+    /// VkDrawIndexedIndirectCommands) the GPU reads from `buffer` at
+    /// `offset`: the device must have multiDrawIndirect enabled where
+    /// `count` > 1, and `count` must not pass its maxDrawIndirectCount.
+    pub fn draw_indexed_indirect(&self, buffer: &Buffer, offset: u64, count: u32) {
         let stride = std::mem::size_of::<vk::DrawIndexedIndirectCommand>() as u32;
-        // SAFETY: as `draw_indexed_indirect`, with `count` commands at
-        // `offset`, tightly packed; the caller checked the feature and
-        // the limit.
+        // SAFETY: geometry and pipeline are bound, inside rendering; the
+        // buffer has INDIRECT_BUFFER usage and holds `count` commands from
+        // `offset`; the caller checked the feature and the limit.
         unsafe {
             self.device.ash().cmd_draw_indexed_indirect(
                 self.cmd,

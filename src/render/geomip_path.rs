@@ -370,7 +370,7 @@ impl GeomipGeometry {
             );
             match indirect {
                 Some((commands, first)) => {
-                    rec.draw_indexed_indirect(commands, (first + i as u64) * DRAW_COMMAND_BYTES)
+                    rec.draw_indexed_indirect(commands, (first + i as u64) * DRAW_COMMAND_BYTES, 1)
                 }
                 None => rec.draw_indexed(draw.first, draw.count),
             }

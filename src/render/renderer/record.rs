@@ -270,11 +270,7 @@ impl TerrainRenderer {
         let mut drawn = 0;
         while drawn < count {
             let n = (count - drawn).min(per_call);
-            let offset = (first + u64::from(drawn)) * DRAW_COMMAND_BYTES;
-            match n {
-                1 => rec.draw_indexed_indirect(buffer, offset),
-                _ => rec.draw_indexed_indirect_many(buffer, offset, n),
-            }
+            rec.draw_indexed_indirect(buffer, (first + u64::from(drawn)) * DRAW_COMMAND_BYTES, n);
             drawn += n;
         }
     }
