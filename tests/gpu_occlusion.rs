@@ -430,7 +430,8 @@ fn a_new_target_is_never_taken_for_a_destroyed_one() {
 }
 
 /// Culling sits out the frames after one that found nothing hidden, then
-/// tries again, or at once after the eye moves more than a patch's width;
+/// tries again, or at once after a cut (the eye placed more than a
+/// patch's width from where it stood);
 /// where it finds hidden patches it runs every frame. Images are the same
 /// either way.
 #[test]
@@ -466,8 +467,8 @@ fn culling_sits_out_after_a_frame_that_hid_nothing() {
         0,
         0.0,
     );
-    // An eye moved by more than a patch's width (16 cells, 1.5 km here)
-    // ends the idle frames: a cut is culled at once.
+    // An eye placed more than a patch's width (16 cells, 1.5 km here)
+    // from a still one ends the idle frames: a cut is culled at once.
     let moved = camera([3000.0, 60000.0, 1.0], [3000.0, 0.0, 0.0], 40.0);
     let after_cut = scene.render(&moved, &settings(RenderPath::Tess, true));
     assert_eq!(

@@ -180,10 +180,18 @@ pub(super) struct Occlusion {
 /// the frame drawn without it (`CullingTurns`): its depth pyramid, patch
 /// test and second pass cost what they could not save. It tries again
 /// after them, so a view that turns towards hidden ground is culled again
-/// within this many frames, and at once when the eye has moved by more
-/// than a patch's width (a cut, or a fast move); images are the same
-/// either way.
+/// within this many frames, and at once after a cut (the eye placed more
+/// than a patch's width away, `CUT_STEP`). A camera that keeps moving,
+/// however fast, sits the frames out: each frame's view is much like the
+/// last, and what culling found in one is the best guess for the next.
+/// Images are the same either way.
 pub const IDLE_AFTER_NOTHING_HIDDEN: u32 = 15;
+
+/// How many times as far as the frame before a cut moves the eye. A
+/// camera that flies, however fast, changes its pace gradually; one placed
+/// elsewhere moves by a patch's width or more in one frame after standing
+/// still or moving slowly.
+const CUT_STEP: f32 = 2.0;
 
 /// The share of the patches in view a culled frame must find hidden for
 /// culling to go on. Culling costs a pass over the depth, a test of every
@@ -250,11 +258,14 @@ pub enum LastFrame {
 /// alone. Images are the same whichever frames are culled.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CullingTurns {
-    /// Frames left that sit culling out, the eye (terrain-local) they
-    /// started from, and a patch's width, the move that ends them.
+    /// Frames left that sit culling out, and a patch's width: a cut, which
+    /// ends them, moves the eye farther than that and more than
+    /// `CUT_STEP` times as far as the frame before.
     idle: u32,
-    idle_from: Vec3,
     patch_width: f32,
+    /// How far the eye moved from the frame before to the frame prepared
+    /// last.
+    step: f32,
     /// The last frame drawn unculled while asking for culling: its GPU
     /// milliseconds and eye.
     plain: Option<(f32, Vec3)>,
@@ -277,8 +288,8 @@ impl CullingTurns {
     pub fn new(patch_width: f32) -> Self {
         CullingTurns {
             idle: 0,
-            idle_from: Vec3::ZERO,
             patch_width,
+            step: 0.0,
             plain: None,
             culled: None,
             culled_run: 0,
@@ -293,15 +304,19 @@ impl CullingTurns {
     pub fn look_from(&mut self, eye: Vec3, last: LastFrame) {
         if let Some(seen_from) = self.last_eye.replace(eye) {
             self.judge(seen_from, last);
-            if eye.distance(seen_from) > self.patch_width {
-                // A cut: this view starts its own run of culled frames
-                // before it is timed unculled.
+            let step = eye.distance(seen_from);
+            if step > self.patch_width {
+                // Times are compared within a patch's width: this view
+                // starts its own run of culled frames before it is timed
+                // unculled.
                 self.probe = false;
                 self.culled_run = 0;
+                if step > CUT_STEP * self.step {
+                    // A cut: what the last view found says nothing here.
+                    self.idle = 0;
+                }
             }
-        }
-        if self.idle > 0 && eye.distance(self.idle_from) > self.patch_width {
-            self.idle = 0;
+            self.step = step;
         }
     }
 
@@ -315,11 +330,11 @@ impl CullingTurns {
                 self.probing = false;
                 self.culled_run += 1;
                 if !hidden.worth_culling() {
-                    self.sit_out(eye);
+                    self.sit_out();
                 } else if let (Some(ms), true) = (gpu_ms, self.culled_run >= 2) {
                     self.culled = Some((ms, eye));
                     match near(self.plain) {
-                        Some((plain, _)) if ms > plain => self.sit_out(eye),
+                        Some((plain, _)) if ms > plain => self.sit_out(),
                         Some(_) => self.probe |= self.culled_run >= PROBE_AFTER_CULLED,
                         None => self.probe = true,
                     }
@@ -332,16 +347,15 @@ impl CullingTurns {
                     if std::mem::take(&mut self.probing)
                         && near(self.culled).is_some_and(|(culled, _)| culled > ms)
                     {
-                        self.sit_out(eye);
+                        self.sit_out();
                     }
                 }
             }
         }
     }
 
-    fn sit_out(&mut self, eye: Vec3) {
+    fn sit_out(&mut self) {
         self.idle = IDLE_AFTER_NOTHING_HIDDEN;
-        self.idle_from = eye;
         self.probe = false;
     }
 
@@ -1031,6 +1045,73 @@ mod tests {
         assert!(turns.takes_turn());
         turns.look_from(far, culled);
         assert!(!turns.takes_turn(), "then timed unculled");
+    }
+
+    /// Which of `frames` frames are culled along a straight flight whose
+    /// eye moves `step(i)` before frame `i`, each culled frame finding
+    /// `hidden`.
+    fn culled_along_flight(
+        step: impl Fn(usize) -> f32,
+        frames: usize,
+        hidden: HiddenCount,
+    ) -> Vec<bool> {
+        let mut turns = CullingTurns::new(10.0);
+        let mut last = LastFrame::Unasked;
+        let mut x = 0.0;
+        (0..frames)
+            .map(|i| {
+                x += if i == 0 { 0.0 } else { step(i) };
+                turns.look_from(Vec3::new(x, 0.0, 0.0), last);
+                let culled = turns.takes_turn();
+                last = match culled {
+                    true => LastFrame::Culled {
+                        hidden,
+                        gpu_ms: Some(5.0),
+                    },
+                    false => LastFrame::Plain { gpu_ms: Some(8.0) },
+                };
+                culled
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_moving_camera_sits_culling_out_however_fast_it_moves() {
+        let few = HiddenCount {
+            in_view: 100,
+            hidden: 10,
+        };
+        let idle = IDLE_AFTER_NOTHING_HIDDEN as usize;
+        // A third of a patch's width a frame, two widths a frame, and a
+        // pace about a patch's width that jumps every other frame: the eye
+        // passes many patches during the sit-out, which still ends on its
+        // count alone. (The fast flight's first move, from a still eye, is
+        // a cut, and culls once more.)
+        let about_a_width = |i: usize| if i % 2 == 0 { 9.5 } else { 10.5 };
+        let flights: [(&dyn Fn(usize) -> f32, usize); 3] =
+            [(&|_| 3.0, 0), (&|_| 20.0, 1), (&about_a_width, 1)];
+        for (n, (step, first)) in flights.into_iter().enumerate() {
+            let frames = culled_along_flight(step, 40, few);
+            let culled: Vec<usize> = (0..40).filter(|&i| frames[i]).collect();
+            let after = |k: usize| first + k * (idle + 1);
+            let mut expected = vec![0, after(0), after(1), after(2)];
+            expected.dedup();
+            assert_eq!(culled, expected, "flight {n}: {frames:?}");
+        }
+        // A cut during the sit-out ends it.
+        let cut_at_5 = |i: usize| if i == 5 { 100.0 } else { 3.0 };
+        let frames = culled_along_flight(cut_at_5, 8, few);
+        assert_eq!(
+            frames,
+            [true, false, false, false, false, true, false, false]
+        );
+        // Where culling pays, a fast flight culls every frame: it never
+        // stays within a patch's width to be timed unculled.
+        let frames = culled_along_flight(|_| 20.0, 40, WORTH);
+        assert!(frames.iter().all(|&c| c), "{frames:?}");
+        // Slowly, it is timed unculled after two culled frames.
+        let frames = culled_along_flight(|_| 3.0, 40, WORTH);
+        assert!(!frames[2], "{frames:?}");
     }
 
     #[test]
