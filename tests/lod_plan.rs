@@ -11,7 +11,7 @@ use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs, SightRe
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
-use vkterrain::terrain::sight::{Block, LatticePoint, SightTable, LEVELS};
+use vkterrain::terrain::sight::{Block, BlockShares, LatticePoint, SightTable, LEVELS};
 use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
 
 fn view_of(terrain: &Terrain, eye: DVec3, target: DVec3, tau: f32) -> LodView {
@@ -261,9 +261,10 @@ fn the_share_only_coarsens_the_bounds_choice() {
     assert!(chosen > 0, "the share coarsened nothing");
 }
 
-/// A block's entry adds its patches' areas and keeps their largest errors:
-/// seen from anywhere, it puts at least as large a share of its pixels
-/// over any error as each of them. The cache's bytes give the same table.
+/// A block's entry adds its patches' areas and, read by its largest
+/// shares, keeps their largest errors: seen from anywhere, it puts at least
+/// as large a share of its pixels over any error as each of them. The
+/// cache's bytes give the same table.
 #[test]
 fn block_entries_bound_their_patches_and_survive_the_cache() {
     let terrain = dem_terrain(16, DVec2::ZERO);
@@ -283,7 +284,7 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
     ] {
         for (col, row) in [(0usize, 0usize), (2, 4), (4, 2)] {
             let block = Block { level: 1, col, row };
-            let Some(whole) = sight.view(block, &at, 5.0) else {
+            let Some(whole) = sight.view(block, &at, 5.0, BlockShares::Largest) else {
                 continue;
             };
             let children: Vec<_> = [(0, 0), (1, 0), (0, 1), (1, 1)]
@@ -293,7 +294,11 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
                     row: 2 * row + dr,
                 })
                 .iter()
-                .map(|&b| sight.view(b, &at, 5.0).expect("a whole block's patch"))
+                .map(|&b| {
+                    sight
+                        .view(b, &at, 5.0, BlockShares::Largest)
+                        .expect("a whole block's patch")
+                })
                 .collect();
             let area: f32 = children.iter().map(|c| c.area()).sum();
             assert!((whole.area() - area).abs() <= 1e-3 * area, "{block:?}");
@@ -310,6 +315,72 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
         }
     }
     assert!(compared >= 6);
+}
+
+/// Read by its pooled shares, a block of one rough patch among three flat
+/// ones puts the rough patch's own pixels over an error, within a stored
+/// share's step above them; its largest shares, which take the rough
+/// patch's share for the whole block, put more there.
+#[test]
+fn pooled_block_shares_count_a_rough_patch_for_its_own_pixels() {
+    // 33 x 33 samples in 16-cell patches: a 2x2 block; ridges run across
+    // half of the upper-left patch, the rest a plane.
+    let map = Heightmap::from_fn(33, 33, |r, c| {
+        let plane = 0.5 * c as f32 + 0.2 * r as f32;
+        match (r < 16, c < 8) {
+            (true, true) => plane + if (r + c) % 2 == 0 { 3.0 } else { 0.0 },
+            _ => plane,
+        }
+    })
+    .unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let sight = terrain.sight_table().unwrap();
+    let block = Block {
+        level: 1,
+        col: 0,
+        row: 0,
+    };
+    let patch = |col, row| Block { level: 0, col, row };
+    let (mut compared, mut below_largest) = (0, 0);
+    for at in [
+        LatticePoint::new(1.0, 0.0, 0.07),
+        LatticePoint::new(-0.3, 1.0, 0.36),
+    ] {
+        for error in [0.05, 0.2, 0.8] {
+            let read = |b, shares| sight.view(b, &at, error, shares).expect("an entry");
+            let rough = read(patch(0, 0), BlockShares::Pooled);
+            let pooled = read(block, BlockShares::Pooled);
+            let largest = read(block, BlockShares::Largest);
+            let rough_share = rough.area() / pooled.area();
+            for k in 0..3 {
+                let r = rough.over_fraction(k);
+                if r < 1e-3 {
+                    continue;
+                }
+                for flat in [patch(1, 0), patch(0, 1), patch(1, 1)] {
+                    let f = read(flat, BlockShares::Pooled).over_fraction(k);
+                    assert!(f < 1e-6, "a plane is drawn exactly at level {k}: {f}");
+                }
+                // Never below the rough patch's own pixels; at most a
+                // stored share's step (a factor of 4) above them.
+                let own = r * rough_share;
+                let p = pooled.over_fraction(k);
+                assert!(
+                    p >= own - 1e-6 && p <= 4.0 * own + 1e-6,
+                    "level {k}, error {error}: pooled {p}, the rough patch's {own}"
+                );
+                assert!(largest.over_fraction(k) >= r - 1e-6, "level {k}");
+                below_largest += usize::from(p < largest.over_fraction(k) - 1e-6);
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared >= 6, "{compared}");
+    assert!(
+        below_largest >= compared / 2,
+        "{below_largest} of {compared}"
+    );
 }
 
 /// The far remainders (patches narrower than the rest) have entries laid
@@ -338,10 +409,10 @@ fn narrower_patches_have_entries_of_their_own() {
     for (col, row, side) in narrower {
         let block = Block { level: 0, col, row };
         let flat = plane
-            .view(block, &at, 1e-3)
+            .view(block, &at, 1e-3, BlockShares::Pooled)
             .expect("a narrower patch's entry");
         let bent = curved
-            .view(block, &at, 1e-3)
+            .view(block, &at, 1e-3, BlockShares::Pooled)
             .expect("a narrower patch's entry");
         // Level k has 2^k segments; from the first reaching the smaller
         // side on, full resolution.

@@ -24,7 +24,9 @@
 //! let a share of its terrain's pixels exceed tau (`EXCEED_SHARE`): each
 //! block's pixels over tau at each coarser level are read off the view
 //! model from the direction the block is seen (its rays falling to its
-//! mean height, or for the geomip path to its bottom: `SightReading`),
+//! mean height, or for the geomip path to its bottom: `SightReading`;
+//! the tess path reads a block's shares pooled over its patches' pixels,
+//! the geomip path each share's largest over its patches: `BlockShares`),
 //! and the share is spent greedily on the blocks and levels
 //! that save the most triangles for it (the same exchange as the view
 //! measure's, on the model's figures). A patch much deeper than it is
@@ -50,7 +52,9 @@ use super::hierarchy::{Hierarchy, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::view::LodView;
 use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
-use crate::terrain::sight::{Block, BlockView, LatticePoint, SightTable, BLOCK_LEVELS};
+use crate::terrain::sight::{
+    Block, BlockShares, BlockView, LatticePoint, SightTable, BLOCK_LEVELS,
+};
 use crate::terrain::{PatchGrid, Terrain};
 
 /// Share of the frame's terrain pixels the view model's choice may put
@@ -104,6 +108,19 @@ pub enum SightReading {
     /// which leaves them a margin: on the default scene's overview at 2 px,
     /// rays landing at the mean put its p99 at 2.05 px, at the bottom 1.97.
     Template,
+}
+
+impl SightReading {
+    /// Which of a block's errors the path reads: the tess path the shares
+    /// pooled over the block's pixels; the geomip path, whose stitched
+    /// edges and glides the model does not see, each share's largest over
+    /// its patches, which keeps their margin.
+    fn shares(self) -> BlockShares {
+        match self {
+            SightReading::Tessellated => BlockShares::Pooled,
+            SightReading::Template => BlockShares::Largest,
+        }
+    }
 }
 
 /// A square of patches the frame draws one by one, all decided at once: a
@@ -395,7 +412,7 @@ pub fn plan(
         Some(sight) => read_model(
             sight,
             (&pending, &parts),
-            tau,
+            (tau, inputs.reading.shares()),
             view.viewport_pixels() as f32,
         ),
         None => (Vec::new(), 0.0),
@@ -611,7 +628,7 @@ struct Pending {
 fn read_model(
     sight: &SightTable,
     (pending, parts): (&[Pending], &[Part]),
-    tau: f32,
+    (tau, shares): (f32, BlockShares),
     viewport: f32,
 ) -> (Vec<Candidate>, f64) {
     let blocks = pending
@@ -619,7 +636,7 @@ fn read_model(
         .flat_map(|p| std::iter::repeat(p.block).take(p.parts));
     let views: Vec<Option<BlockView>> = blocks
         .zip(parts)
-        .map(|(block, part)| sight.view(block, &part.at, tau / part.scale))
+        .map(|(block, part)| sight.view(block, &part.at, tau / part.scale, shares))
         .collect();
     std::hint::black_box(views.iter().flatten().fold(0, |acc, v| acc ^ v.touch()));
     let mut frame_pixels = 0.0f64;

@@ -38,8 +38,12 @@
 //! **Blocks.** The level choice may decide a whole aligned block of 2^m x
 //! 2^m full-size patches at once (m up to `BLOCK_LEVELS`), every patch at
 //! the same level: a block's entry is its patches' pixel areas added up
-//! and, at each share, the largest of their errors, so the share of the
-//! block's pixels over an error is never more than the entry says.
+//! and two sets of errors (`BlockShares`). Pooled: at each share, the
+//! error over which that share of the block's pixels lie, its patches'
+//! pixels taken together, so a rough patch among smooth ones counts its
+//! own pixels over an error, not the whole block's. Largest: at each
+//! share the largest of its patches' errors, so no patch's share over an
+//! error is more than the entry says.
 //!
 //! Errors are stored as one byte each, on a log scale below one scale for
 //! the whole terrain (`CODES_PER_OCTAVE` to an octave), rounded up: the
@@ -67,7 +71,7 @@ const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
 /// part of its on-disk cache key.
-pub const MODEL_VERSION: u32 = 3;
+pub const MODEL_VERSION: u32 = 4;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -90,8 +94,12 @@ struct Entry {
     /// Pixel area per `K^2 / d^2` from each direction.
     area: [f32; DIRECTIONS],
     /// [direction][level][fraction] codes: a direction's levels lie
-    /// together, as a frame reads them.
+    /// together, as a frame reads them. A block's shares are pooled over
+    /// its patches' pixels (`BlockShares::Pooled`).
     codes: Vec<u8>,
+    /// A block's codes with each share its patches' largest
+    /// (`BlockShares::Largest`); None for a patch, whose are `codes`.
+    largest: Option<Vec<u8>>,
 }
 
 /// One level of blocks (level 0: the patches), row-major over
@@ -111,21 +119,28 @@ struct EntryLevel {
     area: Vec<f32>,
     /// [direction][block][level][fraction] codes.
     codes: Vec<u8>,
+    /// The same, each share its patches' largest; empty for the patches.
+    largest: Vec<u8>,
 }
 
 impl EntryLevel {
-    /// `cols` x `entries.len() / cols` blocks' entries, packed.
-    fn pack(cols: usize, entries: &[Option<Entry>]) -> Self {
+    /// `cols` x `entries.len() / cols` blocks' entries, packed; blocks of
+    /// patches (`of_blocks`) keep their largest shares too.
+    fn pack(cols: usize, entries: &[Option<Entry>], of_blocks: bool) -> Self {
         let blocks = entries.len();
         let per = LEVELS * FRACTIONS;
         let mut area = vec![0.0f32; DIRECTIONS * blocks];
         let mut codes = vec![ZERO; DIRECTIONS * blocks * per];
+        let mut largest = vec![ZERO; if of_blocks { codes.len() } else { 0 }];
         for (b, entry) in entries.iter().enumerate() {
             let Some(entry) = entry else { continue };
             for d in 0..DIRECTIONS {
                 area[d * blocks + b] = entry.area[d];
-                codes[(d * blocks + b) * per..][..per]
-                    .copy_from_slice(&entry.codes[d * per..(d + 1) * per]);
+                let at = (d * blocks + b) * per;
+                codes[at..][..per].copy_from_slice(&entry.codes[d * per..(d + 1) * per]);
+                if let Some(own) = &entry.largest {
+                    largest[at..][..per].copy_from_slice(&own[d * per..(d + 1) * per]);
+                }
             }
         }
         EntryLevel {
@@ -138,6 +153,7 @@ impl EntryLevel {
                 .collect(),
             area,
             codes,
+            largest,
         }
     }
 }
@@ -237,6 +253,7 @@ impl SightTable {
                 rect.cells_x() == n && rect.cells_z() == n
             })
             .collect();
+        let decoded = decoded_codes(scale);
         let mut built: Vec<(usize, Vec<Option<Entry>>)> = vec![(grid.patch_cols(), patches)];
         let mut rows = grid.patch_rows();
         for _ in 0..BLOCK_LEVELS {
@@ -245,6 +262,7 @@ impl SightTable {
             let (cols, below_rows) = (below_cols.div_ceil(2), rows);
             rows = rows.div_ceil(2);
             let entries = (0..cols * rows)
+                .into_par_iter()
                 .map(|b| {
                     let (c, r) = (b % cols, b / cols);
                     let child = |dc: usize, dr: usize| {
@@ -256,14 +274,15 @@ impl SightTable {
                     };
                     let children = [child(0, 0), child(1, 0), child(0, 1), child(1, 1)];
                     let children: Option<Vec<&Entry>> = children.into_iter().collect();
-                    children.map(|children| block_entry(&children))
+                    children.map(|children| block_entry(&children, &decoded))
                 })
                 .collect();
             built.push((cols, entries));
         }
         let levels = built
             .iter()
-            .map(|(cols, entries)| EntryLevel::pack(*cols, entries))
+            .enumerate()
+            .map(|(level, (cols, entries))| EntryLevel::pack(*cols, entries, level > 0))
             .collect();
         SightTable::with_levels(scale, levels)
     }
@@ -283,16 +302,21 @@ impl SightTable {
                 out.extend_from_slice(&a.to_le_bytes());
             }
             out.extend_from_slice(&level.codes);
+            out.extend_from_slice(&level.largest);
         }
         out
     }
 
     /// The length of `to_bytes` for `grid`'s table.
     pub fn encoded_len(grid: &PatchGrid) -> usize {
-        let per_block = 1 + 4 + DIRECTIONS * (4 + LEVELS * FRACTIONS);
+        let per_block = |level: usize| {
+            let code_sets = if level == 0 { 1 } else { 2 };
+            1 + 4 + DIRECTIONS * (4 + code_sets * LEVELS * FRACTIONS)
+        };
         4 + level_sizes(grid)
             .iter()
-            .map(|&(cols, rows)| cols * rows * per_block)
+            .enumerate()
+            .map(|(level, &(cols, rows))| cols * rows * per_block(level))
             .sum::<usize>()
     }
 
@@ -311,7 +335,8 @@ impl SightTable {
         };
         let levels = level_sizes(grid)
             .into_iter()
-            .map(|(cols, rows)| {
+            .enumerate()
+            .map(|(level, (cols, rows))| {
                 let blocks = cols * rows;
                 let present = take(blocks).iter().map(|&b| b != 0).collect();
                 let floats = |bytes: &[u8]| -> Vec<f32> {
@@ -323,6 +348,10 @@ impl SightTable {
                 let mean = floats(take(4 * blocks));
                 let area = floats(take(4 * DIRECTIONS * blocks));
                 let codes = take(DIRECTIONS * blocks * LEVELS * FRACTIONS).to_vec();
+                let largest = match level {
+                    0 => Vec::new(),
+                    _ => take(DIRECTIONS * blocks * LEVELS * FRACTIONS).to_vec(),
+                };
                 EntryLevel {
                     cols,
                     blocks,
@@ -330,6 +359,7 @@ impl SightTable {
                     mean,
                     area,
                     codes,
+                    largest,
                 }
             })
             .collect();
@@ -337,16 +367,9 @@ impl SightTable {
     }
 
     fn with_levels(scale: f32, levels: Vec<EntryLevel>) -> SightTable {
-        let decoded = std::array::from_fn(|c| {
-            if c == usize::from(ZERO) {
-                0.0
-            } else {
-                scale * (-(c as f32) / CODES_PER_OCTAVE).exp2()
-            }
-        });
         SightTable {
             scale,
-            decoded,
+            decoded: decoded_codes(scale),
             levels,
         }
     }
@@ -375,8 +398,18 @@ impl SightTable {
     /// heightmap's units, at the block): the entry's figures at the
     /// lattice directions around `at`: their areas, and where their codes
     /// lie (`BlockView::touch` fetches them); None without an entry.
-    pub fn view(&self, block: Block, at: &LatticePoint, error: f32) -> Option<BlockView<'_>> {
+    pub fn view(
+        &self,
+        block: Block,
+        at: &LatticePoint,
+        error: f32,
+        shares: BlockShares,
+    ) -> Option<BlockView<'_>> {
         let (level, b) = self.entry(block)?;
+        let codes = match shares {
+            BlockShares::Largest if !level.largest.is_empty() => &level.largest,
+            _ => &level.codes,
+        };
         let corners = at.corners();
         let per_direction = LEVELS * FRACTIONS;
         let at_direction = |d: usize| d * level.blocks + b;
@@ -384,13 +417,14 @@ impl SightTable {
             area: corners.map(|(d, _)| level.area[at_direction(d)]),
             codes: corners.map(|(d, _)| {
                 <&[u8; LEVELS * FRACTIONS]>::try_from(
-                    &level.codes[at_direction(d) * per_direction..][..per_direction],
+                    &codes[at_direction(d) * per_direction..][..per_direction],
                 )
                 .expect("a direction's codes")
             }),
             weights: corners.map(|(_, w)| w),
             error,
             decoded: &self.decoded,
+            stepped: block.level > 0 && shares == BlockShares::Pooled,
         })
     }
 }
@@ -405,6 +439,9 @@ pub struct BlockView<'a> {
     /// The error the shares are over.
     error: f32,
     decoded: &'a [f32; 256],
+    /// Read between the stored shares at the larger one (a block's pooled
+    /// shares), not in log-log.
+    stepped: bool,
 }
 
 impl BlockView<'_> {
@@ -431,8 +468,12 @@ impl BlockView<'_> {
     /// index `k` (2^k segments a side) puts over the error: its errors
     /// interpolated between the lattice's directions (a ray's gap grows
     /// about in proportion to its fall), then the share between the
-    /// stored ones in log-log. 0 for a level the table does not hold
-    /// (full resolution and finer, whose error is 0).
+    /// stored ones in log-log, or for a block's pooled shares the larger
+    /// of the two: pooled over patches unlike each other, its pixels'
+    /// errors fall in steps (a rough patch's, then a smooth one's), which a
+    /// line in log-log between two stored shares can pass below. 0 for a
+    /// level the table does not hold (full resolution and finer, whose
+    /// error is 0).
     pub fn over_fraction(&self, k: usize) -> f32 {
         if k >= LEVELS {
             return 0.0;
@@ -447,7 +488,21 @@ impl BlockView<'_> {
                     e + w * self.decoded[usize::from(codes[k * FRACTIONS + j])]
                 })
         };
-        fraction_over(error_at, self.error)
+        match self.stepped {
+            true => fraction_over_stepped(error_at, self.error),
+            false => fraction_over(error_at, self.error),
+        }
+    }
+}
+
+/// The share of pixels over `error` of a row of errors at
+/// `FRACTION_EXPONENTS`, as `fraction_over`, taking the larger stored share
+/// between two: never less than the row says.
+fn fraction_over_stepped(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
+    match (0..FRACTIONS).find(|&j| error_at(j) <= error) {
+        None => 1.0,
+        Some(0) => 0.0,
+        Some(j) => (FRACTION_EXPONENTS[j] as f32).exp2(),
     }
 }
 
@@ -499,6 +554,27 @@ fn level_sizes(grid: &PatchGrid) -> Vec<(usize, usize)> {
     sizes
 }
 
+/// The error of each code, below `scale`.
+fn decoded_codes(scale: f32) -> [f32; 256] {
+    std::array::from_fn(|c| {
+        if c == usize::from(ZERO) {
+            0.0
+        } else {
+            scale * (-(c as f32) / CODES_PER_OCTAVE).exp2()
+        }
+    })
+}
+
+/// Which of a block's errors a reading takes (see the module
+/// documentation); a patch has one set, which both read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockShares {
+    /// Each share's error over the block's pixels taken together.
+    Pooled,
+    /// Each share's error the largest of its patches'.
+    Largest,
+}
+
 /// A block of patches or blocks: its level (0 for a patch), and its column
 /// and row among that level's blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -508,17 +584,73 @@ pub struct Block {
     pub row: usize,
 }
 
-/// A block's entry from its four children's: their areas added, their
-/// errors' largest (their codes' smallest) at each share.
-fn block_entry(children: &[&Entry]) -> Entry {
+/// A block's entry from its four children's: their areas added; from each
+/// direction and at each level, their largest error, and at each share the
+/// error over which that share of the block's pixels lie, their pixels
+/// pooled (each child's share over an error, weighted by its pixels from
+/// that direction, `fraction_over`), rounded up to a code. A rough child
+/// among smooth ones so counts its own pixels over tau, not the whole
+/// block's.
+fn block_entry(children: &[&Entry], decoded: &[f32; 256]) -> Entry {
     let mut entry = children[0].clone();
     entry.mean = children.iter().map(|c| c.mean).sum::<f32>() / children.len() as f32;
+    let largest_of = |c: &Entry| c.largest.clone().unwrap_or_else(|| c.codes.clone());
+    let mut largest = largest_of(children[0]);
     for child in &children[1..] {
         for (a, b) in entry.area.iter_mut().zip(&child.area) {
             *a += b;
         }
-        for (a, b) in entry.codes.iter_mut().zip(&child.codes) {
+        for (a, b) in largest.iter_mut().zip(&largest_of(child)) {
             *a = (*a).min(*b);
+        }
+    }
+    entry.largest = Some(largest);
+    for d in 0..DIRECTIONS {
+        let total = entry.area[d];
+        for k in 0..LEVELS {
+            let at = (d * LEVELS + k) * FRACTIONS;
+            let rows: Vec<(&[u8], f32)> = children
+                .iter()
+                .map(|c| (&c.codes[at..at + FRACTIONS], c.area[d]))
+                .collect();
+            let largest = rows.iter().map(|(r, _)| r[0]).min().expect("children");
+            let out = &mut entry.codes[at..at + FRACTIONS];
+            out[0] = largest;
+            if total <= 0.0 {
+                // Seen from nowhere in this direction: the largest error
+                // at every share.
+                for (j, o) in out.iter_mut().enumerate().skip(1) {
+                    *o = rows.iter().map(|(r, _)| r[j]).min().expect("children");
+                }
+                continue;
+            }
+            // The pooled share of pixels over an error: non-decreasing as
+            // the error falls (as its code rises).
+            let pooled = |code: u8| {
+                let e = decoded[usize::from(code)];
+                rows.iter()
+                    .map(|(r, w)| w * fraction_over(|j| decoded[usize::from(r[j])], e))
+                    .sum::<f32>()
+                    / total
+            };
+            for (j, &exponent) in FRACTION_EXPONENTS.iter().enumerate().skip(1) {
+                let share = (exponent as f32).exp2();
+                // The largest code (smallest error) whose pooled share is
+                // within this one: the largest error's code qualifies.
+                let (mut lo, mut hi) = (largest, ZERO);
+                if pooled(hi) <= share {
+                    lo = hi;
+                }
+                while hi - lo > 1 {
+                    let mid = lo + (hi - lo) / 2;
+                    if pooled(mid) <= share {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                out[j] = lo;
+            }
         }
     }
     entry
@@ -694,7 +826,12 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
         })
         .collect();
     let mean = (heights.iter().sum::<f64>() / heights.len() as f64) as f32;
-    Entry { mean, area, codes }
+    Entry {
+        mean,
+        area,
+        codes,
+        largest: None,
+    }
 }
 
 /// Weights of errors in bins `1 / BINS_PER_OCTAVE` octave wide below a
