@@ -289,7 +289,7 @@ impl SightTable {
 
     /// The table as bytes, `encoded_len` of them, for the on-disk cache:
     /// its scale, then per level each block's presence, mean heights, areas
-    /// and codes.
+    /// and codes, and above the patches the largest shares' codes.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut out = Vec::new();
         out.extend_from_slice(&self.scale.to_le_bytes());
