@@ -58,7 +58,7 @@ pub fn load_or_compute(
     let Some(dir) = dir else {
         return compute();
     };
-    let path = dir.join(format!("{kind}-{key:016x}.bin"));
+    let path = entry_path(dir, kind, key);
     if let Some(bytes) = read(&path, key, len) {
         // Used now: the last to be removed.
         let renewed = std::fs::File::options()
@@ -78,7 +78,13 @@ pub fn load_or_compute(
     bytes
 }
 
-/// Whether `name` is an entry's file name: `{kind}-{16 hex digits}.bin`.
+/// Where `kind`'s entry for `key` lives in `dir`.
+fn entry_path(dir: &Path, kind: &str, key: u64) -> PathBuf {
+    dir.join(format!("{kind}-{key:016x}.bin"))
+}
+
+/// Whether `name` is an entry's file name (`entry_path`):
+/// `{kind}-{16 hex digits}.bin`.
 fn is_entry(name: &str) -> bool {
     let Some(stem) = name.strip_suffix(".bin") else {
         return false;
@@ -163,7 +169,7 @@ mod tests {
     /// Stores `n` bytes as `kind` under `key` in `dir`, its modification
     /// time `age` seconds ago.
     fn entry(dir: &Path, kind: &str, key: u64, n: usize, age: u64) -> PathBuf {
-        let path = dir.join(format!("{kind}-{key:016x}.bin"));
+        let path = entry_path(dir, kind, key);
         write(dir, &path, key, &vec![7u8; n]).unwrap();
         let when = std::time::SystemTime::now() - std::time::Duration::from_secs(age);
         std::fs::File::options()
@@ -220,7 +226,7 @@ mod tests {
         let got = load_or_compute(Some(dir), "sight", 1, 100, || unreachable!("cached"));
         assert_eq!(got, vec![7u8; 100]);
         // Stored now, with room for two of the three: the one read is kept.
-        let stored = dir.join(format!("lightmap-{:016x}.bin", 3));
+        let stored = entry_path(dir, "lightmap", 3);
         write(dir, &stored, 3, &[1u8; 100]).unwrap();
         prune(dir, 2 * 124, &stored);
         assert!(old.exists() && stored.exists() && !newer.exists());

@@ -102,6 +102,13 @@ struct Entry {
     largest: Option<Vec<u8>>,
 }
 
+impl Entry {
+    /// Its codes with each share its patches' largest.
+    fn largest_codes(&self) -> &[u8] {
+        self.largest.as_deref().unwrap_or(&self.codes)
+    }
+}
+
 /// One level of blocks (level 0: the patches), row-major over
 /// `cols` x `rows` blocks, laid out by direction first: blocks near each
 /// other, which a view sees from nearly the same direction, have their
@@ -594,13 +601,12 @@ pub struct Block {
 fn block_entry(children: &[&Entry], decoded: &[f32; 256]) -> Entry {
     let mut entry = children[0].clone();
     entry.mean = children.iter().map(|c| c.mean).sum::<f32>() / children.len() as f32;
-    let largest_of = |c: &Entry| c.largest.clone().unwrap_or_else(|| c.codes.clone());
-    let mut largest = largest_of(children[0]);
+    let mut largest = children[0].largest_codes().to_vec();
     for child in &children[1..] {
         for (a, b) in entry.area.iter_mut().zip(&child.area) {
             *a += b;
         }
-        for (a, b) in largest.iter_mut().zip(&largest_of(child)) {
+        for (a, b) in largest.iter_mut().zip(child.largest_codes()) {
             *a = (*a).min(*b);
         }
     }
