@@ -136,6 +136,7 @@ fn frame_plan(c: &mut Criterion) {
                 merge: true,
                 cull: true,
                 reading: SightReading::Tessellated,
+                seen: None,
             };
             group.bench_function(format!("{measure}/{}", view.name), |b| {
                 b.iter(|| black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs)))
@@ -164,6 +165,7 @@ fn geomip_levels(c: &mut Criterion) {
             merge: false,
             cull: true,
             reading: SightReading::Template,
+            seen: None,
         };
         let frame_plan = plan(&terrain, &hierarchy, &lod_view, &inputs);
         let mut levels = vec![(count - 1) as u8; grid.patch_count()];

@@ -4,7 +4,7 @@
 
 // Evaluates the shared GLSL formulas on inputs from the CPU so tests can
 // hold them against their Rust mirrors: the tessellation factor, the
-// frustum test and height sampling, exactly as the terrain stages use them.
+// frustum test, height sampling and the patch a pixel is counted for, exactly as the terrain stages use them.
 
 layout(local_size_x = 64) in;
 
@@ -20,7 +20,8 @@ layout(std430, set = 0, binding = BINDING_MIRROR_CASES) readonly buffer Cases {
 // Per case, three vec4s: distance factor, 1 if the box is outside the
 // frustum, sampled height, error-bounded factor; then the distance to the
 // box (position +- extents) and to the strip on the segment from position
-// to position + extents (x, z) between heights position.y -+ extents.y;
+// to position + extents (x, z) between heights position.y -+ extents.y,
+// and the patch of the surface point at the sample coordinates;
 // then the peers' factors: sphere and edge length for the edge from
 // position to position + extents, CDLOD at position.
 layout(std430, set = 0, binding = BINDING_MIRROR_RESULTS) writeonly buffer Results {
@@ -47,7 +48,7 @@ void main() {
         box_distance(position.xyz - extents.xyz, position.xyz + extents.xyz),
         edge_distance(position.xz, position.xz + extents.xz,
                       position.y - extents.y, position.y + extents.y),
-        0.0, 0.0);
+        float(patch_of_grid(grid.xy)), 0.0);
     results[3u * i + 2u] = vec4(
         sphere_tess_factor(position.xyz, position.xyz + extents.xyz),
         edge_length_tess_factor(position.xyz, position.xyz + extents.xyz),

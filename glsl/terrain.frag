@@ -1,5 +1,7 @@
 #version 460
 #extension GL_GOOGLE_include_directive : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_ballot : require
 #include "terrain_common.glsl"
 #ifdef MATERIAL
 #include "material.glsl"
@@ -10,6 +12,36 @@ layout(location = 1) in float in_height;
 layout(location = 2) flat in float in_inside_factor;
 
 layout(location = 0) out vec4 out_color;
+
+// The depth test comes before this shader, as it would without the count
+// below: only fragments in front of what is drawn so far are counted.
+layout(early_fragment_tests) in;
+
+// The pixels each patch shows, counted in the frames the CPU asks for
+// (src/render/seen.rs): `counting` is 1 in such a frame. A pixel belongs
+// to the patch owning the cell under its surface point (`patch_of_grid`).
+layout(std430, set = 0, binding = BINDING_SEEN_PIXELS) buffer SeenPixels {
+    uint counting;
+    uint seen_pixels[];
+};
+
+// One atomic add per subgroup where its fragments share a patch (the
+// common case: they are neighbours on screen), one each otherwise. Helper
+// invocations, which cover no sample, take no part.
+void count_seen_pixel() {
+    if (counting == 0u || gl_SampleMaskIn[0] == 0) {
+        return;
+    }
+    uint patch_index = patch_of_grid(in_grid);
+    if (subgroupAllEqual(patch_index)) {
+        uint fragments = subgroupBallotBitCount(subgroupBallot(true));
+        if (subgroupElect()) {
+            atomicAdd(seen_pixels[patch_index], fragments);
+        }
+    } else {
+        atomicAdd(seen_pixels[patch_index], 1u);
+    }
+}
 
 #ifdef MATERIAL
 layout(set = 0, binding = BINDING_DIFFUSE_MAPS) uniform sampler2DArray diffuse_maps;
@@ -123,6 +155,7 @@ void layered(vec3 n, float height, out vec3 albedo, out vec3 normal) {
 #endif
 
 void main() {
+    count_seen_pixel();
     uint mode = frame.shading;
     if (mode == SHADE_FLAT) {
         out_color = vec4(1.0);

@@ -92,6 +92,17 @@ vec2 local_to_grid(vec2 xz) {
     return vec2((xz.x - frame.grid.x) * frame.grid.z, (frame.grid.y - xz.y) * frame.grid.w);
 }
 
+// The patch (row-major index) owning the cell under continuous sample
+// coordinates g, clamped to the grid. Mirror: PatchGrid::patch_of_cell on
+// the cell floor(g) clamped to the last, as `lod::seen` counts pixels.
+uint patch_of_grid(vec2 g) {
+    ivec2 last_cell = ivec2(frame.spacing_size.zw) - 2;
+    ivec2 cell = clamp(ivec2(floor(g)), ivec2(0), last_cell);
+    int n = int(frame.cells_per_patch);
+    int cols = (last_cell.x + n) / n;
+    return uint((cell.y / n) * cols + cell.x / n);
+}
+
 // The height at a fraction st across a cell with samples a (upper left),
 // b (upper right), c (lower left) and d (lower right), split along the
 // diagonal from b to c: triangles ABC and DCB. Mirror: heightmap::blend_cell.

@@ -11,6 +11,10 @@ pub const BINDING_HEIGHTMAP: u32 = 1;
 /// storage buffer (see `render::frame::DescriptorPlan::new`).
 pub const BINDING_FRAME_STORAGE: u32 = 21;
 
+/// Storage buffer of the pixels each patch shows (glsl/terrain.frag):
+/// a word that is 1 in a frame that counts, then a count per patch.
+pub const BINDING_SEEN_PIXELS: u32 = 22;
+
 /// Storage buffer of the per-patch error table (tess path, error LOD).
 pub const BINDING_ERROR_TABLE: u32 = 4;
 /// Storage buffer of this frame's full-resolution patches, one bit each
@@ -184,6 +188,7 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("SPEC_STREAMED", SPEC_STREAMED.to_string()),
         ("BINDING_PAGES", BINDING_PAGES.to_string()),
         ("BINDING_PAGE_TABLE", BINDING_PAGE_TABLE.to_string()),
+        ("BINDING_SEEN_PIXELS", BINDING_SEEN_PIXELS.to_string()),
         ("PAGE_LEVEL_SHIFT", PAGE_LEVEL_SHIFT.to_string()),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),

@@ -152,14 +152,27 @@ fn a_quick_run_measures_every_configuration() {
             };
             assert!(monotone, "{camera} {path:?}: {tris:?}");
         }
-        // Occlusion culling changes no pixel and draws no more.
+        // Occlusion culling changes no pixel and draws no more, where the
+        // two rows choose alike. A still camera's tess error rows read
+        // the pixels their own frames counted (`render::seen`), which
+        // culling changes (a culled patch counts nothing; an unculled
+        // hidden one drawn before what hides it counts its overdraw):
+        // each is held to tau on its own, above.
         for r in rows.iter().filter(|r| r.camera == camera && r.occlusion) {
             let off = rows_of(&rows, camera, r.path, r.lod)
                 .into_iter()
                 .find(|o| o.tau == r.tau)
                 .expect("an occluded row has its counterpart");
-            assert_eq!(r.differing_pixels, Some(0), "{}", r.config);
-            assert!(r.figures.triangles <= off.figures.triangles, "{}", r.config);
+            let alike = r.path != RowPath::Tess || camera == "flythrough";
+            if alike {
+                assert_eq!(r.differing_pixels, Some(0), "{}", r.config);
+                assert!(r.figures.triangles <= off.figures.triangles, "{}", r.config);
+            } else {
+                let tau = f64::from(r.tau.expect("an error row's tau"));
+                for row in [r, off] {
+                    assert!(row.p99_px <= tau, "{}: p99 {} px", row.config, row.p99_px);
+                }
+            }
             // Culling ran on the measured frames, or sat out after a
             // frame where it hid nothing and drew what the row without it
             // draws. In the flythrough it may have run only on the frames
@@ -169,16 +182,19 @@ fn a_quick_run_measures_every_configuration() {
                     assert!(ms > 0.0 && r.patches_occluded.is_some(), "{}", r.config)
                 }
                 (Some(_), None) => assert_eq!(camera, "flythrough", "{}", r.config),
-                (None, None) => {
+                (None, None) if alike => {
                     assert_eq!(r.figures.triangles, off.figures.triangles, "{}", r.config);
                 }
+                (None, None) => {}
             }
-            assert_eq!(
-                (r.max_px, r.p99_px, r.mismatched_pixels),
-                (off.max_px, off.p99_px, off.mismatched_pixels),
-                "{}",
-                r.config
-            );
+            if alike {
+                assert_eq!(
+                    (r.max_px, r.p99_px, r.mismatched_pixels),
+                    (off.max_px, off.p99_px, off.mismatched_pixels),
+                    "{}",
+                    r.config
+                );
+            }
         }
         for r in rows.iter().filter(|r| !r.occlusion) {
             assert_eq!(

@@ -251,6 +251,14 @@ fn glsl_formulas_match_their_rust_mirrors() {
                     case.grid,
                     got.height
                 );
+                let patches = terrain.grid();
+                let patch = patches.patch_at(f64::from(case.grid.x), f64::from(case.grid.y));
+                assert_eq!(
+                    got.patch as usize,
+                    patches.patch_index(patch),
+                    "case {k}: patch at {}",
+                    case.grid
+                );
                 if case.grid.fract() == Vec2::ZERO
                     && case.grid.cmple(Vec2::new(w, d)).all()
                     && case.grid.cmpge(Vec2::ZERO).all()

@@ -1498,6 +1498,8 @@ fn each_patch_stays_within_its_predicted_error() {
                     merge: settings.merge_patches,
                     cull: true,
                     reading: SightReading::Tessellated,
+                    // What the frame's choice read of earlier frames.
+                    seen: scene.renderer().seen_pixels(),
                 };
                 let frame = plan(&terrain, &hierarchy, &lod_view, &inputs);
                 let predicted = predicted_per_patch(&terrain, &frame, tau);

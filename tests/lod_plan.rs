@@ -8,6 +8,7 @@ use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
 use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs, SightReading};
+use vkterrain::lod::seen::SeenPixels;
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
@@ -40,6 +41,7 @@ fn planned(
             merge: true,
             cull: true,
             reading: SightReading::Tessellated,
+            seen: None,
         },
     )
 }
@@ -87,6 +89,7 @@ fn the_plan_visits_a_few_thousand_nodes_of_a_512_by_512_patch_grid() {
                     merge,
                     cull: true,
                     reading: SightReading::Tessellated,
+                    seen: None,
                 };
                 let frame = plan(&terrain, &hierarchy, &view, &inputs);
                 assert!(
@@ -259,6 +262,81 @@ fn the_share_only_coarsens_the_bounds_choice() {
         }
     }
     assert!(chosen > 0, "the share coarsened nothing");
+}
+
+/// The pixels each patch showed (`lod::seen`) only ever coarsen a block
+/// that showed fewer than the view model gives it: counts above every
+/// block's modelled pixels leave the plan as it is; a block whose patches
+/// showed nothing takes its coarsest level, and with half the patches
+/// hidden, those blocks are drawn no finer than without counts, some
+/// coarser.
+#[test]
+fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table();
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let grid = terrain.grid();
+    let (_, hi) = terrain.info().min_max();
+    let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
+    let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), 1.0);
+    let with = |seen: Option<&SeenPixels>| {
+        plan(
+            &terrain,
+            &hierarchy,
+            &view,
+            &PlanInputs {
+                table: &table,
+                sight,
+                merge: true,
+                cull: true,
+                reading: SightReading::Tessellated,
+                seen,
+            },
+        )
+    };
+    let level_of = |frame: &FramePlan, p: usize| {
+        frame
+            .blocks
+            .iter()
+            .find(|b| b.patches(grid).any(|q| q == p))
+            .map(|b| (b.patch_level, b.full_resolution))
+    };
+    let unseen = with(None);
+    let counts = |f: &dyn Fn(usize) -> u32| -> SeenPixels {
+        SeenPixels::new(grid, &(0..grid.patch_count()).map(f).collect::<Vec<_>>()).unwrap()
+    };
+    let everything = counts(&|_| 1 << 24);
+    assert_eq!(with(Some(&everything)).blocks, unseen.blocks);
+    let nothing = with(Some(&counts(&|_| 0)));
+    assert_eq!(nothing.blocks.len(), unseen.blocks.len());
+    let mut coarsened = 0;
+    for (block, before) in nothing.blocks.iter().zip(&unseen.blocks) {
+        if block.chosen || before.chosen {
+            assert_eq!(block.patch_level, 0, "{block:?}");
+        }
+        assert!(block.patch_level <= before.patch_level);
+        coarsened += usize::from(block.patch_level < before.patch_level);
+    }
+    assert!(coarsened > 0, "nothing coarsened");
+    // Half the patch columns hidden.
+    let hidden = |p: usize| grid.patch_id(p).col % 2 == 0;
+    let half = with(Some(&counts(&|p| if hidden(p) { 0 } else { 1 << 24 })));
+    let mut coarser = 0;
+    for block in half.blocks.iter().filter(|b| b.level == 0) {
+        let p = block.patches(grid).next().unwrap();
+        let (Some(own), Some(before)) = (level_of(&half, p), level_of(&unseen, p)) else {
+            continue;
+        };
+        if hidden(p) {
+            assert!(
+                own.0 <= before.0 && (!own.1 || before.1),
+                "patch {p}: {own:?} > {before:?}"
+            );
+            coarser += usize::from(own.0 < before.0);
+        }
+    }
+    assert!(coarser > 0, "no hidden patch was drawn coarser");
 }
 
 /// A block's entry adds its patches' areas and, read by its largest

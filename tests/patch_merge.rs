@@ -43,6 +43,7 @@ fn planned(terrain: &Terrain, eye: Vec3, pixels: f32) -> FramePlan {
             merge: true,
             cull: false,
             reading: SightReading::Tessellated,
+            seen: None,
         },
     )
 }

@@ -32,6 +32,12 @@ pub const VIEW_MEASURE_TAU: f32 = 1.0;
 /// Frames timed per named view, after `WARM_UP` untimed ones.
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
+
+/// Untimed frames a fixed view's single timed frame follows, for a row
+/// whose choice reads earlier frames of its view (`render::seen`): the
+/// view's first frame counts nothing, the second counts, the third reads
+/// that and counts again, and the timed frame reads both.
+pub const STILL_FRAMES: usize = 3;
 /// Share of a patch's pixels the oracle lets exceed tau (its per-patch
 /// 99th percentile is then at most tau).
 pub const ORACLE_EXCEED_FRACTION: f64 = 0.01;
@@ -159,6 +165,12 @@ impl Config {
             | Config::GeomipErrorView(t) => Some(t),
             _ => None,
         }
+    }
+
+    /// Whether the row's level choice reads what earlier frames of its
+    /// view counted (`render::seen`): the tess path's error LOD.
+    pub fn reads_earlier_frames(&self) -> bool {
+        matches!(self, Config::TessError(_) | Config::TessErrorOccluded(_))
     }
 
     /// Whether the row is drawn with occlusion culling.
@@ -855,6 +867,14 @@ impl<'a> Bench<'a> {
                 }
                 let levels = levels_of(config);
                 if hold_before_read {
+                    // A single frame is drawn as a still camera's: after the
+                    // frames whose counts its choice reads.
+                    if config.reads_earlier_frames() {
+                        for _ in 0..STILL_FRAMES {
+                            let timed = self.time(camera, config, levels)?;
+                            self.gather_choice(config, timed.lod_ms, g);
+                        }
+                    }
                     self.hold_clock(camera, config, levels, g)?;
                 }
                 let frame = self.render_counted(camera, config, levels, timed_sample, g)?;
@@ -1006,14 +1026,11 @@ fn pixel_patches(terrain: &Terrain, camera: &Camera, view: &DepthView) -> Vec<Op
     let info = terrain.info();
     let grid = terrain.grid();
     let inverse: DMat4 = view.view_proj.inverse();
-    let (max_col, max_row) = (info.cols() - 2, info.rows() - 2);
     (0..view.width * view.height)
         .map(|i| {
             let p = camera.eye + view.position(&inverse, i)?;
             let g = info.world_to_grid(p.x, p.z);
-            let col = (g.x.floor().max(0.0) as usize).min(max_col);
-            let row = (g.y.floor().max(0.0) as usize).min(max_row);
-            Some(grid.patch_index(grid.patch_of_cell(row, col)))
+            Some(grid.patch_index(grid.patch_at(g.x, g.y)))
         })
         .collect()
 }

@@ -30,6 +30,12 @@ pub struct Capabilities {
     /// (at most `max_draw_indirect_count`).
     pub multi_draw_indirect: bool,
     pub max_draw_indirect_count: u32,
+    /// fragmentStoresAndAtomics: the terrain's fragment shader counts the
+    /// pixels each patch shows in a storage buffer (required).
+    pub fragment_stores_and_atomics: bool,
+    /// Subgroup vote and ballot operations in fragment shaders: the count
+    /// adds once per subgroup of fragments on one patch (required).
+    pub fragment_subgroup_ballot: bool,
     /// Nanoseconds per timestamp tick, when the graphics queue has
     /// timestamps.
     pub timestamp_period_ns: Option<f32>,
@@ -254,7 +260,10 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
     // SAFETY: queries on a physical device enumerated from this instance.
     unsafe {
         let mut driver = vk::PhysicalDeviceDriverProperties::default();
-        let mut props2 = vk::PhysicalDeviceProperties2::default().push_next(&mut driver);
+        let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+        let mut props2 = vk::PhysicalDeviceProperties2::default()
+            .push_next(&mut driver)
+            .push_next(&mut subgroup);
         instance.get_physical_device_properties2(physical, &mut props2);
         let props = props2.properties;
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default();
@@ -303,6 +312,13 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 pipeline_statistics_query: features.pipeline_statistics_query != 0,
                 sampler_anisotropy: features.sampler_anisotropy != 0,
                 multi_draw_indirect: features.multi_draw_indirect != 0,
+                fragment_stores_and_atomics: features.fragment_stores_and_atomics != 0,
+                fragment_subgroup_ballot: subgroup
+                    .supported_stages
+                    .contains(vk::ShaderStageFlags::FRAGMENT)
+                    && subgroup.supported_operations.contains(
+                        vk::SubgroupFeatureFlags::VOTE | vk::SubgroupFeatureFlags::BALLOT,
+                    ),
                 max_draw_indirect_count: props.limits.max_draw_indirect_count,
                 timestamp_period_ns: timestamps.then_some(props.limits.timestamp_period),
                 timestamp_valid_bits: family.timestamp_valid_bits,
@@ -394,7 +410,8 @@ impl Device {
             .fill_mode_non_solid(caps.fill_mode_non_solid)
             .pipeline_statistics_query(caps.pipeline_statistics_query)
             .sampler_anisotropy(caps.sampler_anisotropy)
-            .multi_draw_indirect(caps.multi_draw_indirect);
+            .multi_draw_indirect(caps.multi_draw_indirect)
+            .fragment_stores_and_atomics(caps.fragment_stores_and_atomics);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)
             .synchronization2(true);

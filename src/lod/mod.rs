@@ -11,6 +11,8 @@
 //! - [`plan`]: the real-time error LOD: a frame plan walked down the
 //!   hierarchy, levels from the bound and the terrain's view model, in a
 //!   fraction of a millisecond whatever the terrain's size.
+//! - [`seen`]: the pixels each patch showed in earlier frames of a view,
+//!   which the plan reads so as not to refine hidden ground.
 //! - [`order`]: front-to-back draw order of the chosen patches.
 //! - [`patch_merge`]: merged nodes, blocks of flat patches drawn as one.
 //! - [`view_measure`] and [`viewshed`]: the error a view sees, measured
@@ -22,6 +24,7 @@ pub mod hierarchy;
 pub mod order;
 pub mod patch_merge;
 pub mod plan;
+pub mod seen;
 pub mod view;
 pub mod view_measure;
 pub mod viewshed;

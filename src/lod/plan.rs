@@ -50,6 +50,7 @@ use glam::{Vec2, Vec3};
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
 use super::hierarchy::{Hierarchy, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
+use super::seen::SeenPixels;
 use super::view::LodView;
 use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
 use crate::terrain::sight::{
@@ -90,6 +91,9 @@ pub struct PlanInputs<'a> {
     pub cull: bool,
     /// How the view model is read.
     pub reading: SightReading,
+    /// The pixels each patch showed in earlier frames of this view; None:
+    /// every block shows all its modelled pixels.
+    pub seen: Option<&'a SeenPixels>,
 }
 
 /// How the path a plan is for draws a level, which decides how the view
@@ -414,6 +418,7 @@ pub fn plan(
             (&pending, &parts),
             (tau, inputs.reading.shares()),
             view.viewport_pixels() as f32,
+            inputs.seen,
         ),
         None => (Vec::new(), 0.0),
     };
@@ -518,6 +523,7 @@ fn plan_block(
     let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;
     let pending = Pending {
         block,
+        patches: (pc, pr),
         parts: parts.len() - before,
         candidate: Candidate {
             slot,
@@ -614,6 +620,8 @@ struct Part {
 /// and its candidate, whose pixels over tau the reading fills in.
 struct Pending {
     block: Block,
+    /// Its patches' columns and rows.
+    patches: ([usize; 2], [usize; 2]),
     /// How many of the parts, following those of the blocks before it.
     parts: usize,
     candidate: Candidate,
@@ -630,6 +638,7 @@ fn read_model(
     (pending, parts): (&[Pending], &[Part]),
     (tau, shares): (f32, BlockShares),
     viewport: f32,
+    seen: Option<&SeenPixels>,
 ) -> (Vec<Candidate>, f64) {
     let blocks = pending
         .iter()
@@ -646,17 +655,31 @@ fn read_model(
         let c = &p.candidate;
         let mut over = [0.0f32; LEVEL_COUNT + 1];
         let mut modelled = false;
+        let mut block_pixels = 0.0f64;
         for (view, part) in views.by_ref().take(p.parts) {
             let Some(view) = view else {
                 continue;
             };
             modelled = true;
             let pixels = (view.area() * part.share * part.scale * part.scale).min(viewport);
-            frame_pixels += f64::from(pixels);
+            block_pixels += f64::from(pixels);
             for (k, o) in over.iter_mut().enumerate().take(c.bound) {
                 *o += pixels * view.over_fraction(k);
             }
         }
+        // Pixels nearer ground hid in earlier frames of this view are
+        // none of the block's: each share of its pixels over tau is
+        // taken of the pixels it showed.
+        if let Some(seen) = seen {
+            let (cols, rows) = p.patches;
+            let shown = seen.block_pixels(cols, rows) as f64;
+            if shown < block_pixels {
+                let kept = (shown / block_pixels) as f32;
+                over.iter_mut().for_each(|o| *o *= kept);
+                block_pixels = shown;
+            }
+        }
+        frame_pixels += block_pixels;
         if modelled && c.bound > 0 {
             candidates.push(Candidate { over, ..*c });
         }

@@ -9,6 +9,7 @@ use ash::vk;
 use super::appearance::GpuAppearance;
 use super::geomip_path::GeomipDraw;
 use super::occlusion::{DrawCommand, DRAW_COMMAND_BYTES, MAX_LISTED_DRAWS};
+use super::seen::SeenBuffer;
 use super::settings::RenderSettings;
 use super::tess_path::ChoiceBuffers;
 use super::uniforms::FrameUniforms;
@@ -20,7 +21,7 @@ use crate::gpu::Device;
 use crate::render::error::Result;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION,
-    BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_VISIBILITY,
+    BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_SEEN_PIXELS, BINDING_VISIBILITY,
 };
 
 /// Parts of a frame whose pipeline statistics are counted apart: the
@@ -57,6 +58,8 @@ pub(super) struct FrameSlot {
     pub(super) batch_commands: BatchCommands,
     /// What `prepare` chose for this slot's frame.
     pub(super) prepared: PreparedFrame,
+    /// The pixels each patch showed, in a frame that counts them.
+    pub(super) seen: SeenBuffer,
 }
 
 /// A frame's tess batches as indirect commands, for a device with
@@ -151,7 +154,7 @@ pub(super) fn build_frames(
     sets: &DescriptorSets,
     (heightmap, sampler): (&Image, &Sampler),
     appearance: &GpuAppearance,
-    patches: usize,
+    (patches, seen_patches): (usize, Option<usize>),
 ) -> Result<Vec<FrameSlot>> {
     let mut frames = Vec::new();
     for (i, set) in sets.iter().enumerate() {
@@ -167,6 +170,8 @@ pub(super) fn build_frames(
         )?;
         write_frame_bindings(device, set, &uniforms, heightmap, sampler);
         appearance.write(device, set);
+        let seen = SeenBuffer::new(device, i, seen_patches)?;
+        seen.bind(device, set);
         frames.push(FrameSlot {
             uniforms,
             set,
@@ -179,6 +184,7 @@ pub(super) fn build_frames(
             tess_batches: Vec::new(),
             batch_commands: BatchCommands::new(device, i, patches)?,
             prepared: PreparedFrame::default(),
+            seen,
         });
     }
     Ok(frames)
@@ -239,9 +245,15 @@ impl DescriptorPlan {
             pool_sizes: vec![
                 (vk::DescriptorType::UNIFORM_BUFFER, 1),
                 (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
-                (vk::DescriptorType::STORAGE_BUFFER, 1),
+                (vk::DescriptorType::STORAGE_BUFFER, 2),
             ],
         };
+        // The pixels each patch shows (render::seen).
+        plan.bindings.push((
+            BINDING_SEEN_PIXELS,
+            vk::DescriptorType::STORAGE_BUFFER,
+            vk::ShaderStageFlags::FRAGMENT,
+        ));
         if tess {
             // The control shader's: the error table, the full-resolution
             // bits, the occlusion state, and the frame block again as a

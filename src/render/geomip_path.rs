@@ -194,6 +194,7 @@ impl GeomipGeometry {
                         merge: false,
                         cull: settings.cull,
                         reading: SightReading::Template,
+                        seen: None,
                     },
                 );
                 // Geomip level l has n / 2^l segments a side: the error

@@ -50,6 +50,9 @@ pub struct MirrorResult {
     pub sphere_tess_factor: f32,
     pub edge_length_tess_factor: f32,
     pub cdlod_tess_factor: f32,
+    /// The patch (row-major index) a pixel whose surface point lies at
+    /// `grid` is counted for (`render::seen`).
+    pub patch: u32,
 }
 
 const LOCAL_SIZE: u32 = 64;
@@ -175,6 +178,7 @@ fn unpack_results(values: &[[f32; 4]]) -> Vec<MirrorResult> {
             sphere_tess_factor: v[2][0],
             edge_length_tess_factor: v[2][1],
             cdlod_tess_factor: v[2][2],
+            patch: v[1][2] as u32,
         })
         .collect()
 }

@@ -13,6 +13,7 @@ pub mod occlusion;
 mod pipelines;
 pub mod renderer;
 pub mod residency;
+mod seen;
 pub mod settings;
 pub mod shaders;
 pub mod stream_budget;

@@ -40,7 +40,8 @@ use super::pipelines::{
     PipelineTarget,
 };
 use super::residency::StreamShape;
-use super::settings::{LodMetric, RenderPath, RenderSettings};
+use super::seen::SeenState;
+use super::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use super::streaming::{NoStream, StreamConfig, StreamStats, Streamer};
 use super::tess_path::{run_batches, ChoiceBuffers, TessGeometry};
 use super::uniforms::FrameUniforms;
@@ -55,6 +56,7 @@ use crate::lod::geomip;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::patches_in_view;
+use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::render::error::{RenderError, Result};
 use crate::terrain::tiled::TiledHeightmap;
@@ -140,6 +142,8 @@ pub struct TerrainRenderer {
     /// The quadtree the level choices walk, built with the first path
     /// that draws patches.
     hierarchy: Option<Hierarchy>,
+    /// What the frames counted of the pixels each patch shows.
+    seen: SeenState,
 }
 
 /// What one frame's queries measured; None where the device can't tell.
@@ -276,7 +280,13 @@ impl TerrainRenderer {
             &sets,
             (&heightmap, &sampler),
             &appearance,
-            terrain.grid().patch_count(),
+            (
+                terrain.grid().patch_count(),
+                // Only the tess path's error LOD reads the counts, and not
+                // on a streamed terrain.
+                (options.stream.is_none() && device.caps.tessellation_shader)
+                    .then(|| terrain.grid().patch_count()),
+            ),
         )?;
         let no_stream = NoStream::new(device, "terrain.stream")?;
         for frame in &frames {
@@ -311,6 +321,7 @@ impl TerrainRenderer {
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms: 0.0,
             hierarchy: None,
+            seen: SeenState::default(),
             last_prepared: 0,
         };
         for &path in &options.paths {
@@ -550,6 +561,20 @@ impl TerrainRenderer {
             (false, false) => LastFrame::Unasked,
         };
         self.occlusion.look_from(view.eye_local, last);
+        // What the slot's last frame counted, taken in before the choice;
+        // timed with it.
+        let seen_start = Instant::now();
+        let counts = match (settings.path, settings.lod_metric) {
+            (RenderPath::Tess, LodMetric::Error(pixels))
+                if settings.error_measure == ErrorMeasure::Sight =>
+            {
+                Some(pixels)
+            }
+            _ => None,
+        };
+        self.seen
+            .prepare(terrain.grid(), &mut self.frames[slot].seen, view, counts)?;
+        let seen_ms = seen_start.elapsed().as_secs_f64() * 1e3;
         if let Some(streamer) = self.streamer.as_mut() {
             streamer.prepare(slot, view)?;
         }
@@ -593,6 +618,8 @@ impl TerrainRenderer {
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
                 self.prepare_tess_error(slot, terrain, view, settings, pixels)?;
+                let prepared = &mut self.frames[slot].prepared;
+                prepared.lod_ms = prepared.lod_ms.map(|ms| ms + seen_ms);
             }
             (RenderPath::Tess, _) => {
                 let hierarchy = self
@@ -646,7 +673,7 @@ impl TerrainRenderer {
         let choice = frame.choice.as_mut().ok_or_else(not_built)?;
         let planned = tess.plan_error_frame(
             terrain,
-            hierarchy,
+            (hierarchy, self.seen.pixels()),
             geomip,
             (view, settings, pixels),
             (choice, &mut frame.prepared.exact),
@@ -661,6 +688,13 @@ impl TerrainRenderer {
         prepared.merged_nodes = planned.merged_nodes;
         prepared.patches_in_view = planned.patches_in_view;
         Ok(())
+    }
+
+    /// The pixels each patch showed in earlier frames of the last
+    /// prepared frame's view, as its level choice read them (`lod::seen`);
+    /// None where no frame of that view has been counted.
+    pub fn seen_pixels(&self) -> Option<&SeenPixels> {
+        self.seen.pixels()
     }
 
     /// The largest error the last prepared frame's level choice expects on
@@ -788,6 +822,12 @@ fn check_device(device: &Device, terrain: &Terrain, options: &RendererOptions) -
         )));
     }
     device.caps.check_samples(options.samples)?;
+    if !device.caps.fragment_stores_and_atomics || !device.caps.fragment_subgroup_ballot {
+        return Err(RenderError::Unsupported(format!(
+            "{} lacks fragmentStoresAndAtomics or subgroup vote and ballot in fragment shaders, with which the terrain's fragment shader counts the pixels each patch shows",
+            device.caps.device_name
+        )));
+    }
     for &path in &options.paths {
         check_path(device, terrain, path, options.wireframe)?;
     }

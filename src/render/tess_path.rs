@@ -27,6 +27,7 @@ use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::{DrawOrder, PatchMarks};
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock, SightReading};
+use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::{RenderError, Result};
@@ -81,7 +82,7 @@ impl TessGeometry {
     pub(super) fn plan_error_frame(
         &mut self,
         terrain: &Terrain,
-        hierarchy: &Hierarchy,
+        (hierarchy, seen_pixels): (&Hierarchy, Option<&SeenPixels>),
         geomip: &GeomipGeometry,
         (view, settings, pixels): (&FrameView, &RenderSettings, f32),
         (choice, exact): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>),
@@ -119,6 +120,7 @@ impl TessGeometry {
                 merge: settings.merge_patches,
                 cull: settings.cull,
                 reading: SightReading::Tessellated,
+                seen: seen_pixels,
             },
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;

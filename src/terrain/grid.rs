@@ -172,6 +172,16 @@ impl PatchGrid {
         }
     }
 
+    /// The patch owning the cell under continuous sample coordinates
+    /// (`col`, `row`), clamped to the grid: the patch a pixel whose
+    /// surface point lies there is counted for. Mirror: `patch_of_grid`
+    /// in glsl/terrain_common.glsl.
+    pub fn patch_at(&self, col: f64, row: f64) -> PatchId {
+        let c = (col.floor().max(0.0) as usize).min(self.sample_cols - 2);
+        let r = (row.floor().max(0.0) as usize).min(self.sample_rows - 2);
+        self.patch_of_cell(r, c)
+    }
+
     /// Control point index of boundary (i, j).
     pub fn control_index(&self, i: usize, j: usize) -> usize {
         i * self.control_cols() + j

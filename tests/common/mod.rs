@@ -84,6 +84,8 @@ pub fn test_capabilities() -> vkterrain::gpu::Capabilities {
         pipeline_statistics_query: true,
         sampler_anisotropy: true,
         multi_draw_indirect: true,
+        fragment_stores_and_atomics: true,
+        fragment_subgroup_ballot: true,
         max_draw_indirect_count: u32::MAX,
         timestamp_period_ns: None,
         timestamp_valid_bits: 0,

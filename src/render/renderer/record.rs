@@ -136,6 +136,13 @@ impl TerrainRenderer {
         }
         frame.queries.end_timing(rec);
         rec.end_rendering();
+        if frame.seen.counting() {
+            use vk::{AccessFlags2 as A, PipelineStageFlags2 as S};
+            rec.memory_barrier(
+                (S::FRAGMENT_SHADER, A::SHADER_STORAGE_WRITE),
+                (S::HOST, A::HOST_READ),
+            );
+        }
         Ok(())
     }
 

@@ -1,0 +1,157 @@
+//! The pixels each patch showed in earlier frames of the same view: what
+//! the frames' own depth says of hidden ground, which the view model
+//! counts as seen.
+//!
+//! The view model knows how many pixels a block covers from where it is
+//! seen, not how many of them nearer ground hides. A frame that counts,
+//! for each patch, the pixels whose front-most surface lies on it tells
+//! the next frames of the same view how much of each block shows: the
+//! plan scales a block's modelled pixels over tau down to the pixels its
+//! patches showed (`SeenPixels::block_pixels`), never up. Counts from
+//! several frames of one view are kept as each patch's largest, so a
+//! patch that showed through once, drawn coarser, keeps the pixels it
+//! showed and the choice settles instead of swinging between levels.
+
+use crate::terrain::PatchGrid;
+
+/// Each patch's largest count of pixels shown, over the frames counted,
+/// with a summed-area table over the patch grid so that a block's pixels
+/// are four reads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SeenPixels {
+    cols: usize,
+    rows: usize,
+    /// Per patch, row-major (`PatchGrid::patch_index`).
+    counts: Vec<u32>,
+    /// (rows + 1) x (cols + 1): the pixels of the patches above and left
+    /// of each boundary point.
+    sums: Vec<u64>,
+}
+
+/// Why counts do not fit a grid.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{got} pixel counts for a grid of {patches} patches")]
+pub struct SeenCountError {
+    pub got: usize,
+    pub patches: usize,
+}
+
+impl SeenPixels {
+    /// One frame's counts, a patch each in row-major order.
+    pub fn new(grid: &PatchGrid, counts: &[u32]) -> Result<Self, SeenCountError> {
+        if counts.len() != grid.patch_count() {
+            return Err(SeenCountError {
+                got: counts.len(),
+                patches: grid.patch_count(),
+            });
+        }
+        let mut seen = SeenPixels {
+            cols: grid.patch_cols(),
+            rows: grid.patch_rows(),
+            counts: counts.to_vec(),
+            sums: Vec::new(),
+        };
+        seen.sum();
+        Ok(seen)
+    }
+
+    /// Adds another frame's counts of the same view: each patch keeps the
+    /// larger of its two counts.
+    pub fn merge(&mut self, counts: &[u32]) -> Result<(), SeenCountError> {
+        if counts.len() != self.counts.len() {
+            return Err(SeenCountError {
+                got: counts.len(),
+                patches: self.counts.len(),
+            });
+        }
+        for (kept, &c) in self.counts.iter_mut().zip(counts) {
+            *kept = (*kept).max(c);
+        }
+        self.sum();
+        Ok(())
+    }
+
+    fn sum(&mut self) {
+        let w = self.cols + 1;
+        self.sums.clear();
+        self.sums.resize(w * (self.rows + 1), 0);
+        for r in 0..self.rows {
+            let mut across = 0u64;
+            for c in 0..self.cols {
+                across += u64::from(self.counts[r * self.cols + c]);
+                self.sums[(r + 1) * w + c + 1] = self.sums[r * w + c + 1] + across;
+            }
+        }
+    }
+
+    /// One patch's pixels (row-major index).
+    pub fn patch(&self, index: usize) -> u32 {
+        self.counts[index]
+    }
+
+    /// The pixels shown by the patches of columns `cols[0]..cols[1]` and
+    /// rows `rows[0]..rows[1]` (clamped to the grid).
+    pub fn block_pixels(&self, cols: [usize; 2], rows: [usize; 2]) -> u64 {
+        let w = self.cols + 1;
+        let (c0, c1) = (cols[0].min(self.cols), cols[1].min(self.cols));
+        let (r0, r1) = (rows[0].min(self.rows), rows[1].min(self.rows));
+        if c0 >= c1 || r0 >= r1 {
+            return 0;
+        }
+        self.sums[r1 * w + c1] + self.sums[r0 * w + c0]
+            - self.sums[r0 * w + c1]
+            - self.sums[r1 * w + c0]
+    }
+
+    /// Every patch's pixels.
+    pub fn total(&self) -> u64 {
+        self.sums[self.sums.len() - 1]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(cols: usize, rows: usize) -> PatchGrid {
+        PatchGrid::for_size(cols * 4 + 1, rows * 4 + 1, 4)
+    }
+
+    #[test]
+    fn a_block_sums_its_own_patches_only() {
+        let g = grid(5, 3);
+        let counts: Vec<u32> = (0..15).map(|i| 1 << i).collect();
+        let seen = SeenPixels::new(&g, &counts).unwrap();
+        for c0 in 0..5 {
+            for c1 in c0..=6 {
+                for r0 in 0..3 {
+                    for r1 in r0..=4 {
+                        let mut expect = 0u64;
+                        for r in r0..r1.min(3) {
+                            for c in c0..c1.min(5) {
+                                expect += u64::from(counts[r * 5 + c]);
+                            }
+                        }
+                        assert_eq!(seen.block_pixels([c0, c1], [r0, r1]), expect);
+                    }
+                }
+            }
+        }
+        assert_eq!(seen.total(), (1 << 15) - 1);
+    }
+
+    #[test]
+    fn merged_counts_keep_each_patchs_largest() {
+        let g = grid(2, 2);
+        let mut seen = SeenPixels::new(&g, &[5, 0, 7, 1]).unwrap();
+        seen.merge(&[3, 4, 9, 0]).unwrap();
+        assert_eq!(
+            (0..4).map(|i| seen.patch(i)).collect::<Vec<_>>(),
+            [5, 4, 9, 1]
+        );
+        assert_eq!(seen.block_pixels([0, 2], [0, 2]), 19);
+        assert_eq!(seen.block_pixels([1, 2], [0, 2]), 5);
+        assert!(seen.merge(&[1, 2, 3]).is_err());
+        assert!(SeenPixels::new(&g, &[1]).is_err());
+    }
+}

@@ -1,0 +1,219 @@
+//! Counting the pixels each patch shows, for the error LOD's next frames
+//! of the same view (`lod::seen`).
+//!
+//! In a frame that counts, glsl/terrain.frag adds one to its patch's word
+//! for each fragment that passes the depth test when it is shaded (early
+//! fragment tests). The terrain is drawn front to back, so a fragment a
+//! nearer one later covers is rare, and counting it only adds pixels: a
+//! block is never taken to show less than it does. The slot's buffer is
+//! read when the slot next comes round, its frame complete, so the choice
+//! never waits on the GPU.
+//!
+//! Counts hold for one view and one tolerance: a frame whose camera,
+//! projection or viewport differs in any way from its tolerance's last
+//! frame reads none, and counts none. A still camera counts from its
+//! second frame at a tolerance on, `COUNTS_PER_VIEW` times, each count
+//! merged into each patch's largest, and the choice settles: a hidden
+//! patch drawn coarser that then shows through keeps what it showed. A
+//! moving camera never counts, and pays nothing.
+
+use std::mem::size_of;
+
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+
+use super::view::FrameView;
+use crate::gpu::descriptors::DescriptorSet;
+use crate::gpu::memory::{Buffer, BufferDesc};
+use crate::gpu::Device;
+use crate::lod::seen::SeenPixels;
+use crate::render::error::{RenderError, Result};
+use crate::shader_constants::BINDING_SEEN_PIXELS;
+use crate::terrain::PatchGrid;
+
+/// Frames a still view counts.
+pub const COUNTS_PER_VIEW: u32 = 4;
+
+/// Bytes before the counts: the word that says whether the frame counts.
+const HEADER_BYTES: usize = size_of::<u32>();
+
+/// One frame slot's counts.
+pub(super) struct SeenBuffer {
+    buffer: Buffer,
+    /// Patches it has a word for: the grid's, or 0 where it never counts.
+    patches: usize,
+    /// The view and tolerance the slot's last frame counted, if it
+    /// counted.
+    counted: Option<(FrameView, f32)>,
+}
+
+impl SeenBuffer {
+    /// A buffer for `patches` words, or one that never counts (`None`:
+    /// the bindings still need a buffer).
+    pub(super) fn new(device: &Device, slot: usize, patches: Option<usize>) -> Result<Self> {
+        let patches = patches.unwrap_or(0);
+        let size = (HEADER_BYTES + patches.max(1) * size_of::<u32>()) as u64;
+        let mut buffer = device.create_buffer(
+            BufferDesc {
+                size,
+                usage: vk::BufferUsageFlags::STORAGE_BUFFER,
+                location: MemoryLocation::GpuToCpu,
+            },
+            &format!("terrain.seen_pixels[{slot}]"),
+        )?;
+        buffer
+            .mapped_mut()
+            .ok_or(RenderError::NotMapped("the seen pixels"))?
+            .fill(0);
+        Ok(SeenBuffer {
+            buffer,
+            patches,
+            counted: None,
+        })
+    }
+
+    /// Points `set`'s binding at the buffer.
+    pub(super) fn bind(&self, device: &Device, set: DescriptorSet) {
+        device.write_buffer(
+            set,
+            BINDING_SEEN_PIXELS,
+            vk::DescriptorType::STORAGE_BUFFER,
+            &self.buffer,
+            self.buffer.desc.size,
+        );
+    }
+
+    /// Whether the slot's frame counts.
+    pub(super) fn counting(&self) -> bool {
+        self.counted.is_some()
+    }
+
+    /// The counts of the slot's last frame, and the view it counted,
+    /// where it counted (the frame must have completed).
+    fn take(&mut self) -> Result<Option<(FrameView, f32, Vec<u32>)>> {
+        let Some((view, tau)) = self.counted.take() else {
+            return Ok(None);
+        };
+        let bytes = self
+            .buffer
+            .mapped()
+            .ok_or(RenderError::NotMapped("the seen pixels"))?;
+        let counts = bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()]
+            .chunks_exact(size_of::<u32>())
+            .map(|w| u32::from_ne_bytes([w[0], w[1], w[2], w[3]]))
+            .collect();
+        Ok(Some((view, tau, counts)))
+    }
+
+    /// Sets the slot's next frame to count `view` at a tolerance (zeroing
+    /// the counts), or not to count.
+    fn arm(&mut self, view: Option<(FrameView, f32)>) -> Result<()> {
+        let bytes = self
+            .buffer
+            .mapped_mut()
+            .ok_or(RenderError::NotMapped("the seen pixels"))?;
+        let counting = view.is_some() && self.patches > 0;
+        bytes[..HEADER_BYTES].copy_from_slice(&u32::from(counting).to_ne_bytes());
+        if counting {
+            bytes[HEADER_BYTES..].fill(0);
+        }
+        self.counted = view.filter(|_| counting);
+        Ok(())
+    }
+}
+
+/// Tolerances whose counts are kept at once (the bench draws a view at
+/// three; the window at one at a time).
+const TOLERANCES_KEPT: usize = 8;
+
+/// What the renderer knows of the pixels each patch showed, for each
+/// tolerance its frames drew at: each is a choice of its own, so counts
+/// are taken and read per tolerance, and a view is still for a tolerance
+/// when that tolerance's last frame was of the same view.
+#[derive(Default)]
+pub(super) struct SeenState {
+    /// The most recently drawn tolerances last.
+    entries: Vec<SeenEntry>,
+    /// The tolerance of the frame last prepared, if it reads counts.
+    current: Option<f32>,
+}
+
+struct SeenEntry {
+    tau: f32,
+    /// The view of this tolerance's last frame.
+    last_view: FrameView,
+    /// The merged counts and the view they are of.
+    pixels: Option<(FrameView, SeenPixels)>,
+    /// Counts taken of `last_view` so far, read or not.
+    counts: u32,
+}
+
+impl SeenState {
+    /// The counts that hold for the frame last prepared.
+    pub(super) fn pixels(&self) -> Option<&SeenPixels> {
+        let tau = self.current?;
+        let entry = self.entries.iter().find(|e| e.tau == tau)?;
+        entry
+            .pixels
+            .as_ref()
+            .filter(|(held, _)| *held == entry.last_view)
+            .map(|(_, p)| p)
+    }
+
+    /// Before a frame of `view` is prepared in the slot that owns
+    /// `buffer` (its last frame complete): takes in what that frame
+    /// counted, and arms the slot to count if the view is still for the
+    /// frame's tolerance and wants more counts (`count`: the tolerance
+    /// where the frame's path reads the counts, None where it does not).
+    pub(super) fn prepare(
+        &mut self,
+        grid: &PatchGrid,
+        buffer: &mut SeenBuffer,
+        view: &FrameView,
+        count: Option<f32>,
+    ) -> Result<()> {
+        if let Some((counted, tau, counts)) = buffer.take()? {
+            if let Some(entry) = self.entries.iter_mut().find(|e| e.tau == tau) {
+                match &mut entry.pixels {
+                    Some((held, pixels)) if *held == counted => pixels.merge(&counts),
+                    _ => SeenPixels::new(grid, &counts).map(|p| {
+                        entry.pixels = Some((counted, p));
+                    }),
+                }
+                .map_err(|e| RenderError::Unsupported(e.to_string()))?;
+            }
+        }
+        self.current = count;
+        let Some(tau) = count else {
+            return buffer.arm(None);
+        };
+        let Some(at) = self.entries.iter().position(|e| e.tau == tau) else {
+            // A tolerance's first frame: the next of the same view counts.
+            if self.entries.len() == TOLERANCES_KEPT {
+                self.entries.remove(0);
+            }
+            self.entries.push(SeenEntry {
+                tau,
+                last_view: *view,
+                pixels: None,
+                counts: 0,
+            });
+            return buffer.arm(None);
+        };
+        let mut entry = self.entries.remove(at);
+        if entry.last_view != *view {
+            entry.last_view = *view;
+            entry.counts = 0;
+            // Not still: the next frame of this view may count.
+            entry.pixels = None;
+            buffer.arm(None)?;
+        } else if entry.counts < COUNTS_PER_VIEW {
+            entry.counts += 1;
+            buffer.arm(Some((*view, tau)))?;
+        } else {
+            buffer.arm(None)?;
+        }
+        self.entries.push(entry);
+        Ok(())
+    }
+}
