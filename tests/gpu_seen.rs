@@ -56,7 +56,7 @@ fn a_still_view_counts_the_pixels_each_patch_shows_and_a_moving_one_does_not() {
     }
     let terrain = dem_terrain(32, DVec2::ZERO);
     let camera = view(&terrain, "grazing");
-    let mut scene = GpuScene::new(dem_terrain(32, DVec2::ZERO), 320, 180, false);
+    let mut scene = GpuScene::new(terrain.clone(), 320, 180, false);
     let settings = error_lod(1.0);
     scene.render(&camera, &settings);
     assert!(
@@ -123,7 +123,7 @@ fn counted_pixels_spare_hidden_ground_within_tau() {
     }
     let terrain = dem_terrain(32, DVec2::ZERO);
     let camera = view(&terrain, "grazing");
-    let mut scene = GpuScene::new(dem_terrain(32, DVec2::ZERO), 640, 360, false);
+    let mut scene = GpuScene::new(terrain.clone(), 640, 360, false);
     let brute = RenderSettings {
         path: RenderPath::Brute,
         ..RenderSettings::default()

@@ -1477,9 +1477,7 @@ fn each_patch_stays_within_its_predicted_error() {
         let grid = terrain.grid();
         let patch_at = |p: DVec3| {
             let g = info.world_to_grid(p.x, p.z);
-            let col = (g.x.max(0.0) as usize).min(info.cols() - 2);
-            let row = (g.y.max(0.0) as usize).min(info.rows() - 2);
-            grid.patch_index(grid.patch_of_cell(row, col))
+            grid.patch_index(grid.patch_at(g.x, g.y))
         };
         let mut scene = GpuScene::new(terrain.clone(), w, h, false);
         for (view_name, cam) in &crack_cameras(&terrain) {

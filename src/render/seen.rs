@@ -98,10 +98,9 @@ impl SeenBuffer {
             .buffer
             .mapped()
             .ok_or(RenderError::NotMapped("the seen pixels"))?;
-        let counts = bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()]
-            .chunks_exact(size_of::<u32>())
-            .map(|w| u32::from_ne_bytes([w[0], w[1], w[2], w[3]]))
-            .collect();
+        let counts = bytemuck::pod_collect_to_vec(
+            &bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()],
+        );
         Ok(Some((view, tau, counts)))
     }
 
