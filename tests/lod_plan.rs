@@ -339,6 +339,77 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     assert!(coarser > 0, "no hidden patch was drawn coarser");
 }
 
+/// Ground the view model does not read still counts towards the frame's
+/// share over tau. On the DEM's grazing view the eye is inside the box of
+/// the patch below it, so that patch keeps the bound's choice (full
+/// resolution, within tau everywhere) and its model is never read; counts
+/// say how many of the frame's pixels it shows. With those pixels counted
+/// the frame may put more pixels over tau elsewhere: no block is finer
+/// than with the same counts less that patch's, and some are coarser.
+#[test]
+fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table();
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let grid = terrain.grid();
+    let camera = vkterrain::bench::cameras::named_views(terrain.info())
+        .into_iter()
+        .find(|v| v.name == "grazing")
+        .expect("the grazing view")
+        .camera;
+    let view = FrameView::new(&terrain, &camera, 1280, 720).lod_view(Tau::DEFAULT);
+    let at = terrain.info().world_to_grid(camera.eye.x, camera.eye.z);
+    let below = grid.patch_index(grid.patch_at(at.x, at.y));
+    let with = |below_shows: u32| {
+        let counts: Vec<u32> = (0..grid.patch_count())
+            .map(|p| if p == below { below_shows } else { 1 << 24 })
+            .collect();
+        let seen = SeenPixels::new(grid, &counts).unwrap();
+        plan(
+            &terrain,
+            &hierarchy,
+            &view,
+            &PlanInputs {
+                table: &table,
+                sight,
+                merge: true,
+                cull: true,
+                reading: SightReading::Tessellated,
+                seen: Some(&seen),
+            },
+        )
+    };
+    let (hidden, shown) = (with(0), with(400_000));
+    let block_of = |frame: &FramePlan| {
+        frame
+            .blocks
+            .iter()
+            .find(|b| b.patches(grid).any(|q| q == below))
+            .copied()
+            .expect("the patch below the eye is drawn")
+    };
+    assert!(block_of(&hidden).full_resolution && block_of(&shown).full_resolution);
+    assert_eq!(hidden.blocks.len(), shown.blocks.len());
+    let mut coarser = 0;
+    for (after, before) in shown.blocks.iter().zip(&hidden.blocks) {
+        assert_eq!(
+            (after.col, after.row, after.level),
+            (before.col, before.row, before.level)
+        );
+        assert!(
+            after.patch_level <= before.patch_level
+                && (!after.full_resolution || before.full_resolution),
+            "{after:?} finer than {before:?}"
+        );
+        coarser += usize::from(after.patch_level < before.patch_level);
+    }
+    assert!(
+        coarser > 0,
+        "no block coarser with the pixels below the eye counted"
+    );
+}
+
 /// A block's entry adds its patches' areas and, read by its largest
 /// shares, keeps their largest errors: seen from anywhere, it puts at least
 /// as large a share of its pixels over any error as each of them. The

@@ -674,6 +674,7 @@ impl<'a> Bench<'a> {
             }
         }
         if let Some(ms) = lod_ms {
+            log::trace!("level choice of {}: {ms:.3} ms", config.label());
             gathered.lod_ms_max = Some(gathered.lod_ms_max.map_or(ms, |m| m.max(ms)));
         }
     }

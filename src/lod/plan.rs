@@ -32,7 +32,10 @@
 //! measure's, on the model's figures). A patch much deeper than it is
 //! near (one near the eye) is read in parts, each from its own nearest
 //! point and direction, the parts outside the frustum left out
-//! (`model_parts`).
+//! (`model_parts`). Once earlier frames of the view have counted the
+//! pixels each patch shows (`lod::seen`), a block is read at the pixels
+//! it showed, and the frame's pixels include those of ground whose model
+//! is not read, which the bound keeps within tau (`unread_pixels`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
 //! own errors as before.
@@ -412,7 +415,7 @@ pub fn plan(
         plan.blocks.push(planned);
         pending.extend(to_read);
     }
-    let (candidates, frame_pixels) = match inputs.sight {
+    let (candidates, mut frame_pixels) = match inputs.sight {
         Some(sight) => read_model(
             sight,
             (&pending, &parts),
@@ -422,6 +425,9 @@ pub fn plan(
         ),
         None => (Vec::new(), 0.0),
     };
+    if let Some(seen) = inputs.seen {
+        frame_pixels += unread_pixels(&plan, &pending, grid, seen);
+    }
     if !candidates.is_empty() {
         let budget = EXCEED_SHARE * frame_pixels.min(view.viewport_pixels());
         let levels = share_greedily(&candidates, budget as f32);
@@ -669,11 +675,14 @@ fn read_model(
         }
         // Pixels nearer ground hid in earlier frames of this view are
         // none of the block's: each share of its pixels over tau is
-        // taken of the pixels it showed.
+        // taken of the pixels it showed. A block the model does not see
+        // is over tau nowhere, and its pixels are the ones it showed.
         if let Some(seen) = seen {
             let (cols, rows) = p.patches;
             let shown = seen.block_pixels(cols, rows) as f64;
-            if shown < block_pixels {
+            if !modelled {
+                block_pixels = shown;
+            } else if shown < block_pixels {
                 let kept = (shown / block_pixels) as f32;
                 over.iter_mut().for_each(|o| *o *= kept);
                 block_pixels = shown;
@@ -685,6 +694,37 @@ fn read_model(
         }
     }
     (candidates, frame_pixels)
+}
+
+/// The pixels counted of the blocks whose view model was not read (the
+/// patch the eye is over, those without a model) and of the merged nodes:
+/// ground drawn within tau by its bound, whose pixels are the frame's all
+/// the same, so a 99th percentile over the frame allows its share of them
+/// over tau elsewhere. Only counts tell them: the model does not see them.
+fn unread_pixels(
+    plan: &FramePlan,
+    pending: &[Pending],
+    grid: &PatchGrid,
+    seen: &SeenPixels,
+) -> f64 {
+    let mut read = vec![false; plan.blocks.len()];
+    for p in pending {
+        read[p.candidate.slot] = true;
+    }
+    let blocks = plan
+        .blocks
+        .iter()
+        .zip(&read)
+        .filter(|(_, &read)| !read)
+        .map(|(b, _)| b.patch_range(grid));
+    let merged = plan.merged.iter().map(|m| {
+        let (col, row, span) = (m.col as usize, m.row as usize, 1usize << m.level);
+        ([col, col + span], [row, row + span])
+    });
+    blocks
+        .chain(merged)
+        .map(|(cols, rows)| seen.block_pixels(cols, rows) as f64)
+        .sum()
 }
 
 /// Each candidate's level: from every one at its coarsest, the step that
