@@ -7,13 +7,15 @@ mod common;
 use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
-use vkterrain::lod::plan::{patches_in_view, plan, FramePlan, PlanInputs, SightReading};
+use vkterrain::lod::plan::{
+    patches_in_view, plan, FramePlan, PlanInputs, PlannedBlock, SightReading,
+};
 use vkterrain::lod::seen::SeenPixels;
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::sight::{Block, BlockShares, LatticePoint, SightTable, LEVELS};
-use vkterrain::terrain::{ErrorTable, Heightmap, Terrain, TerrainInfo};
+use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, Terrain, TerrainInfo};
 
 fn view_of(terrain: &Terrain, eye: DVec3, target: DVec3, tau: f32) -> LodView {
     let camera = Camera {
@@ -31,9 +33,20 @@ fn planned(
     view: &LodView,
 ) -> FramePlan {
     let hierarchy = Hierarchy::new(terrain, table);
+    planned_seen(terrain, (&hierarchy, table, sight), view, None)
+}
+
+/// The tess path's plan of `view`, merging and culling, with `seen`'s
+/// counts.
+fn planned_seen(
+    terrain: &Terrain,
+    (hierarchy, table, sight): (&Hierarchy, &ErrorTable, Option<&SightTable>),
+    view: &LodView,
+    seen: Option<&SeenPixels>,
+) -> FramePlan {
     plan(
         terrain,
-        &hierarchy,
+        hierarchy,
         view,
         &PlanInputs {
             table,
@@ -41,9 +54,17 @@ fn planned(
             merge: true,
             cull: true,
             reading: SightReading::Tessellated,
-            seen: None,
+            seen,
         },
     )
+}
+
+/// The block of `frame` that holds patch `p`.
+fn block_holding<'f>(frame: &'f FramePlan, grid: &PatchGrid, p: usize) -> Option<&'f PlannedBlock> {
+    frame
+        .blocks
+        .iter()
+        .find(|b| b.patches(grid).any(|q| q == p))
 }
 
 /// A grid of 512 x 512 patches, as many as a 32769^2 terrain's 64-cell
@@ -281,26 +302,10 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
     let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), 1.0);
     let with = |seen: Option<&SeenPixels>| {
-        plan(
-            &terrain,
-            &hierarchy,
-            &view,
-            &PlanInputs {
-                table: &table,
-                sight,
-                merge: true,
-                cull: true,
-                reading: SightReading::Tessellated,
-                seen,
-            },
-        )
+        planned_seen(&terrain, (&hierarchy, &table, sight), &view, seen)
     };
     let level_of = |frame: &FramePlan, p: usize| {
-        frame
-            .blocks
-            .iter()
-            .find(|b| b.patches(grid).any(|q| q == p))
-            .map(|b| (b.patch_level, b.full_resolution))
+        block_holding(frame, grid, p).map(|b| (b.patch_level, b.full_resolution))
     };
     let unseen = with(None);
     let counts = |f: &dyn Fn(usize) -> u32| -> SeenPixels {
@@ -366,29 +371,11 @@ fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
             .map(|p| if p == below { below_shows } else { 1 << 24 })
             .collect();
         let seen = SeenPixels::new(grid, &counts).unwrap();
-        plan(
-            &terrain,
-            &hierarchy,
-            &view,
-            &PlanInputs {
-                table: &table,
-                sight,
-                merge: true,
-                cull: true,
-                reading: SightReading::Tessellated,
-                seen: Some(&seen),
-            },
-        )
+        planned_seen(&terrain, (&hierarchy, &table, sight), &view, Some(&seen))
     };
     let (hidden, shown) = (with(0), with(400_000));
-    let block_of = |frame: &FramePlan| {
-        frame
-            .blocks
-            .iter()
-            .find(|b| b.patches(grid).any(|q| q == below))
-            .copied()
-            .expect("the patch below the eye is drawn")
-    };
+    let block_of =
+        |frame| *block_holding(frame, grid, below).expect("the patch below the eye is drawn");
     assert!(block_of(&hidden).full_resolution && block_of(&shown).full_resolution);
     assert_eq!(hidden.blocks.len(), shown.blocks.len());
     let mut coarser = 0;

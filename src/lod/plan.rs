@@ -718,7 +718,7 @@ fn unread_pixels(
         .filter(|(_, &read)| !read)
         .map(|(b, _)| b.patch_range(grid));
     let merged = plan.merged.iter().map(|m| {
-        let (col, row, span) = (m.col as usize, m.row as usize, 1usize << m.level);
+        let (col, row, span) = (m.col as usize, m.row as usize, m.span() as usize);
         ([col, col + span], [row, row + span])
     });
     blocks
