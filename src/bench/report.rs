@@ -16,7 +16,9 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 use super::look::{extra_percent, LookRow};
-use super::run::{Row, RowLod, RowPath, ORACLE_EXCEED_FRACTION, TIMED_FRAMES, WARM_UP};
+use super::run::{
+    Row, RowLod, RowPath, ORACLE_EXCEED_FRACTION, SINGLE_FRAME_TIMING, TIMED_FRAMES, WARM_UP,
+};
 use crate::output::write_atomically;
 
 /// Tolerances at which tess error mode's p99 must be within tau.
@@ -726,7 +728,10 @@ frames but the first {WARM_UP} for the flythrough. A fixed view's frames are tim
 rounds, one frame of every row (brute included) a round, nothing read back or measured \
 between them, so that whatever slows the machine during the run slows every row alike; each \
 row's error and counts come from one more frame, drawn and read back after the rounds. A flythrough frame is timed and read back at once (the \
-readback is recorded after the second timestamp). {GPU_CLOCK_NOTE} `cpu_ms` is the median time to choose \
+readback is recorded after the second timestamp). With `--single-frame` a fixed view is read back once, and each row is \
+timed by that frame and the frames it draws straight after it, up to {TIMED_FRAMES} in all within \
+{timing_ms} ms of that frame's start: a row a GPU draws in milliseconds is timed by a median, one \
+that takes longer (brute's tens of millions of triangles on lavapipe) once. {GPU_CLOCK_NOTE} `cpu_ms` is the median time to choose \
 levels, write uniforms and record the frame's commands; `lod_ms` is the level choice alone \
 (its median over the timed frames), and `lod_ms_max` its largest in any frame of the row, \
 warm-up frames and each view's first frame included, so a choice that only a still camera \
@@ -752,7 +757,8 @@ frame to frame and sees only its own row's frames, so each fixed view starts as 
 from the view before it (that first frame is compared but not timed) and the flythrough runs \
 on from the last fixed view. `differing` counts the pixels, over every compared frame, whose \
 colour differs from the same row's render without occlusion culling at the same camera.\n",
-        100.0 * ORACLE_EXCEED_FRACTION
+        100.0 * ORACLE_EXCEED_FRACTION,
+        timing_ms = SINGLE_FRAME_TIMING.as_millis(),
     )
 }
 

@@ -42,8 +42,10 @@ pub struct BenchCmd {
     #[arg(long)]
     pub quick: bool,
 
-    /// Render and time each fixed view once, without warm-up, and leave the
-    /// flythrough out: for terrains whose brute frame takes seconds.
+    /// Render and measure each fixed view once, without warm-up, timing each
+    /// row by that frame and those drawn straight after it (up to 10 within
+    /// half a second), and leave the flythrough out: for terrains whose brute
+    /// frame takes seconds.
     #[arg(long)]
     pub single_frame: bool,
 
