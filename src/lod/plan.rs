@@ -45,7 +45,6 @@
 //! infinite below it. Edges take the larger errors of the two patches
 //! sharing them, so both sides still agree.
 
-use std::cmp::Ordering;
 use std::collections::binary_heap::{BinaryHeap, PeekMut};
 
 use glam::{Vec2, Vec3};
@@ -731,47 +730,61 @@ fn unread_pixels(
 /// relieves the most pixels over tau per triangle added goes first, until
 /// what remains over tau fits `budget`.
 fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
-    /// A candidate's next step: its pixels relieved per triangle added,
-    /// the candidate, the level it goes to. Greater is taken first: the
-    /// larger relief, then the earlier candidate.
-    #[derive(PartialEq)]
-    struct Step(f32, u32, u8);
-    impl Eq for Step {}
-    impl PartialOrd for Step {
-        fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-            Some(self.cmp(other))
-        }
-    }
-    impl Ord for Step {
-        fn cmp(&self, other: &Self) -> Ordering {
-            self.0.total_cmp(&other.0).then(other.1.cmp(&self.1))
-        }
-    }
-    let step = |i: usize, (g, k): (f32, usize)| Step(g, i as u32, k as u8);
+    // A candidate's next step is keyed by its pixels relieved per triangle
+    // added, then the earlier candidate: one integer whose order is that
+    // one (`step_key`), so the heap compares words. The level it goes to
+    // is kept beside it.
+    let mut next = vec![0u8; candidates.len()];
     let mut levels = vec![0usize; candidates.len()];
     let mut over: f32 = candidates.iter().map(|c| c.over[0]).sum();
-    let mut heap: BinaryHeap<Step> = candidates
+    let mut heap: BinaryHeap<u64> = candidates
         .iter()
         .enumerate()
-        .filter_map(|(i, c)| c.best_step(0).map(|s| step(i, s)))
+        .filter_map(|(i, c)| {
+            let (g, k) = c.best_step(0)?;
+            next[i] = k as u8;
+            Some(step_key(g, i))
+        })
         .collect();
     while over > budget {
         let Some(mut top) = heap.peek_mut() else {
             break;
         };
-        let (i, k) = (top.1 as usize, usize::from(top.2));
+        let i = step_candidate(*top);
+        let k = usize::from(next[i]);
         let c = &candidates[i];
         over -= c.over[levels[i]] - c.over[k];
         levels[i] = k;
         // The candidate's next step takes the place of the one taken.
         match c.best_step(k) {
-            Some(next) => *top = step(i, next),
+            Some((g, k)) => {
+                next[i] = k as u8;
+                *top = step_key(g, i);
+            }
             None => {
                 PeekMut::pop(top);
             }
         }
     }
     levels
+}
+
+/// A greedy step's heap key: greater for a larger `gain` (ordered as
+/// `f32::total_cmp` orders it), then for an earlier `candidate`.
+fn step_key(gain: f32, candidate: usize) -> u64 {
+    let bits = gain.to_bits();
+    // Negative floats order reversed, below every positive one.
+    let ordered = if bits >> 31 == 1 {
+        !bits
+    } else {
+        bits | 1 << 31
+    };
+    u64::from(ordered) << 32 | u64::from(u32::MAX - candidate as u32)
+}
+
+/// The candidate a `step_key` is of.
+fn step_candidate(key: u64) -> usize {
+    (u32::MAX - key as u32) as usize
 }
 
 /// The patches whose boxes are not outside the frustum (all of them
@@ -847,6 +860,7 @@ fn in_grid_order(rects: &[([usize; 2], [usize; 2])], cols: usize) -> Vec<u32> {
 #[cfg(test)]
 mod tests {
     use glam::{Mat4, Vec2, Vec3};
+    use proptest::prelude::*;
 
     use super::*;
     use crate::lod::view::Tau;
@@ -937,5 +951,23 @@ mod tests {
         let run = 4000.0;
         assert_eq!(at_mean[0].at, LatticePoint::new(4128.0, 0.0, 20.0 / run));
         assert_eq!(at_bottom[0].at, LatticePoint::new(4128.0, 0.0, 60.0 / run));
+    }
+
+    proptest! {
+        /// The greedy share's heap key orders steps as their gains do under
+        /// `total_cmp`, the earlier candidate first between equal gains, and
+        /// gives its candidate back.
+        #[test]
+        fn step_keys_order_as_gains_then_earlier_candidates(
+            a in any::<f32>(),
+            b in any::<f32>(),
+            i in 0usize..100_000,
+            j in 0usize..100_000,
+        ) {
+            let expected = a.total_cmp(&b).then(j.cmp(&i));
+            prop_assert_eq!(step_key(a, i).cmp(&step_key(b, j)), expected);
+            prop_assert_eq!(step_candidate(step_key(a, i)), i);
+            prop_assert_eq!(step_key(a, i).cmp(&step_key(a, i + 1)), std::cmp::Ordering::Greater);
+        }
     }
 }
