@@ -7,7 +7,9 @@ use common::gpu::skip_gpu;
 use common::vkterrain_in as vkterrain;
 use common::*;
 use glam::DVec2;
-use vkterrain::bench::run::{configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath};
+use vkterrain::bench::run::{
+    configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath, TIMED_FRAMES,
+};
 use vkterrain::gpu::Gpu;
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
 
@@ -52,6 +54,7 @@ fn a_quick_run_measures_every_configuration() {
         single_frame: false,
         views: Vec::new(),
         gpu_warm_ms: 0,
+        timed_frames: TIMED_FRAMES,
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 96, 64).expect("bench objects");
     let mut progress = Count(0, 0);
@@ -352,6 +355,10 @@ fn bench_refuses_bad_arguments() {
         "--gpu-warm-ms",
     );
     fail(
+        &["bench", "--out", "o", "--timed-frames", "0"],
+        "--timed-frames",
+    );
+    fail(
         &["bench", "--out", "q", "--quick", "--view", "flythrough"],
         "leave the flythrough out",
     );
@@ -378,6 +385,7 @@ fn a_single_frame_run_renders_each_view_once() {
         single_frame: true,
         views: Vec::new(),
         gpu_warm_ms: 0,
+        timed_frames: TIMED_FRAMES,
     };
     let mut bench = Bench::new(&gpu, &terrain, lod, &configs, 64, 48).expect("bench objects");
     let mut progress = Count(0, 0);

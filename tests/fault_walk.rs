@@ -187,7 +187,18 @@ fn bench_fails_cleanly_at_every_point() {
     if skip_gpu() {
         return;
     }
-    let (_maps, walk) = on_small_map("bench", &["--quick", "--single-frame", "--out", "results"]);
+    // One timed frame a row: the walk visits every submission.
+    let (_maps, walk) = on_small_map(
+        "bench",
+        &[
+            "--quick",
+            "--single-frame",
+            "--timed-frames",
+            "1",
+            "--out",
+            "results",
+        ],
+    );
     // Three renderers and the target, then every render of every view.
     walk_both(&walk, 20, 16);
 }

@@ -723,7 +723,7 @@ Where one surface hides another (a ridge in front of a valley), a pixel's two po
 on different hills, and its error is large even when both surfaces are close: such pixels are \
 counted as they are, never filtered out.\n\n\
 **Speed.** `gpu_ms` is the time between timestamps written before and after the terrain draw, \
-the median of {TIMED_FRAMES} frames after {WARM_UP} untimed ones for a fixed view, and of all \
+the median of {TIMED_FRAMES} frames (`--timed-frames`) after {WARM_UP} untimed ones for a fixed view, and of all \
 frames but the first {WARM_UP} for the flythrough. A fixed view's frames are timed in \
 rounds, one frame of every row (brute included) a round, nothing read back or measured \
 between them, so that whatever slows the machine during the run slows every row alike; each \

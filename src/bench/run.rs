@@ -29,7 +29,8 @@ pub const OCCLUSION_TAU: f32 = 1.0;
 /// The tolerance of the error modes run with the view measure, beside the
 /// real-time choice's rows at the same tolerance.
 pub const VIEW_MEASURE_TAU: f32 = 1.0;
-/// Frames timed per named view, after `WARM_UP` untimed ones.
+/// Frames timed per named view, after `WARM_UP` untimed ones, unless told
+/// otherwise (`BenchOptions::timed_frames`).
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
 
@@ -40,7 +41,8 @@ pub const WARM_UP: usize = 2;
 pub const STILL_FRAMES: usize = 3;
 /// How long `--single-frame` goes on timing a fixed view's row after the
 /// frame it reads back: frames of the same row are drawn back to back, up
-/// to `TIMED_FRAMES` in all, until this long after that frame began. A
+/// to the run's timed frames in all (`BenchOptions::timed_frames`), until
+/// this long after that frame began. A
 /// device that draws the row in a few milliseconds times it by a median,
 /// as a full run does; a frame that takes longer (brute's 33.5 M
 /// triangles on lavapipe) is timed once.
@@ -353,6 +355,9 @@ pub struct BenchOptions {
     /// lightly loaded draws the timed one at the clock a busy application
     /// would see (0: not drawn).
     pub gpu_warm_ms: u32,
+    /// Frames timed per row of a fixed view (`TIMED_FRAMES` unless told
+    /// otherwise); with `single_frame`, at most this many.
+    pub timed_frames: usize,
 }
 
 /// One configuration seen from one camera (or the whole flythrough).
@@ -477,6 +482,9 @@ pub struct Bench<'a> {
     /// How long a fixed view's frame is drawn untimed before it is timed
     /// (`BenchOptions::gpu_warm_ms`).
     gpu_warm: std::time::Duration,
+    /// The most frames a single-frame view's row is timed by
+    /// (`BenchOptions::timed_frames`).
+    timed_frames: usize,
 }
 
 impl<'a> Bench<'a> {
@@ -503,6 +511,7 @@ impl<'a> Bench<'a> {
             renderers: Vec::new(),
             warm_up: WARM_UP,
             gpu_warm: std::time::Duration::ZERO,
+            timed_frames: TIMED_FRAMES,
         };
         for (path, occlusion) in [
             (RenderPath::Brute, false),
@@ -661,7 +670,7 @@ impl<'a> Bench<'a> {
 
     /// Times more frames of `config` from `camera` straight after a
     /// single-frame view's read-back frame, which began at `since`: up to
-    /// `TIMED_FRAMES` timed in all, while within `SINGLE_FRAME_TIMING`.
+    /// the run's timed frames in all, while within `SINGLE_FRAME_TIMING`.
     fn time_while_cheap(
         &mut self,
         camera: &Camera,
@@ -670,7 +679,7 @@ impl<'a> Bench<'a> {
         (since, sample): (std::time::Instant, usize),
         gathered: &mut Gathered,
     ) -> anyhow::Result<()> {
-        for _ in 1..TIMED_FRAMES {
+        for _ in 1..self.timed_frames {
             if since.elapsed() >= SINGLE_FRAME_TIMING {
                 break;
             }
@@ -960,8 +969,9 @@ impl<'a> Bench<'a> {
         let repeats = if options.single_frame {
             1
         } else {
-            WARM_UP + TIMED_FRAMES
+            WARM_UP + options.timed_frames.max(1)
         };
+        self.timed_frames = options.timed_frames.max(1);
         self.warm_up = if options.single_frame { 0 } else { WARM_UP };
         self.gpu_warm = std::time::Duration::from_millis(u64::from(options.gpu_warm_ms));
         let mut views: Vec<(String, Vec<Camera>, usize)> = named_views(info)

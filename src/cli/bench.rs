@@ -65,6 +65,12 @@ pub struct BenchCmd {
     #[arg(long, value_name = "MS", default_value = "0", value_parser = clap::value_parser!(u32).range(0..=10_000))]
     pub gpu_warm_ms: u32,
 
+    /// Frames timed per row of a fixed view, whose median the row reports
+    /// (after 2 untimed ones; with --single-frame, as many of them as fit
+    /// in half a second, at least one).
+    #[arg(long, value_name = "N", default_value = "10", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub timed_frames: u32,
+
     /// Frames of the flythrough (0 leaves it out).
     #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
     pub frames: usize,
@@ -307,6 +313,7 @@ fn measure(
         single_frame: cmd.single_frame,
         views: cmd.views.clone(),
         gpu_warm_ms: cmd.gpu_warm_ms,
+        timed_frames: cmd.timed_frames as usize,
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
