@@ -6,18 +6,32 @@
 #endif
 
 // The geomip path: one vertex template of (N+1)^2 grid offsets drawn once
-// per visible patch, with the patch's level and sides in push constants.
+// per visible patch, with the patch's level and sides: listed in a storage
+// buffer and found by the draw's instance index (a frame's draws then go
+// in one indirect call), or pushed with the draw.
 // Mirror: terrain::geomip (levels, morph targets; the factors come from
-// terrain::geomip::patch_morph in the push constants).
+// terrain::geomip::patch_morph in the constants), and
+// render::geomip_path::GeomipConstants / GeomipPush.
 
 layout(location = 0) in uvec2 in_offset;  // (column, row) in the patch
 
-layout(push_constant) uniform PatchConstants {
+struct PatchConstants {
     ivec2 origin;      // sample (column, row) of the patch's upper-left corner
     int level;         // step 2^level
     float interior;    // morph factor of the interior
     vec4 sides;        // morph factors of the left, top, right, bottom sides
-} pc;
+};
+
+layout(std430, set = 0, binding = BINDING_PATCH_CONSTANTS) readonly buffer ListedConstants {
+    PatchConstants listed[];
+};
+
+layout(push_constant) uniform DrawConstants {
+    PatchConstants own;  // the draw's own constants, with OWN_PATCH_CONSTANTS
+    uint first_listed;   // else the list index the instance index counts from
+} draw;
+
+PatchConstants pc;
 
 layout(location = 0) out vec2 out_grid;
 layout(location = 1) out float out_height;
@@ -42,6 +56,9 @@ float height_of(ivec2 offset) {
 }
 
 void main() {
+    pc = draw.first_listed == OWN_PATCH_CONSTANTS
+        ? draw.own
+        : listed[draw.first_listed + uint(gl_InstanceIndex)];
     ivec2 offset = ivec2(in_offset);
     ivec2 sample_cr = clamp_sample(offset);
     float h = displaced(sample_cr);

@@ -15,6 +15,14 @@ pub const BINDING_FRAME_STORAGE: u32 = 21;
 /// a word that is 1 in a frame that counts, then a count per patch.
 pub const BINDING_SEEN_PIXELS: u32 = 22;
 
+/// Storage buffer of a frame's listed geomip draws' constants (the geomip
+/// path's patches, or the tess path's full-resolution ones), read by
+/// glsl/geomip.vert at the draw's instance index.
+pub const BINDING_PATCH_CONSTANTS: u32 = 23;
+/// The geomip push constants' list index that says the draw carries its
+/// own constants instead.
+pub const OWN_PATCH_CONSTANTS: u32 = u32::MAX;
+
 /// Storage buffer of the per-patch error table (tess path, error LOD).
 pub const BINDING_ERROR_TABLE: u32 = 4;
 /// Storage buffer of this frame's full-resolution patches, one bit each
@@ -189,6 +197,11 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
         ("BINDING_PAGES", BINDING_PAGES.to_string()),
         ("BINDING_PAGE_TABLE", BINDING_PAGE_TABLE.to_string()),
         ("BINDING_SEEN_PIXELS", BINDING_SEEN_PIXELS.to_string()),
+        (
+            "BINDING_PATCH_CONSTANTS",
+            BINDING_PATCH_CONSTANTS.to_string(),
+        ),
+        ("OWN_PATCH_CONSTANTS", uint(OWN_PATCH_CONSTANTS)),
         ("PAGE_LEVEL_SHIFT", PAGE_LEVEL_SHIFT.to_string()),
         ("BINDING_MIRROR_CASES", BINDING_MIRROR_CASES.to_string()),
         ("BINDING_MIRROR_RESULTS", BINDING_MIRROR_RESULTS.to_string()),

@@ -30,6 +30,9 @@ pub struct Capabilities {
     /// (at most `max_draw_indirect_count`).
     pub multi_draw_indirect: bool,
     pub max_draw_indirect_count: u32,
+    /// drawIndirectFirstInstance: an indirect command's first instance
+    /// may be other than 0 (the geomip path's listed constants).
+    pub draw_indirect_first_instance: bool,
     /// fragmentStoresAndAtomics: the terrain's fragment shader counts the
     /// pixels each patch shows in a storage buffer (required).
     pub fragment_stores_and_atomics: bool,
@@ -57,6 +60,12 @@ pub struct Capabilities {
 }
 
 impl Capabilities {
+    /// Whether one indirect call can draw a frame's geomip patches, each
+    /// reading its listed constants by its first instance.
+    pub fn lists_geomip_draws(&self) -> bool {
+        self.multi_draw_indirect && self.draw_indirect_first_instance
+    }
+
     /// Whether attachments of `samples` samples per pixel can be drawn.
     pub fn supports_samples(&self, samples: u32) -> bool {
         self.sample_counts.contains(&samples)
@@ -312,6 +321,7 @@ fn inspect(instance: &ash::Instance, physical: vk::PhysicalDevice) -> Option<Can
                 pipeline_statistics_query: features.pipeline_statistics_query != 0,
                 sampler_anisotropy: features.sampler_anisotropy != 0,
                 multi_draw_indirect: features.multi_draw_indirect != 0,
+                draw_indirect_first_instance: features.draw_indirect_first_instance != 0,
                 fragment_stores_and_atomics: features.fragment_stores_and_atomics != 0,
                 fragment_subgroup_ballot: subgroup
                     .supported_stages
@@ -411,6 +421,7 @@ impl Device {
             .pipeline_statistics_query(caps.pipeline_statistics_query)
             .sampler_anisotropy(caps.sampler_anisotropy)
             .multi_draw_indirect(caps.multi_draw_indirect)
+            .draw_indirect_first_instance(caps.draw_indirect_first_instance)
             .fragment_stores_and_atomics(caps.fragment_stores_and_atomics);
         let mut v13 = vk::PhysicalDeviceVulkan13Features::default()
             .dynamic_rendering(true)

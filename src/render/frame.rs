@@ -7,7 +7,7 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::appearance::GpuAppearance;
-use super::geomip_path::GeomipDraw;
+use super::geomip_path::{GeomipConstants, GeomipDraw};
 use super::occlusion::{DrawCommand, DRAW_COMMAND_BYTES, MAX_LISTED_DRAWS};
 use super::seen::SeenBuffer;
 use super::settings::RenderSettings;
@@ -21,7 +21,8 @@ use crate::gpu::Device;
 use crate::render::error::Result;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION,
-    BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_SEEN_PIXELS, BINDING_VISIBILITY,
+    BINDING_HEIGHTMAP, BINDING_PAGES, BINDING_PAGE_TABLE, BINDING_PATCH_CONSTANTS,
+    BINDING_SEEN_PIXELS, BINDING_VISIBILITY,
 };
 
 /// Parts of a frame whose pipeline statistics are counted apart: the
@@ -56,6 +57,9 @@ pub(super) struct FrameSlot {
     /// `tess_batches` as indirect commands, drawn in one call where the
     /// device has multiDrawIndirect.
     pub(super) batch_commands: BatchCommands,
+    /// The frame's geomip draws (the geomip path's patches, or the tess
+    /// path's full-resolution ones) listed for one indirect call.
+    pub(super) geomip_list: GeomipList,
     /// What `prepare` chose for this slot's frame.
     pub(super) prepared: PreparedFrame,
     /// The pixels each patch showed, in a frame that counts them.
@@ -126,6 +130,92 @@ impl BatchCommands {
     }
 }
 
+/// A frame's geomip draws listed for one indirect call, where the device
+/// has multiDrawIndirect and drawIndirectFirstInstance: each draw's
+/// constants (`GeomipConstants`, read by glsl/geomip.vert at its instance
+/// index) and its command, whose first instance is its place in the list.
+/// Recording then costs the same for ten patches or ten thousand, and so
+/// does the GPU's side of the draws (on the 4097^2 terrain the geomip path
+/// drew about 10,000 patches a frame, one call and one push each). Sized
+/// when the renderer is built, one entry a patch up to
+/// `MAX_LISTED_DRAWS`; a frame of more draws pushes each draw's own.
+pub(super) struct GeomipList {
+    /// Bound at `BINDING_PATCH_CONSTANTS`; one entry where nothing is
+    /// listed, so the binding is always valid.
+    constants: Buffer,
+    commands: Option<Buffer>,
+    capacity: usize,
+    /// Draws listed for the frame.
+    listed: Option<u32>,
+}
+
+impl GeomipList {
+    fn new(device: &Device, slot: usize, patches: usize) -> Result<Self> {
+        let capacity = match device.caps.lists_geomip_draws() {
+            true => patches.clamp(1, MAX_LISTED_DRAWS as usize),
+            false => 0,
+        };
+        let constants = device.create_host_buffer(
+            &format!("terrain.geomip_constants[{slot}]"),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            &vec![0; capacity.max(1) * size_of::<GeomipConstants>()],
+        )?;
+        let commands = match capacity {
+            0 => None,
+            n => Some(device.create_host_buffer(
+                &format!("terrain.geomip_commands[{slot}]"),
+                vk::BufferUsageFlags::INDIRECT_BUFFER,
+                &vec![0; n * DRAW_COMMAND_BYTES as usize],
+            )?),
+        };
+        Ok(GeomipList {
+            constants,
+            commands,
+            capacity,
+            listed: None,
+        })
+    }
+
+    /// Points `set`'s constants binding at the list.
+    fn bind(&self, device: &Device, set: DescriptorSet) {
+        device.write_buffer(
+            set,
+            BINDING_PATCH_CONSTANTS,
+            vk::DescriptorType::STORAGE_BUFFER,
+            &self.constants,
+            vk::WHOLE_SIZE,
+        );
+    }
+
+    /// Lists `draws` (their order kept), where they fit.
+    pub(super) fn write(&mut self, draws: &[GeomipDraw]) -> Result<()> {
+        self.listed = None;
+        let Some(commands) = self
+            .commands
+            .as_mut()
+            .filter(|_| !draws.is_empty() && draws.len() <= self.capacity)
+        else {
+            return Ok(());
+        };
+        let listed: Vec<DrawCommand> = draws
+            .iter()
+            .enumerate()
+            .map(|(i, d)| DrawCommand::listed(d.first, d.count, i as u32))
+            .collect();
+        commands.write(bytemuck::cast_slice(&listed))?;
+        let constants: Vec<GeomipConstants> = draws.iter().map(|d| d.constants).collect();
+        self.constants.write(bytemuck::cast_slice(&constants))?;
+        self.listed = Some(draws.len() as u32);
+        Ok(())
+    }
+
+    /// The frame's listed commands and how many, None where its draws
+    /// push their own constants.
+    pub(super) fn listed(&self) -> Option<(&Buffer, u32)> {
+        self.commands.as_ref().zip(self.listed)
+    }
+}
+
 /// What a prepared frame chose to draw and what it expects; the renderer
 /// reports the last prepared slot's.
 #[derive(Clone, Debug, Default)]
@@ -172,6 +262,8 @@ pub(super) fn build_frames(
         appearance.write(device, set);
         let seen = SeenBuffer::new(device, i, seen_patches)?;
         seen.bind(device, set);
+        let geomip_list = GeomipList::new(device, i, patches)?;
+        geomip_list.bind(device, set);
         frames.push(FrameSlot {
             uniforms,
             set,
@@ -183,6 +275,7 @@ pub(super) fn build_frames(
             asked_to_cull: false,
             tess_batches: Vec::new(),
             batch_commands: BatchCommands::new(device, i, patches)?,
+            geomip_list,
             prepared: PreparedFrame::default(),
             seen,
         });
@@ -245,14 +338,20 @@ impl DescriptorPlan {
             pool_sizes: vec![
                 (vk::DescriptorType::UNIFORM_BUFFER, 1),
                 (vk::DescriptorType::COMBINED_IMAGE_SAMPLER, 2),
-                (vk::DescriptorType::STORAGE_BUFFER, 2),
+                (vk::DescriptorType::STORAGE_BUFFER, 3),
             ],
         };
-        // The pixels each patch shows (render::seen).
+        // The pixels each patch shows (render::seen), and the geomip
+        // draws' listed constants (`GeomipList`).
         plan.bindings.push((
             BINDING_SEEN_PIXELS,
             vk::DescriptorType::STORAGE_BUFFER,
             vk::ShaderStageFlags::FRAGMENT,
+        ));
+        plan.bindings.push((
+            BINDING_PATCH_CONSTANTS,
+            vk::DescriptorType::STORAGE_BUFFER,
+            vk::ShaderStageFlags::VERTEX,
         ));
         if tess {
             // The control shader's: the error table, the full-resolution

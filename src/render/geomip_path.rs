@@ -1,7 +1,8 @@
 //! The geomip path on the GPU: one vertex template and one index list
 //! per level and stitched-side mask, shared by every patch; each frame the
-//! patches in view become draws with their level and morph factors in
-//! push constants (see `lod::geomip`).
+//! patches in view become draws with their level and morph factors
+//! (see `lod::geomip`), listed in a buffer that one indirect call draws
+//! from (`GeomipList`), or pushed draw by draw where the device cannot.
 
 use std::mem::size_of;
 
@@ -22,6 +23,7 @@ use crate::lod::plan::{patches_in_view, plan, PlanInputs, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
+use crate::shader_constants::OWN_PATCH_CONSTANTS;
 use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::{ErrorTable, Terrain};
 
@@ -43,7 +45,7 @@ pub(super) struct GeomipGeometry {
     pub(super) given: Option<geomip::PatchLevels>,
 }
 
-/// One patch of the geomip path: its index list and push constants.
+/// One patch of the geomip path: its index list and constants.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct GeomipDraw {
     /// The patch's index in the grid.
@@ -53,7 +55,8 @@ pub(super) struct GeomipDraw {
     pub(super) constants: GeomipConstants,
 }
 
-/// Push constants of glsl/geomip.vert.
+/// One patch's constants in glsl/geomip.vert (`PatchConstants`), as
+/// listed (std430) and as pushed.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GeomipConstants {
@@ -64,6 +67,19 @@ pub struct GeomipConstants {
 }
 const _: () = assert!(size_of::<GeomipConstants>() == 32);
 const _: () = assert!(std::mem::offset_of!(GeomipConstants, sides) == 16);
+
+/// Push constants of glsl/geomip.vert (`DrawConstants`): a draw's own
+/// constants, or where its listed ones start.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+struct GeomipPush {
+    own: GeomipConstants,
+    /// `OWN_PATCH_CONSTANTS`, or the list index that the draw's instance
+    /// index counts from.
+    first_listed: u32,
+}
+const _: () = assert!(size_of::<GeomipPush>() == 36);
+const _: () = assert!(std::mem::offset_of!(GeomipPush, first_listed) == 32);
 impl GeomipGeometry {
     /// The path's vertex template, index lists and pipelines for
     /// `terrain`, on the renderer's set layout; `errors` is its error
@@ -93,7 +109,7 @@ impl GeomipGeometry {
         let layout = device.create_pipeline_layout_with_push(
             &[set_layout],
             vk::ShaderStageFlags::VERTEX,
-            size_of::<GeomipConstants>() as u32,
+            size_of::<GeomipPush>() as u32,
             "terrain.pipeline_layout.geomip",
         )?;
         Ok(GeomipGeometry {
@@ -349,25 +365,47 @@ impl GeomipGeometry {
             .map_or(self.variants[0], |&(_, range)| range)
     }
 
-    /// Draws `draws` (this path's patches, or the tess path's
-    /// full-resolution ones) with the geomip pipeline.
-    /// With `indirect`, draw i reads its instance count (0 or 1, set by
-    /// the occlusion state) from the command buffer's command `first + i`.
-    pub(super) fn draw(
-        &self,
-        rec: &Recorder,
-        set: DescriptorSet,
-        wireframe: bool,
-        draws: &[GeomipDraw],
-        indirect: Option<(&Buffer, u64)>,
-    ) -> Result<()> {
+    /// Binds the geomip pipeline and geometry, for this path's patches or
+    /// the tess path's full-resolution ones (`push_listed`, `draw_own`).
+    pub(super) fn bind(&self, rec: &Recorder, set: DescriptorSet, wireframe: bool) -> Result<()> {
         rec.bind_graphics(self.pipelines.select(wireframe)?, &self.layout, set);
         rec.bind_geometry(&self.template, &self.indices);
+        Ok(())
+    }
+
+    /// After `bind`: the draws that follow read their constants from the
+    /// frame's list, draw i's at list index i (its first instance).
+    pub(super) fn push_listed(&self, rec: &Recorder) {
+        let push = GeomipPush {
+            first_listed: 0,
+            ..GeomipPush::default()
+        };
+        rec.push_constants(
+            &self.layout,
+            vk::ShaderStageFlags::VERTEX,
+            bytemuck::bytes_of(&push),
+        );
+    }
+
+    /// After `bind`: `draws` one call each, each pushing its own
+    /// constants; with `indirect`, draw i reads its instance count (0 or
+    /// 1, set by the occlusion state) from command `first + i` of the
+    /// buffer.
+    pub(super) fn draw_own(
+        &self,
+        rec: &Recorder,
+        draws: &[GeomipDraw],
+        indirect: Option<(&Buffer, u64)>,
+    ) {
         for (i, draw) in draws.iter().enumerate() {
+            let push = GeomipPush {
+                own: draw.constants,
+                first_listed: OWN_PATCH_CONSTANTS,
+            };
             rec.push_constants(
                 &self.layout,
                 vk::ShaderStageFlags::VERTEX,
-                bytemuck::bytes_of(&draw.constants),
+                bytemuck::bytes_of(&push),
             );
             match indirect {
                 Some((commands, first)) => {
@@ -376,7 +414,6 @@ impl GeomipGeometry {
                 None => rec.draw_indexed(draw.first, draw.count),
             }
         }
-        Ok(())
     }
 
     /// The patches `visible` this frame (in grid order), at their `chosen`

@@ -89,6 +89,9 @@ pub struct ListedDraw {
     pub patches: [u32; 2],
     pub first_index: u32,
     pub index_count: u32,
+    /// Its first instance: a listed geomip draw's place in its list
+    /// (`GeomipList`), else 0.
+    pub first_instance: u32,
 }
 
 /// One VkDrawIndexedIndirectCommand.
@@ -111,6 +114,15 @@ impl DrawCommand {
             instance_count: 1,
             first_index,
             ..DrawCommand::default()
+        }
+    }
+
+    /// `once`, its one instance numbered `first_instance`: a listed
+    /// geomip draw's place in its list (`GeomipList`).
+    pub(super) fn listed(first_index: u32, index_count: u32, first_instance: u32) -> Self {
+        DrawCommand {
+            first_instance,
+            ..DrawCommand::once(first_index, index_count)
         }
     }
 }
@@ -523,6 +535,7 @@ impl Occlusion {
             .map(|d| DrawCommand {
                 index_count: d.index_count,
                 first_index: d.first_index,
+                first_instance: d.first_instance,
                 ..DrawCommand::default()
             })
             .collect();

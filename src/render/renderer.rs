@@ -641,6 +641,12 @@ impl TerrainRenderer {
         }
         let frame = &mut self.frames[slot];
         frame.batch_commands.write(&frame.tess_batches)?;
+        let geomip_draws = match settings.path {
+            RenderPath::Geomip => frame.prepared.geomip.as_slice(),
+            RenderPath::Tess => frame.prepared.exact.as_slice(),
+            RenderPath::Brute => &[],
+        };
+        frame.geomip_list.write(geomip_draws)?;
         // A streamed tile drawn from a coarser page than its level needs
         // is off by up to that page's error besides the level's.
         if let Some(streamer) = &self.streamer {

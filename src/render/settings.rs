@@ -248,6 +248,10 @@ pub fn measurement_notes(
         notes.push(format!(
             "{name}: multiDrawIndirect is unavailable, so each patch batch is its own draw call"
         ));
+    } else if !caps.draw_indirect_first_instance {
+        notes.push(format!(
+            "{name}: drawIndirectFirstInstance is unavailable, so each geomip patch is its own draw call"
+        ));
     }
     let with_feature = crate::gpu::Capabilities {
         sampler_anisotropy: true,

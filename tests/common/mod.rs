@@ -84,6 +84,7 @@ pub fn test_capabilities() -> vkterrain::gpu::Capabilities {
         pipeline_statistics_query: true,
         sampler_anisotropy: true,
         multi_draw_indirect: true,
+        draw_indirect_first_instance: true,
         fragment_stores_and_atomics: true,
         fragment_subgroup_ballot: true,
         max_draw_indirect_count: u32::MAX,

@@ -51,13 +51,18 @@ impl TerrainRenderer {
             // Every draw is indirect (the geomip path's patches, the tess
             // path's batches and its full-resolution patches), each pass
             // drawing those that hold a patch the occlusion state keeps.
+            // A listed geomip draw keeps its place in the list as its first
+            // instance (`GeomipList`).
+            let listed = self.frames[slot].geomip_list.listed().is_some();
             let patch_draws = |draws: &[GeomipDraw]| -> Vec<ListedDraw> {
                 draws
                     .iter()
-                    .map(|d| ListedDraw {
+                    .enumerate()
+                    .map(|(i, d)| ListedDraw {
                         patches: [d.patch, 1],
                         first_index: d.first,
                         index_count: d.count,
+                        first_instance: if listed { i as u32 } else { 0 },
                     })
                     .collect()
             };
@@ -72,6 +77,7 @@ impl TerrainRenderer {
                             patches: [first / 4, count / 4],
                             first_index: first,
                             index_count: count,
+                            first_instance: 0,
                         })
                         .collect();
                     if matches!(settings.lod_metric, LodMetric::Error(_)) {
@@ -177,16 +183,9 @@ impl TerrainRenderer {
                 if matches!(settings.lod_metric, LodMetric::Error(_))
                     && !frame.prepared.exact.is_empty()
                 {
-                    let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
                     let batches = frame.tess_batches.len() as u64;
                     let exact = indirect.map(|(commands, base)| (commands, base + batches));
-                    geomip.draw(
-                        rec,
-                        frame.set,
-                        settings.wireframe,
-                        &frame.prepared.exact,
-                        exact,
-                    )?;
+                    self.draw_geomip(rec, frame, settings, &frame.prepared.exact, exact)?;
                 }
                 self.draw_patches(rec, frame, (tess, pipeline), phase, indirect);
                 // Merged nodes go in the first pass, untested for occlusion.
@@ -202,15 +201,8 @@ impl TerrainRenderer {
                 }
             }
             RenderPath::Geomip => {
-                let geomip = self.geomip.as_ref().ok_or_else(not_built)?;
                 let indirect = self.indirect_draws(slot, phase)?;
-                geomip.draw(
-                    rec,
-                    frame.set,
-                    settings.wireframe,
-                    &frame.prepared.geomip,
-                    indirect,
-                )?;
+                self.draw_geomip(rec, frame, settings, &frame.prepared.geomip, indirect)?;
             }
             RenderPath::Brute => {
                 let brute = self.brute.as_ref().ok_or_else(not_built)?;
@@ -221,6 +213,38 @@ impl TerrainRenderer {
                 );
                 rec.draw(brute.vertex_count);
             }
+        }
+        Ok(())
+    }
+
+    /// The frame's geomip draws `draws` (the geomip path's patches, or the
+    /// tess path's full-resolution ones) through the geomip pipeline: in
+    /// one indirect call where the frame listed them (`GeomipList`), from
+    /// `indirect`'s commands (the occlusion pass's, each draw's instance
+    /// count 0 or 1) or the list's own; else one call a draw, each
+    /// pushing its constants.
+    fn draw_geomip(
+        &self,
+        rec: &Recorder,
+        frame: &FrameSlot,
+        settings: &RenderSettings,
+        draws: &[GeomipDraw],
+        indirect: Option<(&Buffer, u64)>,
+    ) -> Result<()> {
+        let geomip = self.geomip.as_ref().ok_or_else(|| {
+            RenderError::Unsupported("the geomip path was not built for this renderer".into())
+        })?;
+        geomip.bind(rec, frame.set, settings.wireframe)?;
+        match (frame.geomip_list.listed(), indirect) {
+            (Some(_), Some((commands, first))) => {
+                geomip.push_listed(rec);
+                self.draw_commands(rec, commands, first, draws.len() as u32);
+            }
+            (Some((commands, listed)), None) => {
+                geomip.push_listed(rec);
+                self.draw_commands(rec, commands, 0, listed);
+            }
+            (None, indirect) => geomip.draw_own(rec, draws, indirect),
         }
         Ok(())
     }
