@@ -1,6 +1,6 @@
 //! What each frame in flight owns (its uniform block, descriptor set,
-//! queries and the tess path's choice buffers), and the descriptor set
-//! layout every frame's set follows.
+//! queries, the tess path's choice buffers and the lists its indirect
+//! draws read), and the descriptor set layout every frame's set follows.
 
 use std::mem::size_of;
 
