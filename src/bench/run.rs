@@ -966,12 +966,12 @@ impl<'a> Bench<'a> {
         progress: &mut dyn Progress,
     ) -> anyhow::Result<Vec<Row>> {
         let info = self.terrain.info();
+        self.timed_frames = options.timed_frames.max(1);
         let repeats = if options.single_frame {
             1
         } else {
-            WARM_UP + options.timed_frames.max(1)
+            WARM_UP + self.timed_frames
         };
-        self.timed_frames = options.timed_frames.max(1);
         self.warm_up = if options.single_frame { 0 } else { WARM_UP };
         self.gpu_warm = std::time::Duration::from_millis(u64::from(options.gpu_warm_ms));
         let mut views: Vec<(String, Vec<Camera>, usize)> = named_views(info)

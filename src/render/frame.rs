@@ -56,7 +56,7 @@ pub(super) struct FrameSlot {
     pub(super) tess_batches: Vec<(u32, u32)>,
     /// `tess_batches` as indirect commands, drawn in one call where the
     /// device has multiDrawIndirect.
-    pub(super) batch_commands: BatchCommands,
+    pub(super) batch_commands: IndirectCommands,
     /// The frame's geomip draws (the geomip path's patches, or the tess
     /// path's full-resolution ones) listed for one indirect call.
     pub(super) geomip_list: GeomipList,
@@ -66,62 +66,78 @@ pub(super) struct FrameSlot {
     pub(super) seen: SeenBuffer,
 }
 
-/// A frame's tess batches as indirect commands, for a device with
-/// multiDrawIndirect: one draw call then records every batch, so
-/// recording costs the same for ten batches or ten thousand (the 4097^2
-/// terrain's overview draws about 2,000). Sized when the renderer is
-/// built, for one batch a patch up to `MAX_LISTED_DRAWS`, so it never
-/// allocates during a run; a frame of more batches records them one by
-/// one.
-pub(super) struct BatchCommands {
+/// A frame's draws as indirect commands in a per-slot buffer, so that one
+/// draw call records them all and recording costs the same for ten draws
+/// or ten thousand: the tess path's batches (the 4097^2 terrain's overview
+/// draws about 2,000) on a device with multiDrawIndirect, and the geomip
+/// draws of a `GeomipList`. Sized when the renderer is built, one command
+/// a patch up to `MAX_LISTED_DRAWS`, so it never allocates during a run; a
+/// frame of more draws records them one by one.
+pub(super) struct IndirectCommands {
     buffer: Option<Buffer>,
     capacity: usize,
-    /// Commands written for the frame, None where its batches were not
-    /// written (no multiDrawIndirect, or more than fit).
+    /// Commands written for the frame, None where its draws were not
+    /// written (no buffer, or more than fit).
     written: Option<u32>,
 }
 
-impl BatchCommands {
-    /// Room for `patches` commands (capped), on a device with
-    /// multiDrawIndirect; nothing otherwise.
-    fn new(device: &Device, slot: usize, patches: usize) -> Result<Self> {
-        let capacity = match device.caps.multi_draw_indirect {
-            true => patches.clamp(1, MAX_LISTED_DRAWS as usize),
-            false => 0,
-        };
+impl IndirectCommands {
+    /// Room for `capacity` commands, named `name`; no buffer for 0.
+    fn new(device: &Device, name: &str, capacity: usize) -> Result<Self> {
         let buffer = match capacity {
             0 => None,
             n => Some(device.create_host_buffer(
-                &format!("terrain.batch_commands[{slot}]"),
+                name,
                 vk::BufferUsageFlags::INDIRECT_BUFFER,
                 &vec![0; n * DRAW_COMMAND_BYTES as usize],
             )?),
         };
-        Ok(BatchCommands {
+        Ok(IndirectCommands {
             buffer,
             capacity,
             written: None,
         })
     }
 
-    /// Writes `batches` ((first index, index count) each) as commands,
-    /// where they fit.
-    pub(super) fn write(&mut self, batches: &[(u32, u32)]) -> Result<()> {
+    /// The tess path's batches: room for one a patch (capped) on a device
+    /// with multiDrawIndirect, nothing otherwise.
+    fn for_batches(device: &Device, slot: usize, patches: usize) -> Result<Self> {
+        let capacity = match device.caps.multi_draw_indirect {
+            true => patches.clamp(1, MAX_LISTED_DRAWS as usize),
+            false => 0,
+        };
+        Self::new(device, &format!("terrain.batch_commands[{slot}]"), capacity)
+    }
+
+    /// Whether `count` commands fit.
+    fn fits(&self, count: usize) -> bool {
+        self.buffer.is_some() && count <= self.capacity
+    }
+
+    /// Writes `commands`, where they fit.
+    fn write(&mut self, commands: impl ExactSizeIterator<Item = DrawCommand>) -> Result<()> {
         self.written = None;
         let Some(buffer) = self
             .buffer
             .as_mut()
-            .filter(|_| batches.len() <= self.capacity)
+            .filter(|_| commands.len() <= self.capacity)
         else {
             return Ok(());
         };
-        let commands: Vec<DrawCommand> = batches
-            .iter()
-            .map(|&(first, count)| DrawCommand::once(first, count))
-            .collect();
+        let commands: Vec<DrawCommand> = commands.collect();
         buffer.write(bytemuck::cast_slice(&commands))?;
-        self.written = Some(batches.len() as u32);
+        self.written = Some(commands.len() as u32);
         Ok(())
+    }
+
+    /// Writes `batches` ((first index, index count) each) as commands,
+    /// where they fit.
+    pub(super) fn write_batches(&mut self, batches: &[(u32, u32)]) -> Result<()> {
+        self.write(
+            batches
+                .iter()
+                .map(|&(first, count)| DrawCommand::once(first, count)),
+        )
     }
 
     /// The commands written for the frame, and how many.
@@ -143,10 +159,7 @@ pub(super) struct GeomipList {
     /// Bound at `BINDING_PATCH_CONSTANTS`; one entry where nothing is
     /// listed, so the binding is always valid.
     constants: Buffer,
-    commands: Option<Buffer>,
-    capacity: usize,
-    /// Draws listed for the frame.
-    listed: Option<u32>,
+    commands: IndirectCommands,
 }
 
 impl GeomipList {
@@ -160,19 +173,13 @@ impl GeomipList {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             &vec![0; capacity.max(1) * size_of::<GeomipConstants>()],
         )?;
-        let commands = match capacity {
-            0 => None,
-            n => Some(device.create_host_buffer(
-                &format!("terrain.geomip_commands[{slot}]"),
-                vk::BufferUsageFlags::INDIRECT_BUFFER,
-                &vec![0; n * DRAW_COMMAND_BYTES as usize],
-            )?),
-        };
         Ok(GeomipList {
             constants,
-            commands,
-            capacity,
-            listed: None,
+            commands: IndirectCommands::new(
+                device,
+                &format!("terrain.geomip_commands[{slot}]"),
+                capacity,
+            )?,
         })
     }
 
@@ -189,30 +196,24 @@ impl GeomipList {
 
     /// Lists `draws` (their order kept), where they fit.
     pub(super) fn write(&mut self, draws: &[GeomipDraw]) -> Result<()> {
-        self.listed = None;
-        let Some(commands) = self
-            .commands
-            .as_mut()
-            .filter(|_| !draws.is_empty() && draws.len() <= self.capacity)
-        else {
+        if draws.is_empty() || !self.commands.fits(draws.len()) {
+            self.commands.written = None;
             return Ok(());
-        };
-        let listed: Vec<DrawCommand> = draws
-            .iter()
-            .enumerate()
-            .map(|(i, d)| DrawCommand::listed(d.first, d.count, i as u32))
-            .collect();
-        commands.write(bytemuck::cast_slice(&listed))?;
+        }
         let constants: Vec<GeomipConstants> = draws.iter().map(|d| d.constants).collect();
         self.constants.write(bytemuck::cast_slice(&constants))?;
-        self.listed = Some(draws.len() as u32);
-        Ok(())
+        self.commands.write(
+            draws
+                .iter()
+                .enumerate()
+                .map(|(i, d)| DrawCommand::listed(d.first, d.count, i as u32)),
+        )
     }
 
     /// The frame's listed commands and how many, None where its draws
     /// push their own constants.
     pub(super) fn listed(&self) -> Option<(&Buffer, u32)> {
-        self.commands.as_ref().zip(self.listed)
+        self.commands.written()
     }
 }
 
@@ -274,7 +275,7 @@ pub(super) fn build_frames(
             culled: false,
             asked_to_cull: false,
             tess_batches: Vec::new(),
-            batch_commands: BatchCommands::new(device, i, patches)?,
+            batch_commands: IndirectCommands::for_batches(device, i, patches)?,
             geomip_list,
             prepared: PreparedFrame::default(),
             seen,

@@ -640,7 +640,7 @@ impl TerrainRenderer {
             }
         }
         let frame = &mut self.frames[slot];
-        frame.batch_commands.write(&frame.tess_batches)?;
+        frame.batch_commands.write_batches(&frame.tess_batches)?;
         let geomip_draws = match settings.path {
             RenderPath::Geomip => frame.prepared.geomip.as_slice(),
             RenderPath::Tess => frame.prepared.exact.as_slice(),
