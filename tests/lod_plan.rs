@@ -420,7 +420,10 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
     ] {
         for (col, row) in [(0usize, 0usize), (2, 4), (4, 2)] {
             let block = Block { level: 1, col, row };
-            let Some(whole) = sight.view(block, &at, 5.0, BlockShares::Largest) else {
+            let Some(whole) = sight
+                .view(block, &at, 5.0, BlockShares::Largest)
+                .map(|v| sight.codes(&v))
+            else {
                 continue;
             };
             let children: Vec<_> = [(0, 0), (1, 0), (0, 1), (1, 1)]
@@ -431,9 +434,11 @@ fn block_entries_bound_their_patches_and_survive_the_cache() {
                 })
                 .iter()
                 .map(|&b| {
-                    sight
-                        .view(b, &at, 5.0, BlockShares::Largest)
-                        .expect("a whole block's patch")
+                    sight.codes(
+                        &sight
+                            .view(b, &at, 5.0, BlockShares::Largest)
+                            .expect("a whole block's patch"),
+                    )
                 })
                 .collect();
             let area: f32 = children.iter().map(|c| c.area()).sum();
@@ -484,7 +489,8 @@ fn pooled_block_shares_count_a_rough_patch_for_its_own_pixels() {
         LatticePoint::new(-0.3, 1.0, 0.36),
     ] {
         for error in [0.05, 0.2, 0.8] {
-            let read = |b, shares| sight.view(b, &at, error, shares).expect("an entry");
+            let read =
+                |b, shares| sight.codes(&sight.view(b, &at, error, shares).expect("an entry"));
             let rough = read(patch(0, 0), BlockShares::Pooled);
             let pooled = read(block, BlockShares::Pooled);
             let largest = read(block, BlockShares::Largest);
@@ -544,12 +550,16 @@ fn narrower_patches_have_entries_of_their_own() {
     let narrower = [(3usize, 0usize, 8usize), (0, 2, 4), (3, 2, 4)];
     for (col, row, side) in narrower {
         let block = Block { level: 0, col, row };
-        let flat = plane
-            .view(block, &at, 1e-3, BlockShares::Pooled)
-            .expect("a narrower patch's entry");
-        let bent = curved
-            .view(block, &at, 1e-3, BlockShares::Pooled)
-            .expect("a narrower patch's entry");
+        let flat = plane.codes(
+            &plane
+                .view(block, &at, 1e-3, BlockShares::Pooled)
+                .expect("a narrower patch's entry"),
+        );
+        let bent = curved.codes(
+            &curved
+                .view(block, &at, 1e-3, BlockShares::Pooled)
+                .expect("a narrower patch's entry"),
+        );
         // Level k has 2^k segments; from the first reaching the smaller
         // side on, full resolution.
         let full = side.trailing_zeros() as usize;
@@ -571,4 +581,45 @@ fn narrower_patches_have_entries_of_their_own() {
     };
     assert!(curved.has(block(0)));
     assert!(!curved.has(block(1)));
+}
+
+/// A planner kept from frame to frame plans each frame as a fresh one
+/// does: its buffers, grown on one view or path, carry nothing into the
+/// next. The DEM's bench views in turn, each read for both paths, then
+/// the same frames backwards.
+#[test]
+fn a_planner_kept_across_frames_plans_each_frame_as_a_fresh_one() {
+    use vkterrain::bench::cameras::named_views;
+    use vkterrain::lod::plan::Planner;
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table().expect("a heightmap's view model");
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let mut frames = Vec::new();
+    for view in named_views(terrain.info()) {
+        for tau in [0.5, 2.0] {
+            let view = FrameView::new(&terrain, &view.camera, 1280, 720)
+                .lod_view(Tau::new(tau).unwrap());
+            for reading in [SightReading::Tessellated, SightReading::Template] {
+                frames.push((view, reading));
+            }
+        }
+    }
+    let mut planner = Planner::default();
+    let mut blocks = 0;
+    for (view, reading) in frames.iter().chain(frames.iter().rev()) {
+        let inputs = PlanInputs {
+            table: &table,
+            sight: Some(sight),
+            merge: *reading == SightReading::Tessellated,
+            cull: true,
+            reading: *reading,
+            seen: None,
+        };
+        let fresh = plan(&terrain, &hierarchy, view, &inputs);
+        assert_eq!(planner.plan(&terrain, &hierarchy, view, &inputs), &fresh);
+        assert!(fresh.blocks.iter().any(|b| b.chosen), "{reading:?}");
+        blocks += fresh.blocks.len();
+    }
+    assert!(blocks >= 2 * frames.len() * 20, "{blocks} blocks planned");
 }

@@ -207,6 +207,7 @@ pub struct FramePlan {
 }
 
 /// A block whose level the greedy share decides.
+#[derive(Debug)]
 struct Candidate {
     /// Index into the plan's blocks.
     slot: usize,
@@ -249,6 +250,7 @@ impl Candidate {
 }
 
 /// A node's box: its footprint's x and z, its heights' y.
+#[derive(Debug)]
 struct NodeBox {
     min: Vec3,
     max: Vec3,
@@ -287,17 +289,128 @@ impl NodeBox {
 }
 
 /// Plans one frame of the tess path's error LOD (see the module
-/// documentation).
+/// documentation). A frame loop keeps a `Planner` instead, whose buffers
+/// outlive the frame.
 pub fn plan(
     terrain: &Terrain,
     hierarchy: &Hierarchy,
     view: &LodView,
     inputs: &PlanInputs,
 ) -> FramePlan {
-    let mut plan = FramePlan::default();
-    let mut pending = Vec::new();
-    // The parts of every pending block, in order (`model_parts`).
-    let mut parts = Vec::new();
+    let mut planner = Planner::default();
+    planner.plan(terrain, hierarchy, view, inputs);
+    planner.plan
+}
+
+/// The error LOD's choice with the buffers it fills, kept from one frame
+/// to the next: once they have grown to a view's size, a frame's plan
+/// allocates nothing, and writes into memory it wrote the frame before
+/// instead of fresh pages.
+#[derive(Debug, Default)]
+pub struct Planner {
+    /// The last frame's plan.
+    plan: FramePlan,
+    /// The walk's nodes still to visit.
+    stack: Vec<(NodeId, NodeBox)>,
+    /// The blocks whose view model is read, in the order of their parts.
+    pending: Vec<Pending>,
+    /// The parts of every pending block, in order (`model_parts`).
+    parts: Vec<Part>,
+    /// Each part's reading of the model, where it has an entry.
+    views: Vec<Option<BlockView>>,
+    candidates: Vec<Candidate>,
+    /// Per block of the plan, whether its model was read.
+    read: Vec<bool>,
+    share: GreedyShare,
+}
+
+impl Planner {
+    /// Plans one frame (see `plan`).
+    pub fn plan(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        view: &LodView,
+        inputs: &PlanInputs,
+    ) -> &FramePlan {
+        let plan = &mut self.plan;
+        plan.blocks.clear();
+        plan.merged.clear();
+        (
+            plan.nodes_visited,
+            plan.patches_in_view,
+            plan.predicted_max_px,
+        ) = (0, 0, 0.0);
+        self.pending.clear();
+        self.parts.clear();
+        walk(
+            terrain,
+            hierarchy,
+            view,
+            inputs,
+            (plan, &mut self.stack),
+            (&mut self.pending, &mut self.parts),
+        );
+        let tau = view.tau.px();
+        let mut frame_pixels = match inputs.sight {
+            Some(sight) => read_model(
+                sight,
+                (&self.pending, &self.parts),
+                (tau, inputs.reading.shares()),
+                view.viewport_pixels() as f32,
+                inputs.seen,
+                (&mut self.views, &mut self.candidates),
+            ),
+            None => {
+                self.candidates.clear();
+                0.0
+            }
+        };
+        if let Some(seen) = inputs.seen {
+            frame_pixels +=
+                unread_pixels(plan, &self.pending, terrain.grid(), seen, &mut self.read);
+        }
+        if !self.candidates.is_empty() {
+            let budget = EXCEED_SHARE * frame_pixels.min(view.viewport_pixels());
+            let levels = self.share.levels(&self.candidates, budget as f32);
+            for (c, &level) in self.candidates.iter().zip(levels) {
+                let block = &mut plan.blocks[c.slot];
+                let id = NodeId {
+                    level: block.level,
+                    col: block.col >> block.level,
+                    row: block.row >> block.level,
+                };
+                let patch_max = hierarchy.node(id).patch_max;
+                block.patch_level = level as u8;
+                block.full_resolution = level >= c.full;
+                block.chosen = level < c.bound;
+                block.predicted_px = if block.full_resolution {
+                    0.0
+                } else {
+                    patch_max[level] * c.scale
+                };
+            }
+        }
+        plan.predicted_max_px = plan
+            .blocks
+            .iter()
+            .map(|b| b.predicted_px)
+            .fold(plan.predicted_max_px, f32::max);
+        &self.plan
+    }
+}
+
+/// Walks the hierarchy from its top node down, adding to `plan` its
+/// merged nodes and its blocks at the bound's levels, and to `pending`
+/// and `parts` the blocks whose view model is to be read.
+fn walk(
+    terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    view: &LodView,
+    inputs: &PlanInputs,
+    (plan, stack): (&mut FramePlan, &mut Vec<(NodeId, NodeBox)>),
+    (pending, parts): (&mut Vec<Pending>, &mut Vec<Part>),
+) {
     let tau = view.tau.px();
     let grid = terrain.grid();
     let n = grid.cells_per_patch() as u32;
@@ -309,7 +422,8 @@ pub fn plan(
         (f64::from(n) * spacing.x) as f32,
         (f64::from(n) * spacing.y) as f32,
     );
-    let mut stack = vec![NodeBox::entry(hierarchy, hierarchy.root())];
+    stack.clear();
+    stack.push(NodeBox::entry(hierarchy, hierarchy.root()));
     while let Some((id, bounds)) = stack.pop() {
         plan.nodes_visited += 1;
         let node = hierarchy.node(id);
@@ -371,17 +485,21 @@ pub fn plan(
             col: id.col as usize,
             row: id.row as usize,
         };
+        // Every patch has an entry in the model, and every whole block of
+        // full-size patches (`node.whole`).
         let modelled = inputs.sight.filter(|s| {
+            let has = id.level == 0 || node.whole;
+            debug_assert_eq!(has, id.level > BLOCK_LEVELS || s.has(block));
             id.level <= BLOCK_LEVELS
-                && s.has(block)
+                && has
                 && (node.whole || inputs.reading == SightReading::Tessellated)
         });
         // A block small and shallow on screen is decided at once. Without
         // the model, only whole blocks whose bound needs no patch at full
         // resolution: the tessellator still sets each edge's factor itself,
         // and a full-resolution flag would spread from one patch to all.
+        let (near, far) = bounds.distances(eye);
         let compact = || {
-            let (near, far) = bounds.distances(eye);
             let across = (bounds.max - bounds.min).length();
             near > 0.0
                 && far <= BLOCK_DEPTH_RATIO * near
@@ -393,67 +511,27 @@ pub fn plan(
                 None => id.level <= BLOCK_LEVELS && node.whole && compact(),
             };
         if !decided {
-            NodeBox::push_children(hierarchy, id, &mut stack);
+            NodeBox::push_children(hierarchy, id, stack);
             continue;
         }
         let slot = plan.blocks.len();
         let (planned, to_read) = plan_block(
             terrain,
             hierarchy,
-            (id, &bounds),
+            (id, &bounds, (near, far)),
             view,
             (inputs, modelled),
             slot,
-            &mut parts,
+            parts,
         );
         if id.level > 0 && modelled.is_none() && planned.full_resolution {
-            NodeBox::push_children(hierarchy, id, &mut stack);
+            NodeBox::push_children(hierarchy, id, stack);
             continue;
         }
         plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
         plan.blocks.push(planned);
         pending.extend(to_read);
     }
-    let (candidates, mut frame_pixels) = match inputs.sight {
-        Some(sight) => read_model(
-            sight,
-            (&pending, &parts),
-            (tau, inputs.reading.shares()),
-            view.viewport_pixels() as f32,
-            inputs.seen,
-        ),
-        None => (Vec::new(), 0.0),
-    };
-    if let Some(seen) = inputs.seen {
-        frame_pixels += unread_pixels(&plan, &pending, grid, seen);
-    }
-    if !candidates.is_empty() {
-        let budget = EXCEED_SHARE * frame_pixels.min(view.viewport_pixels());
-        let levels = share_greedily(&candidates, budget as f32);
-        for (c, level) in candidates.iter().zip(levels) {
-            let block = &mut plan.blocks[c.slot];
-            let id = NodeId {
-                level: block.level,
-                col: block.col >> block.level,
-                row: block.row >> block.level,
-            };
-            let patch_max = hierarchy.node(id).patch_max;
-            block.patch_level = level as u8;
-            block.full_resolution = level >= c.full;
-            block.chosen = level < c.bound;
-            block.predicted_px = if block.full_resolution {
-                0.0
-            } else {
-                patch_max[level] * c.scale
-            };
-        }
-    }
-    plan.predicted_max_px = plan
-        .blocks
-        .iter()
-        .map(|b| b.predicted_px)
-        .fold(plan.predicted_max_px, f32::max);
-    plan
 }
 
 /// Block `id`'s entry in the plan at the bound's level, and, where the
@@ -461,19 +539,18 @@ pub fn plan(
 fn plan_block(
     terrain: &Terrain,
     hierarchy: &Hierarchy,
-    (id, bounds): (NodeId, &NodeBox),
+    (id, bounds, (near, far)): (NodeId, &NodeBox, (f32, f32)),
     view: &LodView,
     (inputs, sight): (&PlanInputs, Option<&SightTable>),
     slot: usize,
     parts: &mut Vec<Part>,
 ) -> (PlannedBlock, Option<Pending>) {
     let grid = terrain.grid();
-    let eye = view.eye_local;
     let (pc, pr) = hierarchy.patch_range(id);
     // A single patch is read from the table; a block takes its patches'
     // largest errors. Either is seen from its own box: its footprint, its
     // heights.
-    let d = bounds.distances(eye).0;
+    let d = near;
     let (row, cells) = if id.level == 0 {
         let patch = grid.patch_id(pr[0] * grid.patch_cols() + pc[0]);
         let p = grid.patch_index(patch);
@@ -524,7 +601,7 @@ fn plan_block(
         SightReading::Tessellated => sight.mean_height(block),
         SightReading::Template => None,
     };
-    model_parts(bounds, view, inputs.cull, landing, parts);
+    model_parts((bounds, (near, far)), view, inputs.cull, landing, parts);
     let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;
     let pending = Pending {
         block,
@@ -559,14 +636,13 @@ pub const MAX_PARTS_SIDE: u32 = 4;
 /// height (`mean`; the bottom of its box without one). The parts are
 /// added to `parts`.
 fn model_parts(
-    bounds: &NodeBox,
+    (bounds, (near, far)): (&NodeBox, (f32, f32)),
     view: &LodView,
     cull: bool,
     mean: Option<f32>,
     parts: &mut Vec<Part>,
 ) {
     let eye = view.eye_local;
-    let (near, far) = bounds.distances(eye);
     let side = if far > BLOCK_DEPTH_RATIO * near {
         ((far / (BLOCK_DEPTH_RATIO * near)).ceil() as u32)
             .next_power_of_two()
@@ -623,6 +699,7 @@ struct Part {
 
 /// A block whose view model is still to be read: where it is seen from,
 /// and its candidate, whose pixels over tau the reading fills in.
+#[derive(Debug)]
 struct Pending {
     block: Block,
     /// Its patches' columns and rows.
@@ -632,29 +709,35 @@ struct Pending {
     candidate: Candidate,
 }
 
-/// The candidates of `pending`, each block's pixels over tau read off the
-/// view model (`tau` pixels, `viewport` pixels at most a block). Every
-/// entry is found first, and each memory line of its codes read once, in
-/// a loop of independent reads, so the lines are fetched many at a time
-/// (copying the codes out instead moved 200 bytes a view for it). Returns
-/// them with the pixels the model sees of them all.
+/// Fills `candidates` with those of `pending`, each block's pixels over
+/// tau read off the view model (`tau` pixels, `viewport` pixels at most a
+/// block). Every entry is found first (`views`), and each memory line of
+/// its codes read once, in a loop of independent reads, so the lines are
+/// fetched many at a time (copying the codes out instead moved 200 bytes
+/// a view for it). Returns the pixels the model sees of them all.
 fn read_model(
     sight: &SightTable,
     (pending, parts): (&[Pending], &[Part]),
     (tau, shares): (f32, BlockShares),
     viewport: f32,
     seen: Option<&SeenPixels>,
-) -> (Vec<Candidate>, f64) {
-    let blocks = pending
-        .iter()
-        .flat_map(|p| std::iter::repeat(p.block).take(p.parts));
-    let views: Vec<Option<BlockView>> = blocks
-        .zip(parts)
-        .map(|(block, part)| sight.view(block, &part.at, tau / part.scale, shares))
-        .collect();
-    std::hint::black_box(views.iter().flatten().fold(0, |acc, v| acc ^ v.touch()));
+    (views, candidates): (&mut Vec<Option<BlockView>>, &mut Vec<Candidate>),
+) -> f64 {
+    views.clear();
+    let mut at = 0;
+    for p in pending {
+        for part in &parts[at..at + p.parts] {
+            views.push(sight.view(p.block, &part.at, tau / part.scale, shares));
+        }
+        at += p.parts;
+    }
+    let mut touched = 0;
+    for view in views.iter().flatten() {
+        touched ^= sight.codes(view).touch();
+    }
+    std::hint::black_box(touched);
     let mut frame_pixels = 0.0f64;
-    let mut candidates = Vec::with_capacity(pending.len());
+    candidates.clear();
     let mut views = views.iter().zip(parts);
     for p in pending {
         let c = &p.candidate;
@@ -668,8 +751,9 @@ fn read_model(
             modelled = true;
             let pixels = (view.area() * part.share * part.scale * part.scale).min(viewport);
             block_pixels += f64::from(pixels);
+            let codes = sight.codes(view);
             for (k, o) in over.iter_mut().enumerate().take(c.bound) {
-                *o += pixels * view.over_fraction(k);
+                *o += pixels * codes.over_fraction(k);
             }
         }
         // Pixels nearer ground hid in earlier frames of this view are
@@ -692,7 +776,7 @@ fn read_model(
             candidates.push(Candidate { over, ..*c });
         }
     }
-    (candidates, frame_pixels)
+    frame_pixels
 }
 
 /// The pixels counted of the blocks whose view model was not read (the
@@ -705,15 +789,17 @@ fn unread_pixels(
     pending: &[Pending],
     grid: &PatchGrid,
     seen: &SeenPixels,
+    read: &mut Vec<bool>,
 ) -> f64 {
-    let mut read = vec![false; plan.blocks.len()];
+    read.clear();
+    read.resize(plan.blocks.len(), false);
     for p in pending {
         read[p.candidate.slot] = true;
     }
     let blocks = plan
         .blocks
         .iter()
-        .zip(&read)
+        .zip(read.iter())
         .filter(|(_, &read)| !read)
         .map(|(b, _)| b.patch_range(grid));
     let merged = plan.merged.iter().map(|m| {
@@ -726,47 +812,60 @@ fn unread_pixels(
         .sum()
 }
 
-/// Each candidate's level: from every one at its coarsest, the step that
-/// relieves the most pixels over tau per triangle added goes first, until
-/// what remains over tau fits `budget`.
-fn share_greedily(candidates: &[Candidate], budget: f32) -> Vec<usize> {
-    // A candidate's next step is keyed by its pixels relieved per triangle
-    // added, then the earlier candidate: one integer whose order is that
-    // one (`step_key`), so the heap compares words. The level it goes to
-    // is kept beside it.
-    let mut next = vec![0u8; candidates.len()];
-    let mut levels = vec![0usize; candidates.len()];
-    let mut over: f32 = candidates.iter().map(|c| c.over[0]).sum();
-    let mut heap: BinaryHeap<u64> = candidates
-        .iter()
-        .enumerate()
-        .filter_map(|(i, c)| {
+/// The greedy share's buffers, kept from frame to frame.
+#[derive(Debug, Default)]
+struct GreedyShare {
+    /// Each candidate's next step, keyed (`step_key`).
+    heap: BinaryHeap<u64>,
+    /// Each candidate's next step's level.
+    next: Vec<u8>,
+    /// Each candidate's level so far.
+    levels: Vec<usize>,
+}
+
+impl GreedyShare {
+    /// Each candidate's level: from every one at its coarsest, the step
+    /// that relieves the most pixels over tau per triangle added goes
+    /// first, until what remains over tau fits `budget`.
+    fn levels(&mut self, candidates: &[Candidate], budget: f32) -> &[usize] {
+        // A candidate's next step is keyed by its pixels relieved per
+        // triangle added, then the earlier candidate: one integer whose
+        // order is that one (`step_key`), so the heap compares words. The
+        // level it goes to is kept beside it.
+        let GreedyShare { heap, next, levels } = self;
+        next.clear();
+        next.resize(candidates.len(), 0);
+        levels.clear();
+        levels.resize(candidates.len(), 0);
+        let mut over: f32 = candidates.iter().map(|c| c.over[0]).sum();
+        heap.clear();
+        heap.extend(candidates.iter().enumerate().filter_map(|(i, c)| {
             let (g, k) = c.best_step(0)?;
             next[i] = k as u8;
             Some(step_key(g, i))
-        })
-        .collect();
-    while over > budget {
-        let Some(mut top) = heap.peek_mut() else {
-            break;
-        };
-        let i = step_candidate(*top);
-        let k = usize::from(next[i]);
-        let c = &candidates[i];
-        over -= c.over[levels[i]] - c.over[k];
-        levels[i] = k;
-        // The candidate's next step takes the place of the one taken.
-        match c.best_step(k) {
-            Some((g, k)) => {
-                next[i] = k as u8;
-                *top = step_key(g, i);
-            }
-            None => {
-                PeekMut::pop(top);
+        }));
+        while over > budget {
+            let Some(mut top) = heap.peek_mut() else {
+                break;
+            };
+            let i = step_candidate(*top);
+            let k = usize::from(next[i]);
+            let c = &candidates[i];
+            over -= c.over[levels[i]] - c.over[k];
+            levels[i] = k;
+            // The candidate's next step takes the place of the one taken.
+            match c.best_step(k) {
+                Some((g, k)) => {
+                    next[i] = k as u8;
+                    *top = step_key(g, i);
+                }
+                None => {
+                    PeekMut::pop(top);
+                }
             }
         }
+        levels
     }
-    levels
 }
 
 /// A greedy step's heap key: greater for a larger `gain` (ordered as
@@ -891,7 +990,13 @@ mod tests {
 
     fn parts_of(bounds: &NodeBox, view: &LodView, cull: bool) -> Vec<Part> {
         let mut parts = Vec::new();
-        model_parts(bounds, view, cull, Some(20.0), &mut parts);
+        model_parts(
+            (bounds, bounds.distances(view.eye_local)),
+            view,
+            cull,
+            Some(20.0),
+            &mut parts,
+        );
         parts
     }
 
@@ -945,9 +1050,10 @@ mod tests {
         let v = view(Vec3::new(0.0, 60.0, 0.0), Vec3::X);
         let bounds = patch(4000.0, -128.0);
         let mut at_mean = Vec::new();
-        model_parts(&bounds, &v, true, Some(40.0), &mut at_mean);
+        let distances = bounds.distances(v.eye_local);
+        model_parts((&bounds, distances), &v, true, Some(40.0), &mut at_mean);
         let mut at_bottom = Vec::new();
-        model_parts(&bounds, &v, true, None, &mut at_bottom);
+        model_parts((&bounds, distances), &v, true, None, &mut at_bottom);
         let run = 4000.0;
         assert_eq!(at_mean[0].at, LatticePoint::new(4128.0, 0.0, 20.0 / run));
         assert_eq!(at_bottom[0].at, LatticePoint::new(4128.0, 0.0, 60.0 / run));

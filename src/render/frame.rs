@@ -18,6 +18,7 @@ use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::Sampler;
 use crate::gpu::queries::FrameQueries;
 use crate::gpu::Device;
+use crate::lod::plan::Planner;
 use crate::render::error::Result;
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION,
@@ -62,6 +63,9 @@ pub(super) struct FrameSlot {
     pub(super) geomip_list: GeomipList,
     /// What `prepare` chose for this slot's frame.
     pub(super) prepared: PreparedFrame,
+    /// The error LOD's choice, with the buffers it fills kept from this
+    /// slot's last frame.
+    pub(super) planner: Planner,
     /// The pixels each patch showed, in a frame that counts them.
     pub(super) seen: SeenBuffer,
 }
@@ -278,6 +282,7 @@ pub(super) fn build_frames(
             batch_commands: IndirectCommands::for_batches(device, i, patches)?,
             geomip_list,
             prepared: PreparedFrame::default(),
+            planner: Planner::default(),
             seen,
         });
     }

@@ -19,7 +19,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip;
 use crate::lod::hierarchy::{Hierarchy, NodeId};
-use crate::lod::plan::{patches_in_view, plan, PlanInputs, SightReading};
+use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
@@ -144,7 +144,7 @@ impl GeomipGeometry {
         hierarchy: &Hierarchy,
         view: &FrameView,
         settings: &RenderSettings,
-        draws: &mut Vec<GeomipDraw>,
+        (draws, planner): (&mut Vec<GeomipDraw>, &mut Planner),
     ) -> GeomipChoice {
         let grid = terrain.grid();
         let count = geomip::level_count(grid.cells_per_patch());
@@ -200,7 +200,7 @@ impl GeomipGeometry {
                     ErrorMeasure::Sight => terrain.sight_table(),
                     _ => None,
                 };
-                let frame_plan = plan(
+                let frame_plan = planner.plan(
                     terrain,
                     hierarchy,
                     &lod_view,

@@ -603,9 +603,15 @@ impl TerrainRenderer {
                     (self.geomip.as_mut(), self.hierarchy.as_ref())
                 {
                     let start = Instant::now();
-                    let prepared = &mut self.frames[slot].prepared;
-                    let choice =
-                        geomip.choose(terrain, hierarchy, view, settings, &mut prepared.geomip);
+                    let frame = &mut self.frames[slot];
+                    let prepared = &mut frame.prepared;
+                    let choice = geomip.choose(
+                        terrain,
+                        hierarchy,
+                        view,
+                        settings,
+                        (&mut prepared.geomip, &mut frame.planner),
+                    );
                     prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
                     let predicted =
                         geomip.emit(terrain, view, settings, choice, &mut prepared.geomip);
@@ -682,7 +688,7 @@ impl TerrainRenderer {
             (hierarchy, self.seen.pixels()),
             geomip,
             (view, settings, pixels),
-            (choice, &mut frame.prepared.exact),
+            (choice, &mut frame.prepared.exact, &mut frame.planner),
             self.max_patches_per_draw,
         )?;
         frame.tess_batches = planned.tess_batches;

@@ -26,7 +26,7 @@ use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::order::{DrawOrder, PatchMarks};
 use crate::lod::patch_merge::MergedNode;
-use crate::lod::plan::{plan, FramePlan, PlanInputs, PlannedBlock, SightReading};
+use crate::lod::plan::{FramePlan, PlanInputs, PlannedBlock, Planner, SightReading};
 use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
@@ -85,7 +85,7 @@ impl TessGeometry {
         (hierarchy, seen_pixels): (&Hierarchy, Option<&SeenPixels>),
         geomip: &GeomipGeometry,
         (view, settings, pixels): (&FrameView, &RenderSettings, f32),
-        (choice, exact): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>),
+        (choice, exact, planner): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>, &mut Planner),
         max_patches_per_draw: Option<u32>,
     ) -> Result<PlannedFrame> {
         let sight = match settings.error_measure {
@@ -110,7 +110,7 @@ impl TessGeometry {
         };
         let lod_view = view.lod_view(Tau::new(pixels).unwrap_or_default());
         let table = seen.as_ref().map_or(&self.errors, |s| &s.table);
-        let frame_plan = plan(
+        let frame_plan = planner.plan(
             terrain,
             hierarchy,
             &lod_view,
@@ -124,13 +124,13 @@ impl TessGeometry {
             },
         );
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;
-        let merged_indices = choice.write(&frame_plan, (&self.errors, table), terrain)?;
+        let merged_indices = choice.write(frame_plan, (&self.errors, table), terrain)?;
         let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
-        exact_draws(terrain, &frame_plan, geomip, exact);
+        exact_draws(terrain, frame_plan, geomip, exact);
         exact.sort_by_cached_key(|d| order.key(d.patch));
         Ok(PlannedFrame {
             lod_ms,
-            tess_batches: block_batches(&frame_plan, &order, max_patches_per_draw),
+            tess_batches: block_batches(frame_plan, &order, max_patches_per_draw),
             merged_batches: patch_batches(0..merged_indices / 4, max_patches_per_draw),
             predicted_max_px: seen
                 .as_ref()

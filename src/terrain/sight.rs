@@ -181,9 +181,9 @@ pub struct SightTable {
 /// neighbouring slopes, with the weights that interpolate between them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LatticePoint {
-    pub azimuths: [usize; 2],
+    pub azimuths: [u8; 2],
     pub azimuth_weight: f32,
-    pub slopes: [usize; 2],
+    pub slopes: [u8; 2],
     pub slope_weight: f32,
 }
 
@@ -191,7 +191,13 @@ impl LatticePoint {
     /// The lattice point of horizontal direction `(x, z)` (any length) and
     /// fall `t`, clamped to the lattice's slopes.
     pub fn new(x: f32, z: f32, t: f32) -> Self {
-        let phi = z.atan2(x).rem_euclid(std::f32::consts::TAU);
+        // In [0, TAU): atan2's (-pi, pi] turned once where negative.
+        let phi = z.atan2(x);
+        let phi = if phi < 0.0 {
+            phi + std::f32::consts::TAU
+        } else {
+            phi
+        };
         let a = phi / std::f32::consts::TAU * AZIMUTHS as f32;
         let a0 = (a.floor() as usize).min(AZIMUTHS - 1);
         let last = SLOPES.len() - 1;
@@ -209,9 +215,9 @@ impl LatticePoint {
             (i, (t - SLOPES[i]) / (SLOPES[i + 1] - SLOPES[i]))
         };
         LatticePoint {
-            azimuths: [a0, (a0 + 1) % AZIMUTHS],
+            azimuths: [a0 as u8, ((a0 + 1) % AZIMUTHS) as u8],
             azimuth_weight: (a - a0 as f32).clamp(0.0, 1.0),
-            slopes: [s0, s0 + 1],
+            slopes: [s0 as u8, s0 as u8 + 1],
             slope_weight,
         }
     }
@@ -219,7 +225,9 @@ impl LatticePoint {
     /// The four lattice directions and their weights.
     fn corners(&self) -> [(usize, f32); 4] {
         let (wa, ws) = (self.azimuth_weight, self.slope_weight);
-        let d = |a: usize, s: usize| self.azimuths[a] * SLOPES.len() + self.slopes[s];
+        let d = |a: usize, s: usize| {
+            usize::from(self.azimuths[a]) * SLOPES.len() + usize::from(self.slopes[s])
+        };
         [
             (d(0, 0), (1.0 - wa) * (1.0 - ws)),
             (d(0, 1), (1.0 - wa) * ws),
@@ -403,47 +411,62 @@ impl SightTable {
 
     /// `block` seen from `at` against a vertical error `error` (in the
     /// heightmap's units, at the block): the entry's figures at the
-    /// lattice directions around `at`: their areas, and where their codes
-    /// lie (`BlockView::touch` fetches them); None without an entry.
+    /// lattice directions around `at`: their area, and where their codes
+    /// lie (`touch` fetches them, `over_fraction` reads them); None without
+    /// an entry.
     pub fn view(
         &self,
         block: Block,
         at: &LatticePoint,
         error: f32,
         shares: BlockShares,
-    ) -> Option<BlockView<'_>> {
+    ) -> Option<BlockView> {
         let (level, b) = self.entry(block)?;
-        let codes = match shares {
-            BlockShares::Largest if !level.largest.is_empty() => &level.largest,
-            _ => &level.codes,
-        };
+        let largest = shares == BlockShares::Largest && !level.largest.is_empty();
         let corners = at.corners();
-        let per_direction = LEVELS * FRACTIONS;
         let at_direction = |d: usize| d * level.blocks + b;
+        let area = corners
+            .iter()
+            .map(|&(d, w)| level.area[at_direction(d)] * w)
+            .sum();
         Some(BlockView {
-            area: corners.map(|(d, _)| level.area[at_direction(d)]),
-            codes: corners.map(|(d, _)| {
-                <&[u8; LEVELS * FRACTIONS]>::try_from(
-                    &codes[at_direction(d) * per_direction..][..per_direction],
-                )
-                .expect("a direction's codes")
-            }),
+            area,
+            codes: corners.map(|(d, _)| (at_direction(d) * LEVELS * FRACTIONS) as u32),
             weights: corners.map(|(_, w)| w),
             error,
-            decoded: &self.decoded,
-            stepped: block.level > 0 && shares == BlockShares::Pooled,
+            level: block.level as u8,
+            largest,
         })
+    }
+
+    /// `view`'s codes, ready to read (`ViewCodes::over_fraction`).
+    pub fn codes(&self, view: &BlockView) -> ViewCodes<'_> {
+        let level = &self.levels[usize::from(view.level)];
+        let codes = match view.largest {
+            true => &level.largest,
+            false => &level.codes,
+        };
+        ViewCodes {
+            area: view.area,
+            codes: view.codes.map(|at| {
+                <&[u8; LEVELS * FRACTIONS]>::try_from(&codes[at as usize..][..LEVELS * FRACTIONS])
+                    .expect("a direction's codes")
+            }),
+            weights: view.weights,
+            error: view.error,
+            decoded: &self.decoded,
+            stepped: view.level > 0 && !view.largest,
+        }
     }
 }
 
-/// A block's entry read from one direction against one error: its
-/// figures at the four lattice directions around it, and their weights.
+/// A block's codes from the four lattice directions of one view, with
+/// their weights and the error the shares are over.
 #[derive(Clone, Copy, Debug)]
-pub struct BlockView<'a> {
-    area: [f32; 4],
+pub struct ViewCodes<'a> {
+    area: f32,
     codes: [&'a [u8; LEVELS * FRACTIONS]; 4],
     weights: [f32; 4],
-    /// The error the shares are over.
     error: f32,
     decoded: &'a [f32; 256],
     /// Read between the stored shares at the larger one (a block's pooled
@@ -451,30 +474,25 @@ pub struct BlockView<'a> {
     stepped: bool,
 }
 
-impl BlockView<'_> {
-    /// A byte from each memory line its codes lie on, folded together:
-    /// reading every view's lines before any is used lets them be
-    /// fetched many at a time.
+impl ViewCodes<'_> {
+    /// The view's pixel area per `K^2 / d^2` (`BlockView::area`).
+    pub fn area(&self) -> f32 {
+        self.area
+    }
+
+    /// A byte from each memory line the codes lie on, folded together:
+    /// reading every view's lines before any is used lets them be fetched
+    /// many at a time.
     pub fn touch(&self) -> u8 {
         self.codes
             .iter()
             .fold(0, |acc, c| acc ^ c[0] ^ c[LEVELS * FRACTIONS - 1])
     }
 
-    /// Its pixel area per `K^2 / d^2`: what it covers at distance d is
-    /// this times `(K / d)^2`.
-    pub fn area(&self) -> f32 {
-        self.area
-            .iter()
-            .zip(&self.weights)
-            .map(|(a, w)| a * w)
-            .sum()
-    }
-
-    /// The share of its pixels that drawing each of its patches at level
-    /// index `k` (2^k segments a side) puts over the error: its errors
-    /// interpolated between the lattice's directions (a ray's gap grows
-    /// about in proportion to its fall), then the share between the
+    /// The share of the view's pixels that drawing each of its patches at
+    /// level index `k` (2^k segments a side) puts over its error: its
+    /// errors interpolated between the lattice's directions (a ray's gap
+    /// grows about in proportion to its fall), then the share between the
     /// stored ones in log-log, or for a block's pooled shares the larger
     /// of the two: pooled over patches unlike each other, its pixels'
     /// errors fall in steps (a rough patch's, then a smooth one's), which a
@@ -485,8 +503,8 @@ impl BlockView<'_> {
         if k >= LEVELS {
             return 0.0;
         }
-        // The row's errors are found one at a time, as the search reaches
-        // them: at the finer levels it stops at the first.
+        // The row's errors are found as the search reaches them: most
+        // searches stop at the first.
         let error_at = |j: usize| {
             self.codes
                 .iter()
@@ -502,14 +520,77 @@ impl BlockView<'_> {
     }
 }
 
+/// A block's entry read from one direction against one error: where its
+/// figures lie at the four lattice directions around it, and their
+/// weights (`SightTable::view`).
+#[derive(Clone, Copy, Debug)]
+pub struct BlockView {
+    area: f32,
+    /// Where each direction's codes start in its level's codes.
+    codes: [u32; 4],
+    weights: [f32; 4],
+    /// The error the shares are over.
+    error: f32,
+    /// Its block level.
+    level: u8,
+    /// Read from the largest shares (a block's, `BlockShares::Largest`).
+    largest: bool,
+}
+
+impl BlockView {
+    /// Its pixel area per `K^2 / d^2`: what it covers at distance d is
+    /// this times `(K / d)^2`.
+    pub fn area(&self) -> f32 {
+        self.area
+    }
+}
+
+/// `FRACTION_EXPONENTS` as shares (0 for the largest error).
+const FRACTION_SHARES: [f32; FRACTIONS] = {
+    let mut shares = [0.0; FRACTIONS];
+    let mut j = 0;
+    while j < FRACTIONS {
+        if FRACTION_EXPONENTS[j] != i32::MIN {
+            shares[j] = 1.0 / (1u64 << -FRACTION_EXPONENTS[j]) as f32;
+        }
+        j += 1;
+    }
+    shares
+};
+
+/// The first of a row of errors at `FRACTION_EXPONENTS` (`error_at(j)`,
+/// non-increasing: errors fall as the share grows) at or below `error`:
+/// its index, and its error and the one before it (infinite before the
+/// first); None where every error is over. The first and the last are read
+/// first: most rows are within at the first, and a coarse level's often
+/// over at the last.
+fn first_within(error_at: impl Fn(usize) -> f32, error: f32) -> Option<(usize, f32, f32)> {
+    let first = error_at(0);
+    if first <= error {
+        return Some((0, first, f32::INFINITY));
+    }
+    let last = error_at(FRACTIONS - 1);
+    if last > error {
+        return None;
+    }
+    let mut above = first;
+    for j in 1..FRACTIONS - 1 {
+        let e = error_at(j);
+        if e <= error {
+            return Some((j, e, above));
+        }
+        above = e;
+    }
+    Some((FRACTIONS - 1, last, above))
+}
+
 /// The share of pixels over `error` of a row of errors at
 /// `FRACTION_EXPONENTS`, as `fraction_over`, taking the larger stored share
 /// between two: never less than the row says.
 fn fraction_over_stepped(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
-    match (0..FRACTIONS).find(|&j| error_at(j) <= error) {
+    match first_within(error_at, error) {
         None => 1.0,
-        Some(0) => 0.0,
-        Some(j) => (FRACTION_EXPONENTS[j] as f32).exp2(),
+        Some((j, ..)) => FRACTION_SHARES[j],
     }
 }
 
@@ -519,15 +600,7 @@ fn fraction_over_stepped(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
 fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
     // The first stored error at or below the given one, and the one
     // before it.
-    let mut above = f32::INFINITY;
-    let Some((j, e1)) = (0..FRACTIONS).find_map(|j| {
-        let e = error_at(j);
-        if e <= error {
-            return Some((j, e));
-        }
-        above = e;
-        None
-    }) else {
+    let Some((j, e1, e0)) = first_within(error_at, error) else {
         return 1.0;
     };
     if j == 0 {
@@ -535,9 +608,8 @@ fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
     }
     let (lo, hi) = (FRACTION_EXPONENTS[j - 1], FRACTION_EXPONENTS[j]);
     if lo == i32::MIN {
-        return (hi as f32).exp2();
+        return FRACTION_SHARES[j];
     }
-    let e0 = above;
     let w = if e1 <= 0.0 || e0 <= e1 {
         1.0
     } else {
@@ -900,6 +972,41 @@ impl Histogram {
                     break;
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    #[test]
+    fn fraction_shares_are_the_exponents_powers_of_two() {
+        for (share, e) in FRACTION_SHARES.iter().zip(FRACTION_EXPONENTS) {
+            let expected = if e == i32::MIN {
+                0.0
+            } else {
+                (e as f32).exp2()
+            };
+            assert_eq!(*share, expected);
+        }
+    }
+
+    proptest! {
+        /// Reading the first and last errors first finds what a search
+        /// from the first finds, on any non-increasing row.
+        #[test]
+        fn first_within_finds_what_a_linear_search_finds(
+            mut row in prop::array::uniform8(0.0f32..100.0),
+            error in 0.0f32..110.0,
+        ) {
+            row.sort_by(|a, b| b.total_cmp(a));
+            let linear = (0..FRACTIONS).position(|j| row[j] <= error).map(|j| {
+                (j, row[j], if j == 0 { f32::INFINITY } else { row[j - 1] })
+            });
+            prop_assert_eq!(first_within(|j| row[j], error), linear);
         }
     }
 }
