@@ -258,10 +258,11 @@ impl GeomipGeometry {
                 // lower a neighbour.
                 geomip::refine_and_balance_blocks(&mut levels, grid, &drawn, &rects);
                 // In grid order, read off the flags: cheaper than sorting
-                // the blocks' patches.
-                (0..grid.patch_count() as u32)
-                    .filter(|&p| drawn[p as usize])
-                    .collect()
+                // the blocks' patches. Sized at once: grown push by push,
+                // the list's copies cost as much as the reading.
+                let mut visible = Vec::with_capacity(frame_plan.patches_in_view);
+                visible.extend((0..grid.patch_count() as u32).filter(|&p| drawn[p as usize]));
+                visible
             }
         };
         for (&p, &d) in visible.iter().zip(&distances) {
