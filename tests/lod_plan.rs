@@ -598,8 +598,8 @@ fn a_planner_kept_across_frames_plans_each_frame_as_a_fresh_one() {
     let mut frames = Vec::new();
     for view in named_views(terrain.info()) {
         for tau in [0.5, 2.0] {
-            let view = FrameView::new(&terrain, &view.camera, 1280, 720)
-                .lod_view(Tau::new(tau).unwrap());
+            let view =
+                FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::new(tau).unwrap());
             for reading in [SightReading::Tessellated, SightReading::Template] {
                 frames.push((view, reading));
             }
