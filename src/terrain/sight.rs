@@ -994,6 +994,35 @@ mod tests {
         }
     }
 
+    /// Every stored row's errors fall as the share grows (its codes rise),
+    /// patches' and blocks' rows, pooled and largest alike: what
+    /// `first_within` relies on to read the last error second. On rough
+    /// ground with a cliff, in 16-cell patches whose last row and column
+    /// are narrower.
+    #[test]
+    fn every_stored_row_falls_as_the_share_grows() {
+        let map = Heightmap::from_fn(91, 75, |r, c| {
+            let (x, z) = (c as f32, r as f32);
+            let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
+            8.0 * (x / 7.0).sin() * (z / 5.0).cos()
+                + 3.0 * rough
+                + if x > 40.0 { 30.0 } else { 0.0 }
+        })
+        .expect("a heightmap");
+        let grid = PatchGrid::for_size(91, 75, 16);
+        let table = SightTable::compute(&map, &grid, (2.0, 3.0));
+        let mut rows = 0;
+        for level in &table.levels {
+            for codes in [&level.codes, &level.largest] {
+                for row in codes.chunks_exact(FRACTIONS) {
+                    assert!(row.windows(2).all(|w| w[0] <= w[1]), "{row:?}");
+                    rows += 1;
+                }
+            }
+        }
+        assert!(rows > 10_000, "{rows} rows");
+    }
+
     proptest! {
         /// Reading the first and last errors first finds what a search
         /// from the first finds, on any non-increasing row.
