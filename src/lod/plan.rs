@@ -489,7 +489,7 @@ fn walk(
         // full-size patches (`node.whole`).
         let modelled = inputs.sight.filter(|s| {
             let has = id.level == 0 || node.whole;
-            debug_assert_eq!(has, id.level > BLOCK_LEVELS || s.has(block));
+            debug_assert!(id.level > BLOCK_LEVELS || has == s.has(block));
             id.level <= BLOCK_LEVELS
                 && has
                 && (node.whole || inputs.reading == SightReading::Tessellated)

@@ -431,7 +431,7 @@ impl SightTable {
             .sum();
         Some(BlockView {
             area,
-            codes: corners.map(|(d, _)| (at_direction(d) * LEVELS * FRACTIONS) as u32),
+            codes: corners.map(|(d, _)| at_direction(d) * LEVELS * FRACTIONS),
             weights: corners.map(|(_, w)| w),
             error,
             level: block.level as u8,
@@ -449,7 +449,7 @@ impl SightTable {
         ViewCodes {
             area: view.area,
             codes: view.codes.map(|at| {
-                <&[u8; LEVELS * FRACTIONS]>::try_from(&codes[at as usize..][..LEVELS * FRACTIONS])
+                <&[u8; LEVELS * FRACTIONS]>::try_from(&codes[at..][..LEVELS * FRACTIONS])
                     .expect("a direction's codes")
             }),
             weights: view.weights,
@@ -527,7 +527,7 @@ impl ViewCodes<'_> {
 pub struct BlockView {
     area: f32,
     /// Where each direction's codes start in its level's codes.
-    codes: [u32; 4],
+    codes: [usize; 4],
     weights: [f32; 4],
     /// The error the shares are over.
     error: f32,
