@@ -63,19 +63,35 @@ impl Buffer {
 
     /// Copies `bytes` to the start of a host-visible buffer.
     pub fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        self.mapped_start(bytes.len())?.copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// Writes `records` one after another from the start of a host-visible
+    /// buffer, straight into its mapped memory: nothing is collected
+    /// first, and the memory needs no alignment for `T`.
+    pub fn write_records<T: bytemuck::Pod>(
+        &mut self,
+        records: impl ExactSizeIterator<Item = T>,
+    ) -> Result<()> {
+        let size = std::mem::size_of::<T>();
+        let start = self.mapped_start(records.len() * size)?;
+        for (into, record) in start.chunks_exact_mut(size).zip(records) {
+            into.copy_from_slice(bytemuck::bytes_of(&record));
+        }
+        Ok(())
+    }
+
+    /// The first `len` bytes of the mapped memory, or why there are none.
+    fn mapped_start(&mut self, len: usize) -> Result<&mut [u8]> {
         let name = self.name.clone();
         let mapped = self.mapped_mut().ok_or_else(|| {
             VkError::Unsupported(format!("{name}: host-visible memory is not mapped"))
         })?;
-        let Some(start) = mapped.get_mut(..bytes.len()) else {
-            return Err(VkError::Unsupported(format!(
-                "{name}: {} bytes do not fit in {}",
-                bytes.len(),
-                mapped.len()
-            )));
-        };
-        start.copy_from_slice(bytes);
-        Ok(())
+        let available = mapped.len();
+        mapped.get_mut(..len).ok_or_else(|| {
+            VkError::Unsupported(format!("{name}: {len} bytes do not fit in {available}"))
+        })
     }
 
     pub fn name(&self) -> &str {

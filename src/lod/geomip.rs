@@ -557,56 +557,55 @@ pub fn patch_morph(chosen: &PatchLevels, grid: &PatchGrid, id: PatchId) -> (f32,
     (own, grid.neighbours(p).map(side))
 }
 
-/// The error patch `p`'s level choice expects on screen, in pixels: its
-/// level's error from its box's nearest point, or while it glides towards
-/// the next coarser level (`geomorph`), the blend of the two by its largest
-/// morph factor; a side stitched to a coarser neighbour adds that level's
-/// error from the nearest point of that side. Level 0 is the reference
-/// itself (error 0), and so is a patch the eye is inside, whose level the
-/// choice keeps at 0.
+/// A drawn patch as `predicted_px` reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct DrawnPatch {
+    /// Its box: footprint and Y bounds, terrain-local.
+    pub lo: Vec3,
+    pub hi: Vec3,
+    /// Its geomip level.
+    pub level: usize,
+    /// The largest of its interior's and sides' morph factors.
+    pub morph: f32,
+    /// Its sides stitched to a coarser neighbour (`neighbour_masks`).
+    pub coarser: u8,
+}
+
+/// The error a patch's level choice expects on screen, in pixels: its
+/// level's error (`error`, by geomip level) from its box's nearest point,
+/// or while it glides towards the next coarser level, the blend of the
+/// two by its largest morph factor; a side stitched to a coarser
+/// neighbour adds that level's error from the nearest point of that
+/// side. Level 0 is the reference itself (error 0), and so is a patch the
+/// eye is inside, whose level the choice keeps at 0.
 pub fn predicted_px(
-    terrain: &Terrain,
-    table: &ErrorTable,
-    chosen: &PatchLevels,
-    p: usize,
+    error: impl Fn(usize) -> f32,
+    patch: &DrawnPatch,
     eye_local: Vec3,
     pixels_per_radian: f32,
-    geomorph: bool,
 ) -> f32 {
-    let grid = terrain.grid();
-    let count = level_count(grid.cells_per_patch());
-    let error = |level: usize| {
-        if level == 0 {
-            0.0
-        } else {
-            table.error(p, (count - 1) - level.min(count - 1))
-        }
-    };
-    let id = grid.patch_id(p);
-    let (centre, extents) = terrain.patch_aabb(id);
-    let d = ((eye_local - centre).abs() - extents)
-        .max(Vec3::ZERO)
-        .length();
-    let level = usize::from(chosen.levels[p]);
+    let (lo, hi) = (patch.lo - eye_local, patch.hi - eye_local);
+    let d = super::factors::box_distance(lo, hi);
+    let level = patch.level;
     if level == 0 || d <= 0.0 {
         return 0.0;
     }
-    let mut e = error(level);
-    if geomorph {
-        let (interior, sides) = patch_morph(chosen, grid, id);
-        let m = sides.iter().fold(interior, |a, &b| a.max(b));
-        e = (1.0 - m) * e + m * error(level + 1);
-    }
+    let m = patch.morph;
+    let e = match m > 0.0 {
+        true => (1.0 - m) * error(level) + m * error(level + 1),
+        false => error(level),
+    };
     let mut px = e * pixels_per_radian / d;
-    let (coarser, _) = neighbour_masks(&chosen.levels, grid, id);
-    if coarser != 0 {
-        let corners = terrain.patch_corners(id).map(|c| c - eye_local);
-        let [lo, hi] = terrain.y_bounds()[p].map(|y| y - eye_local.y);
+    if patch.coarser != 0 {
+        // The corners in control point order (upper-left has the
+        // smallest x and largest z); only their x and z are read.
+        let corners = [(lo.x, hi.z), (hi.x, hi.z), (lo.x, lo.z), (hi.x, lo.z)]
+            .map(|(x, z)| Vec3::new(x, 0.0, z));
         let xz = |v: Vec3| glam::Vec2::new(v.x, v.z);
         // Left, top, right, bottom, as the masks' bits.
         for (bit, (a, b)) in super::factors::patch_edges(corners).into_iter().enumerate() {
-            if coarser & (1 << bit) != 0 {
-                let d = super::factors::edge_distance(xz(a), xz(b), lo, hi);
+            if patch.coarser & (1 << bit) != 0 {
+                let d = super::factors::edge_distance(xz(a), xz(b), lo.y, hi.y);
                 px = px.max(error(level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE));
             }
         }

@@ -18,6 +18,7 @@ use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::Sampler;
 use crate::gpu::queries::FrameQueries;
 use crate::gpu::Device;
+use crate::lod::order::SortBuffers;
 use crate::lod::plan::Planner;
 use crate::render::error::Result;
 use crate::shader_constants::{
@@ -68,6 +69,9 @@ pub(super) struct FrameSlot {
     pub(super) planner: Planner,
     /// The pixels each patch showed, in a frame that counts them.
     pub(super) seen: SeenBuffer,
+    /// The buffers that put the slot's full-resolution draws (tess path)
+    /// in draw order.
+    pub(super) draw_sort: SortBuffers<GeomipDraw>,
 }
 
 /// A frame's draws as indirect commands in a per-slot buffer, so that one
@@ -128,9 +132,9 @@ impl IndirectCommands {
         else {
             return Ok(());
         };
-        let commands: Vec<DrawCommand> = commands.collect();
-        buffer.write(bytemuck::cast_slice(&commands))?;
-        self.written = Some(commands.len() as u32);
+        let count = commands.len() as u32;
+        buffer.write_records(commands)?;
+        self.written = Some(count);
         Ok(())
     }
 
@@ -204,8 +208,8 @@ impl GeomipList {
             self.commands.written = None;
             return Ok(());
         }
-        let constants: Vec<GeomipConstants> = draws.iter().map(|d| d.constants).collect();
-        self.constants.write(bytemuck::cast_slice(&constants))?;
+        self.constants
+            .write_records(draws.iter().map(|d| d.constants))?;
         self.commands.write(
             draws
                 .iter()
@@ -284,6 +288,7 @@ pub(super) fn build_frames(
             prepared: PreparedFrame::default(),
             planner: Planner::default(),
             seen,
+            draw_sort: SortBuffers::default(),
         });
     }
     Ok(frames)

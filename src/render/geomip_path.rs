@@ -19,6 +19,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip;
 use crate::lod::hierarchy::{Hierarchy, NodeId};
+use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
@@ -160,7 +161,7 @@ impl GeomipGeometry {
             let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
             let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &edges);
             geomip::balance_from(&mut chosen.levels, grid, &lowered);
-            self.set_draws(terrain, settings, &visible, &chosen, draws);
+            self.set_draws(terrain, (view, settings), (&visible, &chosen), draws, None);
             return GeomipChoice::Drawn(None);
         }
         if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
@@ -284,6 +285,7 @@ impl GeomipGeometry {
     pub(super) fn emit(
         &self,
         terrain: &Terrain,
+        hierarchy: &Hierarchy,
         view: &FrameView,
         settings: &RenderSettings,
         choice: GeomipChoice,
@@ -297,24 +299,15 @@ impl GeomipGeometry {
                 error_lod,
             } => (visible, chosen, error_lod),
         };
-        self.set_draws(terrain, settings, &visible, &chosen, draws);
-        error_lod.then(|| {
-            let max = visible
-                .iter()
-                .map(|&p| {
-                    geomip::predicted_px(
-                        terrain,
-                        &self.errors,
-                        &chosen,
-                        p as usize,
-                        view.eye_local,
-                        view.pixels_per_radian,
-                        settings.geomorph,
-                    )
-                })
-                .fold(0.0, f32::max);
-            (max, None)
-        })
+        let predict = error_lod.then_some(hierarchy);
+        self.set_draws(
+            terrain,
+            (view, settings),
+            (&visible, &chosen),
+            draws,
+            predict,
+        )
+        .map(|max| (max, None))
     }
 
     /// The error LOD's levels from the view measure's table (every patch,
@@ -351,7 +344,7 @@ impl GeomipGeometry {
         let visible: Vec<u32> = (0..drawn.len() as u32)
             .filter(|&p| drawn[p as usize])
             .collect();
-        self.set_draws(terrain, settings, &visible, &chosen, draws);
+        self.set_draws(terrain, (view, settings), (&visible, &chosen), draws, None);
         match seen {
             Some(v) => (v.predicted_max_px, Some(v.predicted_p99_px)),
             None => (0.0, None),
@@ -417,19 +410,29 @@ impl GeomipGeometry {
         }
     }
 
-    /// The patches `visible` this frame (in grid order), at their `chosen`
-    /// levels, become `draws`.
+    /// The patches `visible` this frame (in grid order), at their
+    /// `chosen` levels, become `draws`, front to back in the runs of
+    /// `DrawOrder` (a run's patches in index order): ordered a run at a
+    /// time, not a draw at a time. With `predict`, returns the largest
+    /// error they are expected to show from `view`
+    /// (`geomip::predicted_px`, each patch's box its node's in the
+    /// hierarchy).
     fn set_draws(
         &self,
         terrain: &Terrain,
-        settings: &RenderSettings,
-        visible: &[u32],
-        chosen: &geomip::PatchLevels,
+        (view, settings): (&FrameView, &RenderSettings),
+        (visible, chosen): (&[u32], &geomip::PatchLevels),
         draws: &mut Vec<GeomipDraw>,
-    ) {
+        predict: Option<&Hierarchy>,
+    ) -> Option<f32> {
         let grid = terrain.grid();
+        let coarsest = geomip::level_count(grid.cells_per_patch()) - 1;
+        let mut predicted = 0.0f32;
         draws.clear();
-        for &p in visible {
+        draws.reserve(visible.len());
+        let order = DrawOrder::new(terrain.info(), grid, view.eye_local);
+        let runs = order.runs(visible.iter().copied());
+        for p in runs.iter().flat_map(|&(first, n)| first..first + n) {
             let p = p as usize;
             let id = grid.patch_id(p);
             let level = usize::from(chosen.levels[p]);
@@ -445,6 +448,34 @@ impl GeomipGeometry {
             } else {
                 (0.0, [0.0; 4])
             };
+            if let Some(hierarchy) = predict {
+                let node = hierarchy.node(NodeId {
+                    level: 0,
+                    col: id.col as u32,
+                    row: id.row as u32,
+                });
+                let ([x0, z0], [x1, z1]) = (node.footprint[0], node.footprint[1]);
+                let [y0, y1] = node.bounds;
+                let patch = geomip::DrawnPatch {
+                    lo: glam::Vec3::new(x0, y0, z0),
+                    hi: glam::Vec3::new(x1, y1, z1),
+                    level,
+                    morph: sides.iter().fold(interior, |a, &b| a.max(b)),
+                    coarser,
+                };
+                // Geomip level l is the error table's level index
+                // log2(n) - l; level 0 is the reference.
+                let error = |l: usize| match l {
+                    0 => 0.0,
+                    l => self.errors.error(p, coarsest - l.min(coarsest)),
+                };
+                predicted = predicted.max(geomip::predicted_px(
+                    error,
+                    &patch,
+                    view.eye_local,
+                    view.pixels_per_radian,
+                ));
+            }
             draws.push(GeomipDraw {
                 patch: p as u32,
                 first,
@@ -457,6 +488,7 @@ impl GeomipGeometry {
                 },
             });
         }
+        predict.map(|_| predicted)
     }
 }
 

@@ -613,13 +613,17 @@ impl TerrainRenderer {
                         (&mut prepared.geomip, &mut frame.planner),
                     );
                     prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
-                    let predicted =
-                        geomip.emit(terrain, view, settings, choice, &mut prepared.geomip);
+                    let predicted = geomip.emit(
+                        terrain,
+                        hierarchy,
+                        view,
+                        settings,
+                        choice,
+                        &mut prepared.geomip,
+                    );
                     prepared.predicted_max_px = predicted.map(|p| p.0);
                     prepared.predicted_p99_px = predicted.and_then(|p| p.1);
                     prepared.patches_in_view = prepared.geomip.len();
-                    let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
-                    prepared.geomip.sort_by_cached_key(|d| order.key(d.patch));
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
@@ -688,7 +692,11 @@ impl TerrainRenderer {
             (hierarchy, self.seen.pixels()),
             geomip,
             (view, settings, pixels),
-            (choice, &mut frame.prepared.exact, &mut frame.planner),
+            (
+                choice,
+                (&mut frame.prepared.exact, &mut frame.draw_sort),
+                &mut frame.planner,
+            ),
             self.max_patches_per_draw,
         )?;
         frame.tess_batches = planned.tess_batches;

@@ -24,7 +24,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::PipelineLayout;
 use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
-use crate::lod::order::{DrawOrder, PatchMarks};
+use crate::lod::order::{DrawOrder, PatchMarks, SortBuffers};
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{FramePlan, PlanInputs, PlannedBlock, Planner, SightReading};
 use crate::lod::seen::SeenPixels;
@@ -85,7 +85,11 @@ impl TessGeometry {
         (hierarchy, seen_pixels): (&Hierarchy, Option<&SeenPixels>),
         geomip: &GeomipGeometry,
         (view, settings, pixels): (&FrameView, &RenderSettings, f32),
-        (choice, exact, planner): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>, &mut Planner),
+        (choice, (exact, exact_sort), planner): (
+            &mut ChoiceBuffers,
+            (&mut Vec<GeomipDraw>, &mut SortBuffers<GeomipDraw>),
+            &mut Planner,
+        ),
         max_patches_per_draw: Option<u32>,
     ) -> Result<PlannedFrame> {
         let sight = match settings.error_measure {
@@ -127,7 +131,7 @@ impl TessGeometry {
         let merged_indices = choice.write(frame_plan, (&self.errors, table), terrain)?;
         let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
         exact_draws(terrain, frame_plan, geomip, exact);
-        exact.sort_by_cached_key(|d| order.key(d.patch));
+        order.sort(exact, |d| d.patch, exact_sort);
         Ok(PlannedFrame {
             lod_ms,
             tess_batches: block_batches(frame_plan, &order, max_patches_per_draw),
