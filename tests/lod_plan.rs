@@ -623,3 +623,44 @@ fn a_planner_kept_across_frames_plans_each_frame_as_a_fresh_one() {
     }
     assert!(blocks >= 2 * frames.len() * 20, "{blocks} blocks planned");
 }
+
+/// The plan takes a node to have a view-model entry exactly where it is a
+/// patch, or a whole block of full-size patches no larger than the
+/// model's blocks (the rule `walk` follows instead of a lookup, which
+/// debug builds assert and release builds do not): on the DEM, whose
+/// last column and row of patches are narrower, every node of every
+/// block level agrees with the table.
+#[test]
+fn the_model_has_an_entry_for_every_patch_and_every_whole_block() {
+    use vkterrain::terrain::sight::BLOCK_LEVELS;
+    let terrain = dem_terrain(32, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table().expect("a heightmap's view model");
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let (mut whole, mut cut) = ([0usize; BLOCK_LEVELS as usize + 1], 0);
+    let mut stack = vec![hierarchy.root()];
+    while let Some(id) = stack.pop() {
+        stack.extend(hierarchy.children(id));
+        if id.level > BLOCK_LEVELS {
+            continue;
+        }
+        let node = hierarchy.node(id);
+        let block = Block {
+            level: id.level,
+            col: id.col as usize,
+            row: id.row as usize,
+        };
+        let expected = id.level == 0 || node.whole;
+        assert_eq!(sight.has(block), expected, "{id:?}");
+        match node.whole {
+            true => whole[id.level as usize] += 1,
+            false => cut += usize::from(id.level > 0),
+        }
+    }
+    // Both kinds occur at every block level: the test sees the rule.
+    assert!(whole.iter().all(|&n| n > 0), "{whole:?}");
+    assert!(
+        cut >= BLOCK_LEVELS as usize,
+        "{cut} blocks cut by the far sides"
+    );
+}
