@@ -61,28 +61,6 @@ impl DrawOrder {
         (d.length() as f32).to_bits()
     }
 
-    /// Puts `items` in draw order by their patches (`patch`): nearest
-    /// first, equally near ones in index order. Each key is found once and
-    /// each item moved once, through `buffers`, which keep their memory
-    /// from one frame to the next.
-    pub fn sort<T: Copy>(
-        &self,
-        items: &mut Vec<T>,
-        patch: impl Fn(&T) -> u32,
-        buffers: &mut SortBuffers<T>,
-    ) {
-        let SortBuffers { keys, sorted } = buffers;
-        keys.clear();
-        keys.extend(items.iter().enumerate().map(|(i, item)| {
-            let p = patch(item);
-            (u64::from(self.key(p)) << 32 | u64::from(p), i as u32)
-        }));
-        keys.sort_unstable();
-        sorted.clear();
-        sorted.extend(keys.iter().map(|&(_, i)| items[i as usize]));
-        std::mem::swap(items, sorted);
-    }
-
     /// `patches` (row-major indices, increasing) as runs of consecutive
     /// patches (first, count), nearest run first: each row's runs split at
     /// the eye's column and into runs of at most `MAX_RUN`, ordered by
@@ -138,23 +116,6 @@ impl DrawOrder {
         }
         keyed.sort_unstable();
         keyed.into_iter().map(|(_, run)| run).collect()
-    }
-}
-
-/// `DrawOrder::sort`'s buffers: each item's key and place, and the items
-/// in order.
-#[derive(Clone, Debug)]
-pub struct SortBuffers<T> {
-    keys: Vec<(u64, u32)>,
-    sorted: Vec<T>,
-}
-
-impl<T> Default for SortBuffers<T> {
-    fn default() -> Self {
-        SortBuffers {
-            keys: Vec::new(),
-            sorted: Vec::new(),
-        }
     }
 }
 
@@ -243,26 +204,6 @@ mod tests {
         let heightmap = Heightmap::from_heights(33, 33, vec![0.0; 33 * 33]).expect("valid");
         let info = TerrainInfo::new(heightmap, DVec2::ONE, 4, DVec2::ZERO).expect("valid");
         DrawOrder::new(&info, &info.patch_grid(), eye)
-    }
-
-    /// Sorted items come nearest first, equally near ones in index order,
-    /// whatever order they came in, and the same as a stable sort of them
-    /// in index order; kept buffers change nothing.
-    #[test]
-    fn sort_puts_items_nearest_first_then_in_index_order() {
-        let order = order(Vec3::new(6.0, 50.0, 6.0));
-        let mut by_index: Vec<(u32, char)> = (0..64).map(|p| (p, 'x')).collect();
-        by_index.sort_by_key(|&(p, _)| order.key(p));
-        let mut buffers = SortBuffers::default();
-        for shuffle in [0u32, 17, 41] {
-            let mut items: Vec<(u32, char)> =
-                (0..64).map(|p| ((p * 37 + shuffle) % 64, 'x')).collect();
-            order.sort(&mut items, |&(p, _)| p, &mut buffers);
-            assert_eq!(items, by_index, "shuffled by {shuffle}");
-        }
-        // Ties exist on this grid: the test would pass without the index order otherwise.
-        let keys: Vec<u32> = by_index.iter().map(|&(p, _)| order.key(p)).collect();
-        assert!(keys.windows(2).any(|w| w[0] == w[1]));
     }
 
     #[test]

@@ -18,7 +18,6 @@ use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::Sampler;
 use crate::gpu::queries::FrameQueries;
 use crate::gpu::Device;
-use crate::lod::order::SortBuffers;
 use crate::lod::plan::Planner;
 use crate::render::error::Result;
 use crate::shader_constants::{
@@ -69,9 +68,6 @@ pub(super) struct FrameSlot {
     pub(super) planner: Planner,
     /// The pixels each patch showed, in a frame that counts them.
     pub(super) seen: SeenBuffer,
-    /// The buffers that put the slot's full-resolution draws (tess path)
-    /// in draw order.
-    pub(super) draw_sort: SortBuffers<GeomipDraw>,
 }
 
 /// A frame's draws as indirect commands in a per-slot buffer, so that one
@@ -288,7 +284,6 @@ pub(super) fn build_frames(
             prepared: PreparedFrame::default(),
             planner: Planner::default(),
             seen,
-            draw_sort: SortBuffers::default(),
         });
     }
     Ok(frames)

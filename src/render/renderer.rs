@@ -692,11 +692,7 @@ impl TerrainRenderer {
             (hierarchy, self.seen.pixels()),
             geomip,
             (view, settings, pixels),
-            (
-                choice,
-                (&mut frame.prepared.exact, &mut frame.draw_sort),
-                &mut frame.planner,
-            ),
+            (choice, &mut frame.prepared.exact, &mut frame.planner),
             self.max_patches_per_draw,
         )?;
         frame.tess_batches = planned.tess_batches;

@@ -24,7 +24,7 @@ use crate::gpu::memory::Buffer;
 use crate::gpu::owned::PipelineLayout;
 use crate::gpu::Device;
 use crate::lod::hierarchy::Hierarchy;
-use crate::lod::order::{DrawOrder, PatchMarks, SortBuffers};
+use crate::lod::order::{DrawOrder, PatchMarks};
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{FramePlan, PlanInputs, PlannedBlock, Planner, SightReading};
 use crate::lod::seen::SeenPixels;
@@ -34,7 +34,7 @@ use crate::render::error::{RenderError, Result};
 use crate::shader_constants::{
     BINDING_ERROR_TABLE, BINDING_FRAME_STORAGE, BINDING_FULL_RESOLUTION, BINDING_VISIBILITY,
 };
-use crate::terrain::{ErrorTable, Terrain};
+use crate::terrain::{ErrorTable, PatchGrid, Terrain};
 
 pub(super) struct TessGeometry {
     pub(super) control_points: Buffer,
@@ -85,11 +85,7 @@ impl TessGeometry {
         (hierarchy, seen_pixels): (&Hierarchy, Option<&SeenPixels>),
         geomip: &GeomipGeometry,
         (view, settings, pixels): (&FrameView, &RenderSettings, f32),
-        (choice, (exact, exact_sort), planner): (
-            &mut ChoiceBuffers,
-            (&mut Vec<GeomipDraw>, &mut SortBuffers<GeomipDraw>),
-            &mut Planner,
-        ),
+        (choice, exact, planner): (&mut ChoiceBuffers, &mut Vec<GeomipDraw>, &mut Planner),
         max_patches_per_draw: Option<u32>,
     ) -> Result<PlannedFrame> {
         let sight = match settings.error_measure {
@@ -130,8 +126,7 @@ impl TessGeometry {
         let lod_ms = start.elapsed().as_secs_f64() * 1e3;
         let merged_indices = choice.write(frame_plan, (&self.errors, table), terrain)?;
         let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
-        exact_draws(terrain, frame_plan, geomip, exact);
-        order.sort(exact, |d| d.patch, exact_sort);
+        exact_draws(terrain, frame_plan, (geomip, &order), exact);
         Ok(PlannedFrame {
             lod_ms,
             tess_batches: block_batches(frame_plan, &order, max_patches_per_draw),
@@ -145,23 +140,24 @@ impl TessGeometry {
         })
     }
 }
-/// The full-resolution patches of `plan` as exact draws
-/// (geomip level 0, no stitching: every edge they share is tessellated
-/// with a vertex on every sample).
+/// The full-resolution patches of `plan` as exact draws (geomip level
+/// 0, no stitching: every edge they share is tessellated with a vertex on
+/// every sample), in `order`'s runs.
 fn exact_draws(
     terrain: &Terrain,
     plan: &FramePlan,
-    geomip: &GeomipGeometry,
+    (geomip, order): (&GeomipGeometry, &DrawOrder),
     exact: &mut Vec<GeomipDraw>,
 ) {
     let grid = terrain.grid();
     exact.clear();
-    for p in plan
-        .blocks
-        .iter()
-        .filter(|b| b.full_resolution)
-        .flat_map(|b| b.patches(grid))
+    let marks = marked_blocks(plan, grid, true);
+    for p in order
+        .marked_runs(&marks)
+        .into_iter()
+        .flat_map(|(first, n)| first..first + n)
     {
+        let p = p as usize;
         let rect = grid.sample_rect(grid.patch_id(p));
         let (first, count) = geomip.full_resolution_range([rect.cells_x(), rect.cells_z()]);
         exact.push(GeomipDraw {
@@ -392,13 +388,23 @@ fn host(buffer: &mut Buffer) -> Result<&mut [u8]> {
 /// The tess path's draws of `plan`'s blocks not drawn at full resolution
 /// (see `run_batches`), nearest first (`DrawOrder`).
 fn block_batches(plan: &FramePlan, order: &DrawOrder, max_patches: Option<u32>) -> Vec<(u32, u32)> {
-    let grid = order.grid();
+    let marks = marked_blocks(plan, order.grid(), false);
+    run_batches(order.marked_runs(&marks), max_patches)
+}
+
+/// The patches of `plan`'s blocks drawn at full resolution, or of those
+/// tessellated (`full_resolution` false), marked in `grid`.
+fn marked_blocks(plan: &FramePlan, grid: &PatchGrid, full_resolution: bool) -> PatchMarks {
     let mut marks = PatchMarks::new(grid);
-    for block in plan.blocks.iter().filter(|b| !b.full_resolution) {
+    for block in plan
+        .blocks
+        .iter()
+        .filter(|b| b.full_resolution == full_resolution)
+    {
         let (cols, rows) = block.patch_range(grid);
         marks.mark(cols, rows);
     }
-    run_batches(order.marked_runs(&marks), max_patches)
+    marks
 }
 
 /// The tess path's draws of the patches `drawn` (indices in increasing
