@@ -48,15 +48,13 @@ int chosen_level(int patch_index) {
     return int((word >> (8u * uint(patch_index & 3))) & 0xffu);
 }
 
-// A patch's errors at 1, 2, ..., 64 segments: its row of the table, or
-// where the share chose its level, zero from that level on and rejected
-// below it. Mirror: lod::plan::chosen_errors.
+// A patch's errors at 1, 2, ..., 64 segments: its row of the table, read
+// as zero from the level the share chose for it, if it chose one
+// (`chosen_error`).
 void read_errors(int patch_index, out float errors[ERROR_LEVEL_COUNT]) {
     int chosen = chosen_level(patch_index);
     for (int k = 0; k < int(ERROR_LEVEL_COUNT); ++k) {
-        errors[k] = chosen == 0
-            ? patch_errors[patch_index * int(ERROR_LEVEL_COUNT) + k]
-            : (k < chosen - 1 ? REJECTED_ERROR : 0.0);
+        errors[k] = chosen_error(patch_errors[patch_index * int(ERROR_LEVEL_COUNT) + k], k, chosen);
     }
 }
 

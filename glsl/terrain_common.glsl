@@ -304,6 +304,18 @@ float error_tess_factor(float errors[ERROR_LEVEL_COUNT], float distance, int cel
     return full;
 }
 
+// A patch's error at level index k as the error LOD's control shader reads
+// it, from its own error there and the byte the frame plan wrote for it:
+// 0 where its own errors decide, else the level index the plan's share of
+// pixels over tau chose, plus one. From that level on the error reads as
+// zero, so the patch is drawn no finer; below it the patch's own error
+// stands, so where its own bound accepts a coarser level, as it does for
+// smooth or farther patches of a block chosen as one, the patch is drawn
+// that much coarser. Mirror: lod::plan::chosen_errors.
+float chosen_error(float own, int k, int chosen) {
+    return chosen != 0 && k >= chosen - 1 ? 0.0 : own;
+}
+
 // Clip-space position of the surface point at sample coordinates g with
 // height h. Every path that places a vertex on a sample goes through here
 // with the same arithmetic and no contraction, so a sample that two draws

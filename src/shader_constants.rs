@@ -66,9 +66,6 @@ pub const OCCLUSION_PHASE_SECOND: u32 = 2;
 pub const OCCLUSION_PHASE_CULLED: u32 = 3;
 /// Levels per patch in the error table (factors 1, 2, ..., 64).
 pub const ERROR_LEVEL_COUNT: u32 = 7;
-/// An error no distance brings within tolerance: the levels below one the
-/// frame plan chose read as this.
-pub const REJECTED_ERROR: f32 = f32::MAX;
 /// LOD metric: distance.
 pub const LOD_METRIC_DISTANCE: u32 = 0;
 /// LOD metric: projected error.
@@ -153,7 +150,6 @@ pub fn shader_defines() -> Vec<(&'static str, String)> {
             BINDING_FULL_RESOLUTION.to_string(),
         ),
         ("ERROR_LEVEL_COUNT", ERROR_LEVEL_COUNT.to_string()),
-        ("REJECTED_ERROR", float(REJECTED_ERROR)),
         ("BINDING_VISIBILITY", BINDING_VISIBILITY.to_string()),
         ("BINDING_HIZ_DEPTH", BINDING_HIZ_DEPTH.to_string()),
         ("BINDING_HIZ_PYRAMID", BINDING_HIZ_PYRAMID.to_string()),

@@ -8,6 +8,7 @@ use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec2, Vec3};
 use vkterrain::gpu::Gpu;
+use vkterrain::lod::plan::chosen_errors;
 use vkterrain::lod::{
     box_distance, cdlod_tess_factor, edge_distance, edge_length_tess_factor, error_tess_factor,
     sphere_tess_factor, tess_factor,
@@ -122,6 +123,8 @@ fn glsl_formulas_match_their_rust_mirrors() {
             errors: error_sets[k % error_sets.len()],
             // Whole and remainder patches, the smallest, and the largest.
             cells: [32, 23, 1, 2, 64, 18][k % 6],
+            // No level chosen, each level chosen, and one past the table.
+            chosen: (k % 9) as u8,
         })
         .collect();
     // An eye inside a patch's box: the levels a view accepts there are
@@ -137,11 +140,14 @@ fn glsl_formulas_match_their_rust_mirrors() {
         grid: grid[0],
         errors: inside,
         cells: 32,
+        chosen: 0,
     });
 
     // Distinct values of each peer's factor, so the agreement is not only
     // at the clamps.
     let mut peer_values: [std::collections::BTreeSet<u32>; 3] = Default::default();
+    // Cases a chosen level made coarser than the bound alone would.
+    let mut chosen_coarser = 0;
     for (lod, pixels) in lods.into_iter().zip([1.0f32, 0.25, 8.0]) {
         for mode in [DistanceMode::Smooth, DistanceMode::Debug] {
             let settings = RenderSettings {
@@ -182,6 +188,13 @@ fn glsl_formulas_match_their_rust_mirrors() {
                     "case {k}: error factor {}",
                     got.error_tess_factor
                 );
+                let chosen = error_tess_factor(
+                    &chosen_errors(&case.errors, case.chosen),
+                    case.position.length(),
+                    view.pixels_per_radian,
+                    pixels,
+                    case.cells,
+                );
                 if finite {
                     // Whole factors: both sides pick the same level.
                     assert!(
@@ -191,6 +204,22 @@ fn glsl_formulas_match_their_rust_mirrors() {
                         case.errors,
                         got.error_tess_factor
                     );
+                    assert!(
+                        got.chosen_tess_factor == chosen,
+                        "case {k} at {} with {:?} chosen {}, {pixels} px: GLSL {} vs Rust {chosen}",
+                        case.position,
+                        case.errors,
+                        case.chosen,
+                        got.chosen_tess_factor
+                    );
+                    // The chosen level is the finest drawn, and none is
+                    // drawn finer than the patch's own errors ask.
+                    assert!(chosen <= want, "case {k}: {chosen} over {want}");
+                    if case.chosen != 0 {
+                        let level = f32::from(1u8 << (case.chosen - 1).min(6));
+                        assert!(chosen <= level.max(1.0), "case {k}: {chosen} over {level}");
+                    }
+                    chosen_coarser += usize::from(chosen < want);
                 }
                 if finite && case.extents.is_finite() {
                     // The peers' factors, in [1, 64] and as in Rust.
@@ -275,6 +304,10 @@ fn glsl_formulas_match_their_rust_mirrors() {
             values.len()
         );
     }
+    assert!(
+        chosen_coarser >= 20,
+        "only {chosen_coarser} chosen cases coarser"
+    );
     assert_eq!(gpu.device.memory_in_use(), 0);
     let report = gpu.shutdown();
     assert_eq!(report.count, 0, "{:#?}", report.messages);

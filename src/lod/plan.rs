@@ -41,9 +41,12 @@
 //! own errors as before.
 //!
 //! A level the share chose is told to the control shader by a byte per
-//! patch (`ChosenLevel`): its errors read as zero from that level on and
-//! infinite below it. Edges take the larger errors of the two patches
-//! sharing them, so both sides still agree.
+//! patch (`ChosenLevel`): its errors read as zero from that level on, and
+//! as its own below it (`chosen_errors`). The block's level is the one its
+//! roughest, nearest patch needs; a patch whose own bound, from its own
+//! box, accepts a coarser level is drawn at that one, within tau, so it
+//! adds no pixel over tau to what the share counted. Edges take the larger
+//! errors of the two patches sharing them, so both sides still agree.
 
 use std::collections::binary_heap::{BinaryHeap, PeekMut};
 
@@ -74,9 +77,6 @@ pub const BLOCK_EXTENT_PX: f32 = 128.0;
 /// the block to be decided at once: its entry is read at its nearest
 /// point's distance.
 pub const BLOCK_DEPTH_RATIO: f32 = 1.5;
-
-/// An error no distance brings within tolerance.
-pub use crate::shader_constants::REJECTED_ERROR as REJECTED;
 
 /// What the choice keeps within tau, and how.
 #[derive(Clone, Copy, Debug)]
@@ -178,15 +178,21 @@ impl PlannedBlock {
     }
 }
 
-/// What the control shader reads of a patch whose level the share chose:
-/// its errors, zero from that level on and rejected below it.
-/// Mirror: `chosen_errors` in glsl/terrain.tesc.
-pub fn chosen_errors(level: u8) -> PatchErrors {
+/// What the control shader reads of a patch's errors (`own`, its row of
+/// the table) given the byte the plan wrote for it (`chosen`: 0 where its
+/// own errors decide, else the level index the share chose plus one): zero
+/// from the chosen level on, so the patch is drawn no finer; its own below
+/// it, so that a patch whose own bound accepts a coarser level (a smooth or
+/// farther patch of a block chosen as one) is drawn at that level. Its own
+/// bound keeps such a patch within tau, so the pixels the share let over
+/// tau are no more than the plan counted.
+/// Mirror: `chosen_error` in glsl/terrain_common.glsl.
+pub fn chosen_errors(own: &PatchErrors, chosen: u8) -> PatchErrors {
     std::array::from_fn(|k| {
-        if k < usize::from(level) {
-            REJECTED
-        } else {
+        if chosen != 0 && k + 1 >= usize::from(chosen) {
             0.0
+        } else {
+            own[k]
         }
     })
 }

@@ -31,6 +31,10 @@ pub struct MirrorCase {
     pub errors: PatchErrors,
     /// Cells the error-bounded factor spans.
     pub cells: u32,
+    /// The byte the error LOD's plan writes for a patch (0, or the level
+    /// its share chose plus one), as the control shader reads `errors`
+    /// with it (`lod::plan::chosen_errors`).
+    pub chosen: u8,
 }
 
 /// What the GPU computed for one case.
@@ -40,6 +44,8 @@ pub struct MirrorResult {
     pub outside_frustum: bool,
     pub height: f32,
     pub error_tess_factor: f32,
+    /// The error-bounded factor of the errors as `chosen` reads them.
+    pub chosen_tess_factor: f32,
     /// Distance to the box `position` +- `extents`.
     pub box_distance: f32,
     /// Distance to the strip on the segment from `position` to `position +
@@ -156,7 +162,10 @@ fn pack_cases(cases: &[MirrorCase]) -> Vec<[f32; 4]> {
             [
                 c.position.extend(0.0).to_array(),
                 c.extents.extend(0.0).to_array(),
-                c.grid.extend(c.cells as f32).extend(0.0).to_array(),
+                c.grid
+                    .extend(c.cells as f32)
+                    .extend(f32::from(c.chosen))
+                    .to_array(),
                 [e[0], e[1], e[2], e[3]],
                 [e[4], e[5], e[6], 0.0],
             ]
@@ -173,6 +182,7 @@ fn unpack_results(values: &[[f32; 4]]) -> Vec<MirrorResult> {
             outside_frustum: v[0][1] != 0.0,
             height: v[0][2],
             error_tess_factor: v[0][3],
+            chosen_tess_factor: v[1][3],
             box_distance: v[1][0],
             edge_distance: v[1][1],
             sphere_tess_factor: v[2][0],
