@@ -10,6 +10,8 @@
 //! each level, and the largest one-segment error of its patches and of the
 //! patches around it.
 
+use glam::Vec3;
+
 use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
 use crate::terrain::{PatchId, Terrain};
 
@@ -41,6 +43,16 @@ pub struct Node {
     pub footprint: [[f32; 2]; 2],
 }
 
+impl Node {
+    /// Its box, terrain-local: its footprint's x and z, its bounds' y, as
+    /// its lowest and highest corners.
+    pub fn aabb(&self) -> (Vec3, Vec3) {
+        let [lo, hi] = self.footprint;
+        let [y_lo, y_hi] = self.bounds;
+        (Vec3::new(lo[0], y_lo, lo[1]), Vec3::new(hi[0], y_hi, hi[1]))
+    }
+}
+
 /// The quadtree over one terrain's patches.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Hierarchy {
@@ -56,6 +68,17 @@ pub struct NodeId {
     pub level: u32,
     pub col: u32,
     pub row: u32,
+}
+
+impl NodeId {
+    /// The level-0 node of patch `id`.
+    pub fn patch(id: PatchId) -> NodeId {
+        NodeId {
+            level: 0,
+            col: id.col as u32,
+            row: id.row as u32,
+        }
+    }
 }
 
 impl Hierarchy {

@@ -264,13 +264,8 @@ struct NodeBox {
 
 impl NodeBox {
     fn of(hierarchy: &Hierarchy, id: NodeId) -> Self {
-        let node = hierarchy.node(id);
-        let [lo, hi] = node.footprint;
-        let [y_lo, y_hi] = node.bounds;
-        NodeBox {
-            min: Vec3::new(lo[0], y_lo, lo[1]),
-            max: Vec3::new(hi[0], y_hi, hi[1]),
-        }
+        let (min, max) = hierarchy.node(id).aabb();
+        NodeBox { min, max }
     }
 
     /// A node with its box, for a walk's stack.

@@ -449,16 +449,10 @@ impl GeomipGeometry {
                 (0.0, [0.0; 4])
             };
             if let Some(hierarchy) = predict {
-                let node = hierarchy.node(NodeId {
-                    level: 0,
-                    col: id.col as u32,
-                    row: id.row as u32,
-                });
-                let ([x0, z0], [x1, z1]) = (node.footprint[0], node.footprint[1]);
-                let [y0, y1] = node.bounds;
+                let (lo, hi) = hierarchy.node(NodeId::patch(id)).aabb();
                 let patch = geomip::DrawnPatch {
-                    lo: glam::Vec3::new(x0, y0, z0),
-                    hi: glam::Vec3::new(x1, y1, z1),
+                    lo,
+                    hi,
                     level,
                     morph: sides.iter().fold(interior, |a, &b| a.max(b)),
                     coarser,
@@ -508,24 +502,14 @@ pub(super) enum GeomipChoice {
 
 /// Distance from the eye to node `id`'s box: its footprint, its heights.
 fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
-    let node = hierarchy.node(id);
-    let [lo, hi] = node.footprint;
-    let [y_lo, y_hi] = node.bounds;
-    crate::lod::box_distance(
-        glam::Vec3::new(lo[0], y_lo, lo[1]) - eye,
-        glam::Vec3::new(hi[0], y_hi, hi[1]) - eye,
-    )
+    let (lo, hi) = hierarchy.node(id).aabb();
+    crate::lod::box_distance(lo - eye, hi - eye)
 }
 
 /// Distance from `eye_local` to the nearest point of patch `p`'s box (its
 /// node's in `hierarchy`: one read, where the terrain's box is three).
 fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: glam::Vec3) -> f32 {
-    let id = NodeId {
-        level: 0,
-        col: p.col as u32,
-        row: p.row as u32,
-    };
-    block_distance(hierarchy, id, eye_local)
+    block_distance(hierarchy, NodeId::patch(p), eye_local)
 }
 
 /// One flag per patch of `grid`: whether it is among `visible`.
