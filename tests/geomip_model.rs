@@ -360,3 +360,18 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
     // patches beyond them.
     assert!(every.iter().filter(|&&l| l < 4).count() > drawn.iter().filter(|&&d| d).count());
 }
+
+/// A geomip level and its error table index name the same number of
+/// segments a side (level l: n / 2^l; index k: 2^k), and each mapping
+/// undoes the other.
+#[test]
+fn a_level_and_its_table_index_have_the_same_segments() {
+    for n in [2usize, 4, 8, 16, 32, 64] {
+        let count = level_count(n);
+        for level in 0..count {
+            let k = table_index(level, count);
+            assert_eq!(1usize << k, n >> level, "n={n} level={level}");
+            assert_eq!(level_of_index(k, count), level);
+        }
+    }
+}

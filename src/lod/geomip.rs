@@ -41,6 +41,19 @@ pub fn level_count(cells_per_patch: usize) -> usize {
     cells_per_patch.trailing_zeros() as usize + 1
 }
 
+/// The error table's level index of geomip level `level`, of `count`
+/// levels (`level_count`): level l has n / 2^l segments a side, which the
+/// table indexes as log2(n) - l.
+pub fn table_index(level: usize, count: usize) -> usize {
+    count - 1 - level
+}
+
+/// The geomip level of the error table's level index `index`, of `count`
+/// levels: `table_index` undone.
+pub fn level_of_index(index: usize, count: usize) -> usize {
+    count - 1 - index
+}
+
 /// Index of template vertex (row i, column j) for patches of `n` cells.
 fn vertex(n: usize, i: usize, j: usize) -> u32 {
     (i * (n + 1) + j) as u32
@@ -461,11 +474,9 @@ pub fn select_levels_by_error(
     let n = grid.cells_per_patch();
     let count = level_count(n);
     let distances = patch_distances(terrain, eye_local);
-    // Geomip level l has n / 2^l segments a side: error table level index
-    // log2(n) - l.
     let threshold = |p: usize, level: usize| {
-        let k = (count - 1) - level;
-        table.error(p, k) * pixels_per_radian / pixel_error.max(f32::MIN_POSITIVE)
+        table.error(p, table_index(level, count)) * pixels_per_radian
+            / pixel_error.max(f32::MIN_POSITIVE)
     };
     let mut levels: Vec<u8> = distances
         .iter()

@@ -646,14 +646,14 @@ fn allocate(
             // estimate (coarsest accepted, or not drawn) constrain nothing.
             let mut geomip = vec![(count - 1) as u8; grid.patch_count()];
             for (e, &k) in estimates.iter().zip(levels) {
-                geomip[e.patch] = (count - 1 - k) as u8;
+                geomip[e.patch] = super::geomip::level_of_index(k, count) as u8;
             }
             super::geomip::balance(&mut geomip, grid);
             estimates
                 .iter()
                 .map(|e| {
                     let id = grid.patch_id(e.patch);
-                    let k = count - 1 - usize::from(geomip[e.patch]);
+                    let k = super::geomip::table_index(usize::from(geomip[e.patch]), count);
                     (k, super::geomip::neighbour_masks(&geomip, grid, id).0)
                 })
                 .unzip()
@@ -1738,7 +1738,7 @@ mod tests {
                     patch.stitched = sides;
                     // The index list's triangles, the template clamped to
                     // the patch as the vertex shader clamps it.
-                    let level = geomip::level_count(n) - 1 - k;
+                    let level = geomip::level_of_index(k, geomip::level_count(n));
                     let corner = |v: u32| {
                         let (i, j) = (v as usize / (n + 1), v as usize % (n + 1));
                         let (i, j) = (i.min(cells.1), j.min(cells.0));

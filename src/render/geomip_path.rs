@@ -214,17 +214,15 @@ impl GeomipGeometry {
                         seen: None,
                     },
                 );
-                // Geomip level l has n / 2^l segments a side: the error
-                // table's level index log2(n) - l. A block's patches take
-                // its level, and glide towards the next coarser one as far
-                // as the block has come from where the bound accepts its
-                // level to where it accepts the next (none where the share
-                // chose it).
+                // A block's patches take its level (`geomip::level_of_index`),
+                // and glide towards the next coarser one as far as the block
+                // has come from where the bound accepts its level to where it
+                // accepts the next (none where the share chose it).
                 let mut drawn = vec![false; grid.patch_count()];
                 let mut rects = Vec::with_capacity(frame_plan.blocks.len());
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
-                    let level = count - 1 - k;
+                    let level = geomip::level_of_index(k, count);
                     let glide = if block.chosen || k == 0 {
                         0.0
                     } else {
@@ -426,7 +424,7 @@ impl GeomipGeometry {
         predict: Option<&Hierarchy>,
     ) -> Option<f32> {
         let grid = terrain.grid();
-        let coarsest = geomip::level_count(grid.cells_per_patch()) - 1;
+        let levels = geomip::level_count(grid.cells_per_patch());
         let mut predicted = 0.0f32;
         draws.clear();
         draws.reserve(visible.len());
@@ -457,11 +455,12 @@ impl GeomipGeometry {
                     morph: sides.iter().fold(interior, |a, &b| a.max(b)),
                     coarser,
                 };
-                // Geomip level l is the error table's level index
-                // log2(n) - l; level 0 is the reference.
+                // Level 0 is the reference.
                 let error = |l: usize| match l {
                     0 => 0.0,
-                    l => self.errors.error(p, coarsest - l.min(coarsest)),
+                    l => self
+                        .errors
+                        .error(p, geomip::table_index(l.min(levels - 1), levels)),
                 };
                 predicted = predicted.max(geomip::predicted_px(
                     error,
