@@ -154,6 +154,15 @@ pub struct PlannedBlock {
 }
 
 impl PlannedBlock {
+    /// Its node in the hierarchy.
+    pub fn node(&self) -> NodeId {
+        NodeId {
+            level: self.level,
+            col: self.col >> self.level,
+            row: self.row >> self.level,
+        }
+    }
+
     /// Patches a side.
     pub fn span(&self) -> u32 {
         1 << self.level
@@ -376,12 +385,7 @@ impl Planner {
             let levels = self.share.levels(&self.candidates, budget as f32);
             for (c, &level) in self.candidates.iter().zip(levels) {
                 let block = &mut plan.blocks[c.slot];
-                let id = NodeId {
-                    level: block.level,
-                    col: block.col >> block.level,
-                    row: block.row >> block.level,
-                };
-                let patch_max = hierarchy.node(id).patch_max;
+                let patch_max = hierarchy.node(block.node()).patch_max;
                 block.patch_level = level as u8;
                 block.full_resolution = level >= c.full;
                 block.chosen = level < c.bound;

@@ -226,11 +226,7 @@ impl GeomipGeometry {
                     let glide = if block.chosen || k == 0 {
                         0.0
                     } else {
-                        let id = NodeId {
-                            level: block.level,
-                            col: block.col >> block.level,
-                            row: block.row >> block.level,
-                        };
+                        let id = block.node();
                         let errors = hierarchy.node(id).patch_max;
                         let d = block_distance(hierarchy, id, view.eye_local);
                         let at = |k: usize| errors[k] * view.pixels_per_radian / pixels;
