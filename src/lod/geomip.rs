@@ -410,7 +410,7 @@ pub fn neighbour_masks(levels: &[u8], grid: &PatchGrid, id: PatchId) -> (u8, u8)
 
 /// Levels of every patch (culled ones too: their neighbours need them) and
 /// each patch's own morph factor towards the next coarser level.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct PatchLevels {
     pub levels: Vec<u8>,
     pub morph: Vec<f32>,

@@ -17,7 +17,7 @@ use crate::gpu::commands::Recorder;
 use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
-use crate::lod::geomip;
+use crate::lod::geomip::{self, PatchLevels};
 use crate::lod::hierarchy::{Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
@@ -44,6 +44,56 @@ pub(super) struct GeomipGeometry {
     /// Levels set from outside (`set_geomip_levels`) instead of chosen,
     /// balanced, with no morph.
     pub(super) given: Option<geomip::PatchLevels>,
+    /// The last choice's levels and patches in view, kept from frame to
+    /// frame so that a choice fills memory it filled the frame before.
+    chosen: ChosenPatches,
+}
+
+/// A choice of levels for every patch (`GeomipGeometry::choose`), read by
+/// `GeomipGeometry::emit`.
+#[derive(Debug, Default)]
+struct ChosenPatches {
+    /// Every patch's level and morph factor.
+    levels: geomip::PatchLevels,
+    /// One flag per patch: whether it is drawn.
+    drawn: Vec<bool>,
+    /// The drawn patches, in grid order.
+    visible: Vec<u32>,
+    /// The error LOD's blocks as columns and rows of patches.
+    rects: Vec<([usize; 2], [usize; 2])>,
+    /// The distance LOD's distances, one per drawn patch in grid order.
+    distances: Vec<f32>,
+}
+
+impl ChosenPatches {
+    /// Every one of `patches` at level `coarsest`, with no morph and not
+    /// drawn.
+    fn reset(&mut self, patches: usize, coarsest: u8) {
+        let PatchLevels { levels, morph } = &mut self.levels;
+        levels.clear();
+        levels.resize(patches, coarsest);
+        morph.clear();
+        morph.resize(patches, 0.0);
+        self.drawn.clear();
+        self.drawn.resize(patches, false);
+        self.visible.clear();
+        self.rects.clear();
+        self.distances.clear();
+    }
+
+    /// `visible` from the drawn flags, in grid order: a write per patch
+    /// and no branch.
+    fn list_drawn(&mut self) {
+        let n = self.drawn.len();
+        self.visible.clear();
+        self.visible.resize(n + 1, 0);
+        let mut count = 0;
+        for (p, &drawn) in self.drawn.iter().enumerate() {
+            self.visible[count] = p as u32;
+            count += usize::from(drawn);
+        }
+        self.visible.truncate(count);
+    }
 }
 
 /// One patch of the geomip path: its index list and constants.
@@ -130,6 +180,7 @@ impl GeomipGeometry {
             layout,
             errors,
             given: None,
+            chosen: ChosenPatches::default(),
         })
     }
 }
@@ -170,31 +221,35 @@ impl GeomipGeometry {
         }
         // Every patch starts at the coarsest level, and those in view get
         // theirs; the coarsest constrains no neighbour.
-        let mut levels = vec![(count - 1) as u8; grid.patch_count()];
-        let mut morph = vec![0.0f32; grid.patch_count()];
-        // The distance LOD's distances, one per patch in view in grid order.
-        let mut distances = Vec::new();
-        // The patches drawn (flags, and in grid order). Culled patches
-        // beside drawn ones are refined to match them, and the levels
-        // balanced.
-        let visible = match tau {
+        let chosen = &mut self.chosen;
+        chosen.reset(grid.patch_count(), (count - 1) as u8);
+        let PatchLevels { levels, morph } = &mut chosen.levels;
+        match tau {
             None => {
                 let visible = patches_in_view(terrain, hierarchy, &lod_view, settings.cull).0;
                 let edges: Vec<PatchId> =
                     visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
+                let distances = &mut chosen.distances;
                 distances.extend(
                     edges
                         .iter()
                         .map(|&id| patch_distance(hierarchy, id, view.eye_local)),
                 );
-                for (&p, &d) in visible.iter().zip(&distances) {
+                for (&p, &d) in visible.iter().zip(distances.iter()) {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
+                    chosen.drawn[p as usize] = true;
                 }
-                // Every drawn patch can lower a neighbour.
-                let drawn = drawn_flags(grid, &visible);
-                geomip::refine_and_balance(&mut levels, grid, &drawn, &edges);
-                visible
+                // Every drawn patch can lower a neighbour; the morph
+                // factors follow the balanced levels.
+                geomip::refine_and_balance(levels, grid, &chosen.drawn, &edges);
+                for (&p, &d) in visible.iter().zip(distances.iter()) {
+                    let level = usize::from(levels[p as usize]);
+                    if level + 1 < count {
+                        morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
+                    }
+                }
+                chosen.visible = visible;
             }
             Some(pixels) => {
                 let sight = match settings.error_measure {
@@ -218,8 +273,7 @@ impl GeomipGeometry {
                 // and glide towards the next coarser one as far as the block
                 // has come from where the bound accepts its level to where it
                 // accepts the next (none where the share chose it).
-                let mut drawn = vec![false; grid.patch_count()];
-                let mut rects = Vec::with_capacity(frame_plan.blocks.len());
+                let cols = grid.patch_cols();
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = geomip::level_of_index(k, count);
@@ -239,36 +293,25 @@ impl GeomipGeometry {
                             crate::lod::saturate((d - from) / (to - from))
                         }
                     };
-                    let cols = grid.patch_cols();
                     let ([c0, c1], [r0, r1]) = block.patch_range(grid);
                     for r in r0..r1 {
                         let row = r * cols + c0..r * cols + c1;
                         levels[row.clone()].fill(level as u8);
-                        morph[row.clone()].fill(glide);
-                        drawn[row].fill(true);
+                        // Every morph factor starts at none.
+                        if glide > 0.0 {
+                            morph[row.clone()].fill(glide);
+                        }
+                        chosen.drawn[row].fill(true);
                     }
-                    rects.push(([c0, c1], [r0, r1]));
+                    chosen.rects.push(([c0, c1], [r0, r1]));
                 }
                 // A block's patches share its level: only its sides can
                 // lower a neighbour.
-                geomip::refine_and_balance_blocks(&mut levels, grid, &drawn, &rects);
-                // In grid order, read off the flags: cheaper than sorting
-                // the blocks' patches. Sized at once: grown push by push,
-                // the list's copies cost as much as the reading.
-                let mut visible = Vec::with_capacity(frame_plan.patches_in_view);
-                visible.extend((0..grid.patch_count() as u32).filter(|&p| drawn[p as usize]));
-                visible
-            }
-        };
-        for (&p, &d) in visible.iter().zip(&distances) {
-            let level = usize::from(levels[p as usize]);
-            if level + 1 < count {
-                morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
+                geomip::refine_and_balance_blocks(levels, grid, &chosen.drawn, &chosen.rects);
+                chosen.list_drawn();
             }
         }
         GeomipChoice::Levels {
-            visible,
-            chosen: geomip::PatchLevels { levels, morph },
             error_lod: tau.is_some(),
         }
     }
@@ -285,19 +328,16 @@ impl GeomipGeometry {
         choice: GeomipChoice,
         draws: &mut Vec<GeomipDraw>,
     ) -> Option<(f32, Option<f32>)> {
-        let (visible, chosen, error_lod) = match choice {
+        let error_lod = match choice {
             GeomipChoice::Drawn(predicted) => return predicted,
-            GeomipChoice::Levels {
-                visible,
-                chosen,
-                error_lod,
-            } => (visible, chosen, error_lod),
+            GeomipChoice::Levels { error_lod } => error_lod,
         };
         let predict = error_lod.then_some(hierarchy);
+        let chosen = &self.chosen;
         self.set_draws(
             terrain,
             (view, settings),
-            (&visible, &chosen),
+            (&chosen.visible, &chosen.levels),
             draws,
             predict,
         )
@@ -485,10 +525,8 @@ impl GeomipGeometry {
 /// view, or (given levels, the view measure) the draws themselves, with
 /// what the choice expects.
 pub(super) enum GeomipChoice {
+    /// Levels for every patch, kept in the geometry (`ChosenPatches`).
     Levels {
-        /// The patches in view, in grid order.
-        visible: Vec<u32>,
-        chosen: geomip::PatchLevels,
         /// Chosen by the error LOD (it reports what it expects).
         error_lod: bool,
     },
