@@ -84,9 +84,10 @@ impl ChosenPatches {
     /// `visible` from the drawn flags, in grid order: a write per patch
     /// and no branch.
     fn list_drawn(&mut self) {
-        let n = self.drawn.len();
+        // Patch p is written at index count <= p: the grid's length holds
+        // every write.
         self.visible.clear();
-        self.visible.resize(n + 1, 0);
+        self.visible.resize(self.drawn.len(), 0);
         let mut count = 0;
         for (p, &drawn) in self.drawn.iter().enumerate() {
             self.visible[count] = p as u32;
