@@ -25,7 +25,7 @@ use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
 use crate::shader_constants::OWN_PATCH_CONSTANTS;
-use crate::terrain::grid::{PatchGrid, PatchId};
+use crate::terrain::grid::PatchId;
 use crate::terrain::{ErrorTable, Terrain};
 
 pub(super) struct GeomipGeometry {
@@ -209,7 +209,8 @@ impl GeomipGeometry {
         if let Some(given) = &self.given {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
             let mut chosen = given.clone();
-            let drawn = drawn_flags(grid, &visible);
+            let mut drawn = vec![false; grid.patch_count()];
+            mark_drawn(&mut drawn, &visible);
             let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
             let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &edges);
             geomip::balance_from(&mut chosen.levels, grid, &lowered);
@@ -239,8 +240,8 @@ impl GeomipGeometry {
                 for (&p, &d) in visible.iter().zip(distances.iter()) {
                     levels[p as usize] =
                         geomip::level_for_distance(d, settings.lod.min_dist, count) as u8;
-                    chosen.drawn[p as usize] = true;
                 }
+                mark_drawn(&mut chosen.drawn, &visible);
                 // Every drawn patch can lower a neighbour; the morph
                 // factors follow the balanced levels.
                 geomip::refine_and_balance(levels, grid, &chosen.drawn, &edges);
@@ -546,11 +547,9 @@ fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: glam::Vec3) -> f
     block_distance(hierarchy, NodeId::patch(p), eye_local)
 }
 
-/// One flag per patch of `grid`: whether it is among `visible`.
-fn drawn_flags(grid: &PatchGrid, visible: &[u32]) -> Vec<bool> {
-    let mut drawn = vec![false; grid.patch_count()];
+/// Sets the flag (one per patch) of each of `visible`.
+fn mark_drawn(drawn: &mut [bool], visible: &[u32]) {
     for &p in visible {
         drawn[p as usize] = true;
     }
-    drawn
 }
