@@ -221,6 +221,22 @@ impl Hierarchy {
             })
     }
 
+    /// Calls `f` with each of the node's children that exist and its node,
+    /// in `children`'s order: the level below is looked up once.
+    pub fn for_each_child(&self, id: NodeId, mut f: impl FnMut(NodeId, &Node)) {
+        let Some(level) = id.level.checked_sub(1) else {
+            return;
+        };
+        let below = &self.levels[level as usize];
+        for (dc, dr) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+            let (col, row) = (2 * id.col + dc, 2 * id.row + dr);
+            if (col as usize) < below.cols && (row as usize) < below.rows {
+                let node = &below.nodes[row as usize * below.cols + col as usize];
+                f(NodeId { level, col, row }, node);
+            }
+        }
+    }
+
     /// The patches a node covers: columns and rows, end exclusive.
     pub fn patch_range(&self, id: NodeId) -> ([usize; 2], [usize; 2]) {
         let span = 1usize << id.level;

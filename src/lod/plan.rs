@@ -272,21 +272,21 @@ struct NodeBox {
 }
 
 impl NodeBox {
-    fn of(hierarchy: &Hierarchy, id: NodeId) -> Self {
-        let (min, max) = hierarchy.node(id).aabb();
-        NodeBox { min, max }
-    }
-
     /// A node with its box, for a walk's stack.
     fn entry(hierarchy: &Hierarchy, id: NodeId) -> (NodeId, NodeBox) {
-        (id, NodeBox::of(hierarchy, id))
+        let (min, max) = hierarchy.node(id).aabb();
+        (id, NodeBox { min, max })
     }
 
     /// Pushes `id`'s children with their boxes: their nodes are read
     /// together, as they are pushed, so the memory lines a cold walk
     /// misses are fetched four at a time instead of one per node popped.
     fn push_children(hierarchy: &Hierarchy, id: NodeId, stack: &mut Vec<(NodeId, NodeBox)>) {
-        stack.extend(hierarchy.children(id).map(|c| NodeBox::entry(hierarchy, c)));
+        stack.reserve(4);
+        hierarchy.for_each_child(id, |c, node| {
+            let (min, max) = node.aabb();
+            stack.push((c, NodeBox { min, max }));
+        });
     }
 
     /// Its nearest and farthest points' distances from the eye (the

@@ -81,21 +81,40 @@ impl ChosenPatches {
         self.distances.clear();
     }
 
-    /// `visible` from the drawn flags, in grid order: a write per patch
-    /// and no branch.
+    /// `visible` from the drawn flags, in grid order, eight flags at a
+    /// time: a run of eight patches all drawn or none drawn costs one test.
     fn list_drawn(&mut self) {
-        // Patch p is written at index count <= p: the grid's length holds
-        // every write.
-        self.visible.clear();
-        self.visible.resize(self.drawn.len(), 0);
-        let mut count = 0;
-        for (p, &drawn) in self.drawn.iter().enumerate() {
-            self.visible[count] = p as u32;
-            count += usize::from(drawn);
+        let visible = &mut self.visible;
+        visible.clear();
+        let flags: &[u8] = bytemuck::cast_slice(&self.drawn);
+        let words = flags.chunks_exact(8);
+        let rest = words.remainder();
+        let mut first = 0;
+        for word in words {
+            let bits = u64::from_le_bytes(word.try_into().expect("eight flags"));
+            match bits {
+                0 => {}
+                ALL_DRAWN => visible.extend(first..first + 8),
+                _ => push_flagged(visible, first, word),
+            }
+            first += 8;
         }
-        self.visible.truncate(count);
+        push_flagged(visible, first, rest);
     }
 }
+
+/// Pushes `first + i` for each flag `i` of `flags` that is set.
+fn push_flagged(out: &mut Vec<u32>, first: u32, flags: &[u8]) {
+    out.extend(
+        (first..)
+            .zip(flags)
+            .filter(|(_, &flag)| flag != 0)
+            .map(|(p, _)| p),
+    );
+}
+
+/// Eight drawn flags (`true` is 1) read as one little-endian word.
+const ALL_DRAWN: u64 = 0x0101_0101_0101_0101;
 
 /// One patch of the geomip path: its index list and constants.
 #[derive(Clone, Copy, Debug)]
@@ -551,5 +570,32 @@ fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: glam::Vec3) -> f
 fn mark_drawn(drawn: &mut [bool], visible: &[u32]) {
     for &p in visible {
         drawn[p as usize] = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every drawn patch is listed once, in grid order, whatever runs of
+    /// drawn and not drawn the flags hold, the last short word included.
+    #[test]
+    fn list_drawn_lists_each_drawn_patch_in_grid_order() {
+        let mut chosen = ChosenPatches::default();
+        for len in [0usize, 5, 8, 29, 67] {
+            // Runs of all, none and some drawn.
+            let drawn: Vec<bool> = (0..len)
+                .map(|p| match (p / 8) % 3 {
+                    0 => true,
+                    1 => false,
+                    _ => p % 3 == 0,
+                })
+                .collect();
+            chosen.reset(len, 0);
+            chosen.drawn.copy_from_slice(&drawn);
+            chosen.list_drawn();
+            let expected: Vec<u32> = (0..len as u32).filter(|&p| drawn[p as usize]).collect();
+            assert_eq!(chosen.visible, expected, "{len} patches");
+        }
     }
 }
