@@ -640,7 +640,7 @@ fn the_model_has_an_entry_for_every_patch_and_every_whole_block() {
     let (mut whole, mut cut) = ([0usize; BLOCK_LEVELS as usize + 1], 0);
     let mut stack = vec![hierarchy.root()];
     while let Some(id) = stack.pop() {
-        stack.extend(hierarchy.children(id));
+        hierarchy.for_each_child(id, |child, _| stack.push(child));
         if id.level > BLOCK_LEVELS {
             continue;
         }

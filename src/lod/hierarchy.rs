@@ -203,26 +203,9 @@ impl Hierarchy {
         &level.nodes[id.row as usize * level.cols + id.col as usize]
     }
 
-    /// The node's children that exist, in the order (upper-left,
-    /// upper-right, lower-left, lower-right).
-    pub fn children(&self, id: NodeId) -> impl Iterator<Item = NodeId> + '_ {
-        let below = id.level.checked_sub(1);
-        [(0, 0), (1, 0), (0, 1), (1, 1)]
-            .into_iter()
-            .filter_map(move |(dc, dr)| {
-                let level = below?;
-                let l = &self.levels[level as usize];
-                let (col, row) = (2 * id.col + dc, 2 * id.row + dr);
-                ((col as usize) < l.cols && (row as usize) < l.rows).then_some(NodeId {
-                    level,
-                    col,
-                    row,
-                })
-            })
-    }
-
     /// Calls `f` with each of the node's children that exist and its node,
-    /// in `children`'s order: the level below is looked up once.
+    /// in the order (upper-left, upper-right, lower-left, lower-right):
+    /// the level below is looked up once.
     pub fn for_each_child(&self, id: NodeId, mut f: impl FnMut(NodeId, &Node)) {
         let Some(level) = id.level.checked_sub(1) else {
             return;
