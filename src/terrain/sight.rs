@@ -191,15 +191,9 @@ impl LatticePoint {
     /// The lattice point of horizontal direction `(x, z)` (any length) and
     /// fall `t`, clamped to the lattice's slopes.
     pub fn new(x: f32, z: f32, t: f32) -> Self {
-        // In [0, TAU): atan2's (-pi, pi] turned once where negative.
-        let phi = z.atan2(x);
-        let phi = if phi < 0.0 {
-            phi + std::f32::consts::TAU
-        } else {
-            phi
-        };
-        let a = phi / std::f32::consts::TAU * AZIMUTHS as f32;
-        let a0 = (a.floor() as usize).min(AZIMUTHS - 1);
+        let a = turns(x, z) * AZIMUTHS as f32;
+        // Not negative: truncation is its floor.
+        let a0 = (a as usize).min(AZIMUTHS - 1);
         let last = SLOPES.len() - 1;
         // NaN falls to the lowest slope.
         let (s0, slope_weight) = if t.is_nan() || t <= SLOPES[0] {
@@ -234,6 +228,33 @@ impl LatticePoint {
             (d(1, 0), wa * (1.0 - ws)),
             (d(1, 1), wa * ws),
         ]
+    }
+}
+
+/// The angle from +x towards +z of the direction `(x, z)`, in turns, in
+/// [0, 1] (0 for no direction): an arctangent of the smaller side over the
+/// larger, within 1e-5 radians (Abramowitz and Stegun 4.4.49), turned into
+/// its octant. A lattice point is found for every part of every block a
+/// frame reads, where the library's `atan2` took 3 % of the choice's
+/// instructions.
+fn turns(x: f32, z: f32) -> f32 {
+    let (ax, az) = (x.abs(), z.abs());
+    let (lo, hi) = if ax >= az { (az, ax) } else { (ax, az) };
+    if hi == 0.0 {
+        return 0.0;
+    }
+    let r = lo / hi;
+    let r2 = r * r;
+    let poly =
+        (((0.020_835_1 * r2 - 0.085_133) * r2 + 0.180_141) * r2 - 0.330_299_5) * r2 + 0.999_866;
+    // In [0, 1/8] of a turn, then its octant.
+    let t = r * poly / std::f32::consts::TAU;
+    let t = if az > ax { 0.25 - t } else { t };
+    let t = if x < 0.0 { 0.5 - t } else { t };
+    if z < 0.0 {
+        1.0 - t
+    } else {
+        t
     }
 }
 
@@ -446,12 +467,13 @@ impl SightTable {
             true => &level.largest,
             false => &level.codes,
         };
+        let row = |at: usize| -> &[u8; LEVELS * FRACTIONS] {
+            codes[at..].first_chunk().expect("a direction's codes")
+        };
+        let [a, b, c, d] = view.codes;
         ViewCodes {
             area: view.area,
-            codes: view.codes.map(|at| {
-                <&[u8; LEVELS * FRACTIONS]>::try_from(&codes[at..][..LEVELS * FRACTIONS])
-                    .expect("a direction's codes")
-            }),
+            codes: [row(a), row(b), row(c), row(d)],
             weights: view.weights,
             error: view.error,
             decoded: &self.decoded,
@@ -1044,5 +1066,36 @@ mod tests {
                 prop_assert_eq!(first_within(|j| row[j], error), linear);
             }
         }
+
+        /// A direction's angle in turns is `atan2`'s, made positive, within
+        /// 2e-6 of a turn (1e-5 radians and rounding), at any length and in
+        /// every octant, the axes and the diagonals included.
+        #[test]
+        fn turns_are_atan2s(
+            x in -1.0e4f32..1.0e4,
+            z in -1.0e4f32..1.0e4,
+            octant in 0u8..8,
+            scale in -20i32..20,
+        ) {
+            let axis = (octant as f32 * std::f32::consts::FRAC_PI_4).sin_cos();
+            for (x, z) in [(x, z), (axis.1, axis.0), (x, 0.0), (0.0, z), (x, x), (x, -x)] {
+                let (x, z) = (x * (scale as f32).exp2(), z * (scale as f32).exp2());
+                let phi = z.atan2(x);
+                let expected = if phi < 0.0 { phi + std::f32::consts::TAU } else { phi }
+                    / std::f32::consts::TAU;
+                let got = turns(x, z);
+                prop_assert!((0.0..=1.0).contains(&got), "{x} {z}: {got}");
+                // A turn and none are one direction.
+                let apart = (got - expected).abs();
+                prop_assert!(apart.min(1.0 - apart) <= 2e-6, "{x} {z}: {got} against {expected}");
+            }
+        }
+    }
+
+    /// No direction at all is taken as +x.
+    #[test]
+    fn no_direction_is_no_turn() {
+        assert_eq!(turns(0.0, 0.0), 0.0);
+        assert_eq!(turns(-0.0, 0.0), 0.0);
     }
 }
