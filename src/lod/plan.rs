@@ -738,7 +738,7 @@ fn read_model(
     }
     let mut touched = 0;
     for view in views.iter().flatten() {
-        touched ^= sight.codes(view).touch();
+        touched ^= sight.touch(view);
     }
     std::hint::black_box(touched);
     let mut frame_pixels = 0.0f64;

@@ -462,11 +462,7 @@ impl SightTable {
 
     /// `view`'s codes, ready to read (`ViewCodes::over_fraction`).
     pub fn codes(&self, view: &BlockView) -> ViewCodes<'_> {
-        let level = &self.levels[usize::from(view.level)];
-        let codes = match view.largest {
-            true => &level.largest,
-            false => &level.codes,
-        };
+        let codes = self.level_codes(view);
         let row = |at: usize| -> &[u8; LEVELS * FRACTIONS] {
             codes[at..].first_chunk().expect("a direction's codes")
         };
@@ -479,6 +475,25 @@ impl SightTable {
             decoded: &self.decoded,
             stepped: view.level > 0 && !view.largest,
         }
+    }
+
+    /// The codes of `view`'s block level and shares.
+    fn level_codes(&self, view: &BlockView) -> &[u8] {
+        let level = &self.levels[usize::from(view.level)];
+        match view.largest {
+            true => &level.largest,
+            false => &level.codes,
+        }
+    }
+
+    /// A byte from each memory line `view`'s codes lie on, folded
+    /// together: reading every view's lines before any is used lets them be
+    /// fetched many at a time.
+    pub fn touch(&self, view: &BlockView) -> u8 {
+        let codes = self.level_codes(view);
+        view.codes.iter().fold(0, |acc, &at| {
+            acc ^ codes[at] ^ codes[at + LEVELS * FRACTIONS - 1]
+        })
     }
 }
 
@@ -500,15 +515,6 @@ impl ViewCodes<'_> {
     /// The view's pixel area per `K^2 / d^2` (`BlockView::area`).
     pub fn area(&self) -> f32 {
         self.area
-    }
-
-    /// A byte from each memory line the codes lie on, folded together:
-    /// reading every view's lines before any is used lets them be fetched
-    /// many at a time.
-    pub fn touch(&self) -> u8 {
-        self.codes
-            .iter()
-            .fold(0, |acc, c| acc ^ c[0] ^ c[LEVELS * FRACTIONS - 1])
     }
 
     /// The share of the view's pixels that drawing each of its patches at
