@@ -53,7 +53,7 @@ use std::collections::binary_heap::{BinaryHeap, PeekMut};
 use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
-use super::hierarchy::{Hierarchy, NodeId};
+use super::hierarchy::{Hierarchy, Node, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::seen::SeenPixels;
 use super::view::LodView;
@@ -277,10 +277,15 @@ struct NodeBox {
 }
 
 impl NodeBox {
+    /// `node`'s box.
+    fn of(node: &Node) -> NodeBox {
+        let (min, max) = node.aabb();
+        NodeBox { min, max }
+    }
+
     /// A node with its box, for a walk's stack.
     fn entry(hierarchy: &Hierarchy, id: NodeId) -> (NodeId, NodeBox) {
-        let (min, max) = hierarchy.node(id).aabb();
-        (id, NodeBox { min, max })
+        (id, NodeBox::of(hierarchy.node(id)))
     }
 
     /// Pushes `id`'s children with their boxes: their nodes are read
@@ -288,10 +293,7 @@ impl NodeBox {
     /// misses are fetched four at a time instead of one per node popped.
     fn push_children(hierarchy: &Hierarchy, id: NodeId, stack: &mut Vec<(NodeId, NodeBox)>) {
         stack.reserve(4);
-        hierarchy.for_each_child(id, |c, node| {
-            let (min, max) = node.aabb();
-            stack.push((c, NodeBox { min, max }));
-        });
+        hierarchy.for_each_child(id, |c, node| stack.push((c, NodeBox::of(node))));
     }
 
     /// Its nearest and farthest points' distances from the eye (the
