@@ -916,6 +916,10 @@ impl<'a> Bench<'a> {
                 }
                 let levels = levels_of(config);
                 if hold_before_read {
+                    // The clock is held first, so that the frames after it,
+                    // those whose times occlusion culling's turns compare
+                    // included, are drawn at a busy application's clock.
+                    self.hold_clock(camera, config, levels, g)?;
                     // A single frame is drawn as a still camera's: after the
                     // frames whose counts its choice reads.
                     if config.reads_earlier_frames() {
@@ -924,7 +928,6 @@ impl<'a> Bench<'a> {
                             self.gather_choice(config, timed.lod_ms, g);
                         }
                     }
-                    self.hold_clock(camera, config, levels, g)?;
                 }
                 let since = std::time::Instant::now();
                 let frame = self.render_counted(camera, config, levels, timed_sample, g)?;

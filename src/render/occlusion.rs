@@ -334,6 +334,14 @@ impl CullingTurns {
 
     /// What `last`, seen from `eye`, says of culling here.
     fn judge(&mut self, eye: Vec3, last: LastFrame) {
+        log::debug!(
+            "culling turns: last {last:?}, idle {}, run {}, plain {:?}, culled {:?}, probing {}",
+            self.idle,
+            self.culled_run,
+            self.plain.map(|p| p.0),
+            self.culled.map(|p| p.0),
+            self.probing
+        );
         let width = self.patch_width;
         let near = |seen: Option<(f32, Vec3)>| seen.filter(|&(_, at)| eye.distance(at) <= width);
         match last {
