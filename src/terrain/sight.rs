@@ -16,9 +16,16 @@
 //! (`s + t <= 0`), the ray is taken to run the whole diagonal.
 //!
 //! **Which pixels.** A sample stands for its share of the patch's area,
-//! seen at the angle between the ray and the reference there: `(r + t)
-//! cos(angle of depression)` pixels per unit area times `K^2 / d^2`, with
-//! `r` the reference's rise along the ray; none where it faces away. A
+//! the four quarters of cells around it, each seen at the angle between
+//! the ray and the reference there: `(r + t) cos(angle of depression)`
+//! pixels per unit area times `K^2 / d^2`, with `r` the quarter's rise
+//! along the ray (from the sample's one-sided slopes); none where it faces
+//! away. Each quarter carries the largest error at its corners (the
+//! sample, the points half-way to its neighbours and the cell's centre,
+//! the error running linearly between samples). A peak one sample wide
+//! thus shows the ray its near faces, as steep as it is high and as far
+//! off as half its height where they meet its neighbours, though its
+//! central differences are flat and its own error is one sample's. A
 //! level's error over the patch is then a distribution over its pixels.
 //!
 //! **The table.** For each direction of a lattice (`AZIMUTHS` horizontal
@@ -65,13 +72,13 @@ pub const SLOPES: [f32; 10] = [-0.2, -0.05, 0.0, 0.012, 0.03, 0.07, 0.16, 0.36, 
 pub const DIRECTIONS: usize = AZIMUTHS * SLOPES.len();
 /// The shares of a patch's pixels the stored errors leave over, as powers
 /// of two (`i32::MIN` for none: the largest error).
-pub const FRACTION_EXPONENTS: [i32; 8] = [i32::MIN, -12, -10, -8, -6, -4, -2, 0];
+pub const FRACTION_EXPONENTS: [i32; 9] = [i32::MIN, -12, -10, -8, -6, -4, -2, -1, 0];
 const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 /// Levels with an entry: those below the largest patch's cell count.
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
 /// part of its on-disk cache key.
-pub const MODEL_VERSION: u32 = 4;
+pub const MODEL_VERSION: u32 = 7;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -507,7 +514,7 @@ pub struct ViewCodes<'a> {
     error: f32,
     decoded: &'a [f32; 256],
     /// Read between the stored shares at the larger one (a block's pooled
-    /// shares), not in log-log.
+    /// shares), not as spread between them.
     stepped: bool,
 }
 
@@ -521,10 +528,11 @@ impl ViewCodes<'_> {
     /// level index `k` (2^k segments a side) puts over its error: its
     /// errors interpolated between the lattice's directions (a ray's gap
     /// grows about in proportion to its fall), then the share between the
-    /// stored ones in log-log, or for a block's pooled shares the larger
-    /// of the two: pooled over patches unlike each other, its pixels'
-    /// errors fall in steps (a rough patch's, then a smooth one's), which a
-    /// line in log-log between two stored shares can pass below. 0 for a
+    /// stored ones as spread evenly between their errors (`fraction_over`),
+    /// or for a block's pooled shares the larger of the two: pooled over
+    /// patches unlike each other, its pixels' errors fall in steps (a rough
+    /// patch's, then a smooth one's), which a line between two stored shares
+    /// can pass below. 0 for a
     /// level the table does not hold (full resolution and finer, whose
     /// error is 0).
     pub fn over_fraction(&self, k: usize) -> f32 {
@@ -625,7 +633,18 @@ fn fraction_over_stepped(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
 
 /// The share of pixels over `error` of a row of errors at
 /// `FRACTION_EXPONENTS` (`error_at(j)`, non-increasing: errors fall as the
-/// share grows), interpolated between them in log-log.
+/// share grows). Between two stored shares the pixels' errors are read as
+/// spread evenly between the two stored errors: the share runs linearly
+/// from the smaller stored share at the larger error to the larger share at
+/// the smaller error.
+///
+/// The reading grows with every stored error and is continuous in them,
+/// so a block whose stored errors are each at least a patch's reads at
+/// least the patch's share, and an exact zero reads as a tiny error does.
+/// A few pixels far over the error beside exact ones (a spike) read close
+/// to the larger share, where the truth may lie. It is never below the line
+/// in log-log through the same two errors, which bends below the straight
+/// one between them.
 fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
     // The first stored error at or below the given one, and the one
     // before it.
@@ -635,16 +654,12 @@ fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
     if j == 0 {
         return 0.0;
     }
-    let (lo, hi) = (FRACTION_EXPONENTS[j - 1], FRACTION_EXPONENTS[j]);
-    if lo == i32::MIN {
-        return FRACTION_SHARES[j];
+    let (s0, s1) = (FRACTION_SHARES[j - 1], FRACTION_SHARES[j]);
+    if FRACTION_EXPONENTS[j - 1] == i32::MIN || e0 <= e1 {
+        return s1;
     }
-    let w = if e1 <= 0.0 || e0 <= e1 {
-        1.0
-    } else {
-        ((e0 / error).log2() / (e0 / e1).log2()).clamp(0.0, 1.0)
-    };
-    (lo as f32 + w * (hi - lo) as f32).exp2()
+    let w = ((e0 - error) / (e0 - e1)).clamp(0.0, 1.0);
+    s0 + w * (s1 - s0)
 }
 
 /// Bins per octave of the errors' histogram, and its octaves.
@@ -775,19 +790,27 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     let stride = nx + 1;
     let (w, d) = (map.width(), map.depth());
     let h = |r: usize, c: usize| f64::from(map.get(r, c));
-    // The reference's gradient (x, z) at each sample, by central
-    // differences, one-sided at the map's edges; local z falls as rows rise.
+    // The reference's one-sided slopes at each sample, towards +x, -x,
+    // +z and -z (each taken the same way, so the -x slope is the rise
+    // from the sample behind to this one); at the map's edges the side
+    // that exists stands for both. Local z falls as rows rise.
     let mut reference = Vec::with_capacity(stride * (nz + 1));
     let mut heights = Vec::with_capacity(stride * (nz + 1));
     for r in rect.row0..=rect.row1 {
         for c in rect.col0..=rect.col1 {
-            let (c0, c1) = (c.saturating_sub(1), (c + 1).min(w - 1));
-            let (r0, r1) = (r.saturating_sub(1), (r + 1).min(d - 1));
-            reference.push([
-                ((h(r, c1) - h(r, c0)) / ((c1 - c0) as f64 * dx)) as f32,
-                ((h(r0, c) - h(r1, c)) / ((r1 - r0) as f64 * dz)) as f32,
-            ]);
-            heights.push(h(r, c));
+            let here = h(r, c);
+            let east = (c + 1 < w).then(|| (h(r, c + 1) - here) / dx);
+            let west = (c > 0).then(|| (here - h(r, c - 1)) / dx);
+            let north = (r > 0).then(|| (h(r - 1, c) - here) / dz);
+            let south = (r + 1 < d).then(|| (here - h(r + 1, c)) / dz);
+            let pair = |a: Option<f64>, b: Option<f64>| {
+                let (a, b) = (a.or(b).unwrap_or(0.0), b.or(a).unwrap_or(0.0));
+                [a as f32, b as f32]
+            };
+            let [gx0, gx1] = pair(east, west);
+            let [gz0, gz1] = pair(north, south);
+            reference.push(Slopes([gx0, gx1, gz0, gz1]));
+            heights.push(here);
         }
     }
     // The reference at patch-local (row, column): a sample where both are
@@ -807,7 +830,7 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
         for (ti, &t) in SLOPES.iter().enumerate() {
             let seen: f32 = reference
                 .iter()
-                .map(|g| (g[0] * ux + g[1] * uz + t).max(0.0))
+                .map(|g| Slopes::seen_from(g.rises(ux, uz), t))
                 .sum();
             area[a * SLOPES.len() + ti] = seen * point_area * cos[ti];
         }
@@ -816,7 +839,8 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     let mut errors = vec![0.0f32; LEVELS * DIRECTIONS * FRACTIONS];
     let mut delta = vec![0.0f32; heights.len()];
     let mut drawn = vec![[0.0f32; 2]; heights.len()];
-    let mut along: Vec<(f32, f32, f32)> = Vec::with_capacity(heights.len());
+    let mut quarters = vec![[0.0f32; 4]; heights.len()];
+    let mut along: Vec<([f32; 4], f32, [f32; 4])> = Vec::with_capacity(heights.len());
     for k in 0..LEVELS {
         let segments = 1usize << k;
         if segments >= nx.min(nz) {
@@ -855,6 +879,35 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 ];
             }
         }
+        // Each quarter of cells around a sample (`Slopes`): the largest
+        // error at its corners, the sample, the points half-way to its two
+        // neighbours and the cell's centre (on either diagonal), where
+        // the error runs linearly between samples. A neighbour outside
+        // the patch counts as the sample.
+        for i in 0..=nz {
+            for j in 0..=nx {
+                let here = delta[i * stride + j];
+                let at = |di: isize, dj: isize| {
+                    let (ii, jj) = (i as isize + di, j as isize + dj);
+                    if ii < 0 || jj < 0 || ii > nz as isize || jj > nx as isize {
+                        here
+                    } else {
+                        delta[ii as usize * stride + jj as usize]
+                    }
+                };
+                let quarter = |di: isize, dj: isize| {
+                    let (x, z, xz) = (at(0, dj), at(di, 0), at(di, dj));
+                    here.max(0.5 * (here + x.max(z).max(xz))).max(0.5 * (x + z))
+                };
+                // As `Slopes::rises` orders them; north is the row above.
+                quarters[i * stride + j] = [
+                    quarter(-1, 1),
+                    quarter(1, 1),
+                    quarter(-1, -1),
+                    quarter(1, -1),
+                ];
+            }
+        }
         let largest = delta.iter().copied().fold(0.0f32, f32::max);
         for a in 0..AZIMUTHS {
             let [ux, uz] = azimuth(a);
@@ -864,9 +917,9 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
             along.extend(
                 reference
                     .iter()
-                    .zip(&delta)
+                    .zip(&quarters)
                     .zip(&drawn)
-                    .map(|((g, &e), s)| (g[0] * ux + g[1] * uz, s[0] * ux + s[1] * uz, e)),
+                    .map(|((g, &e), s)| (g.rises(ux, uz), s[0] * ux + s[1] * uz, e)),
             );
             for (ti, &t) in SLOPES.iter().enumerate() {
                 let dir = a * SLOPES.len() + ti;
@@ -880,24 +933,28 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 // gap and the largest face-on error.
                 let top = (t.abs() * diagonal).max(largest);
                 let mut histogram = Histogram::new(top);
-                for &(rise, drawn_rise, e) in &along {
-                    let seen = (rise + t).max(0.0);
-                    histogram.total += seen;
-                    if seen <= 0.0 || e <= 0.0 {
-                        continue;
-                    }
+                for &(rises, drawn_rise, errors) in &along {
                     let meet = drawn_rise + t;
-                    if meet > 0.0 {
-                        // The drawn plane carried on along the ray; no
-                        // further than where the gap reaches the face-on
-                        // error, or the diagonal's run where that is more.
-                        let gap = t.abs() * e / meet;
-                        histogram.add(gap.min(e.max(t.abs() * diagonal)), seen);
-                        continue;
+                    for (rise, e) in rises.into_iter().zip(errors) {
+                        let seen = 0.25 * (rise + t).max(0.0);
+                        histogram.total += seen;
+                        if seen <= 0.0 || e <= 0.0 {
+                            continue;
+                        }
+                        let gap = if meet > 0.0 {
+                            // The drawn plane carried on along the ray; no
+                            // further than where the gap reaches the
+                            // face-on error, or the diagonal's run where
+                            // that is more.
+                            (t.abs() * e / meet).min(e.max(t.abs() * diagonal))
+                        } else {
+                            // The drawn surface falls away as fast as the
+                            // ray: the ray meets it in front, within the
+                            // diagonal.
+                            t.abs() * diagonal
+                        };
+                        histogram.add(gap, seen);
                     }
-                    // The drawn surface falls away as fast as the ray:
-                    // the ray meets it in front, within the diagonal.
-                    histogram.add(t.abs() * diagonal, seen);
                 }
                 histogram.quantiles(out);
             }
@@ -938,6 +995,30 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
         area,
         codes,
         largest: None,
+    }
+}
+
+/// The reference's one-sided slopes at a sample: towards +x and -x, then
+/// +z and -z. The area a sample stands for is the four quarters of cells
+/// around it, each rising along a ray by its own pair of slopes: a peak
+/// one sample wide, whose central differences are flat, shows the ray its
+/// near faces, as steep as the peak is high.
+#[derive(Clone, Copy, Debug)]
+struct Slopes([f32; 4]);
+
+impl Slopes {
+    /// The rise of each quarter along the horizontal direction (ux, uz).
+    fn rises(&self, ux: f32, uz: f32) -> [f32; 4] {
+        let [east, west, north, south] = self.0;
+        let (e, w, n, s) = (east * ux, west * ux, north * uz, south * uz);
+        [e + n, e + s, w + n, w + s]
+    }
+
+    /// Pixels per unit area of a sample whose quarters rise `rises` along
+    /// a ray falling `t` per unit: each quarter the ray meets at a rise of
+    /// `r` shows `r + t`, none where it faces away.
+    fn seen_from(rises: [f32; 4], t: f32) -> f32 {
+        rises.iter().map(|&r| (r + t).max(0.0)).sum::<f32>() * 0.25
     }
 }
 
@@ -1059,9 +1140,9 @@ mod tests {
         /// with equal errors and errors equal to the tolerance come often.
         #[test]
         fn first_within_finds_what_a_linear_search_finds(
-            row in prop::array::uniform8(0.0f32..100.0),
+            row in prop::array::uniform9(0.0f32..100.0),
             error in 0.0f32..110.0,
-            steps in prop::array::uniform8(0u8..6),
+            steps in prop::array::uniform9(0u8..6),
             step_error in 0u8..7,
         ) {
             for (mut row, error) in [(row, error), (steps.map(f32::from), f32::from(step_error))] {
@@ -1070,6 +1151,41 @@ mod tests {
                     (j, row[j], if j == 0 { f32::INFINITY } else { row[j - 1] })
                 });
                 prop_assert_eq!(first_within(|j| row[j], error), linear);
+            }
+        }
+
+        /// Raising any stored error never lowers the share read over an
+        /// error, and the share is never below the log-log line through
+        /// the two stored errors around it: a block whose stored errors
+        /// are each at least a patch's reads at least the patch's share,
+        /// an exact zero reads as a tiny error does, and smooth ground
+        /// reads no lower than the power law through its stored errors.
+        #[test]
+        fn the_share_over_grows_with_every_stored_error(
+            row in prop::array::uniform9(0.0f32..100.0),
+            raise in 0.0f32..50.0,
+            at in 0usize..9,
+            exact in 0usize..9,
+            error in 0.01f32..110.0,
+        ) {
+            // The last `exact` errors are zero: ground the level draws
+            // exactly.
+            let mut row = row;
+            row.sort_by(|a, b| b.total_cmp(a));
+            row[FRACTIONS - exact..].fill(0.0);
+            let share = fraction_over(|j| row[j], error);
+            let mut raised = row;
+            raised[at] += raise;
+            raised.sort_by(|a, b| b.total_cmp(a));
+            prop_assert!(fraction_over(|j| raised[j], error) >= share - 1e-6);
+            if let Some((j, e1, e0)) = first_within(|j| row[j], error) {
+                let lo = FRACTION_EXPONENTS[j.max(1) - 1];
+                if j > 0 && lo != i32::MIN && e1 > 0.0 && e0 > e1 {
+                    let hi = FRACTION_EXPONENTS[j];
+                    let w = (e0 / error).log2() / (e0 / e1).log2();
+                    let log_log = (lo as f32 + w * (hi - lo) as f32).exp2();
+                    prop_assert!(share >= log_log * (1.0 - 1e-4), "{share} {log_log}");
+                }
             }
         }
 
@@ -1094,6 +1210,70 @@ mod tests {
                 // A turn and none are one direction.
                 let apart = (got - expected).abs();
                 prop_assert!(apart.min(1.0 - apart) <= 2e-6, "{x} {z}: {got} against {expected}");
+            }
+        }
+    }
+
+    /// A peak one sample wide, 60 m on flat ground with samples 10 m
+    /// apart, dropped by the coarsest level and seen from a low eye (a
+    /// ray falling 0.03 per unit): its near faces rise 6 per unit, so
+    /// they and the neighbours' quarters leading up to them (30 m off at
+    /// their midpoints) are about 15 % of the patch's pixels, though the
+    /// peak is one sample in 1,089. The share 2^-4 of the pixels exceeds
+    /// is therefore at least 30 m. Read by the sample alone, with its
+    /// central differences, it was none.
+    #[test]
+    fn a_one_sample_peak_shows_its_near_faces() {
+        let map = Heightmap::from_fn(33, 33, |r, c| if (r, c) == (16, 16) { 60.0 } else { 0.0 })
+            .expect("a heightmap");
+        let grid = PatchGrid::for_size(33, 33, 32);
+        let scale = 200.0;
+        let entry = patch_entry(
+            &map,
+            grid.sample_rect(grid.patch_id(0)),
+            (10.0, 10.0),
+            scale,
+        );
+        let decoded = decoded_codes(scale);
+        let t = SLOPES
+            .iter()
+            .position(|&t| t == 0.03)
+            .expect("a slope of 0.03");
+        let share = FRACTION_EXPONENTS
+            .iter()
+            .position(|&e| e == -4)
+            .expect("2^-4");
+        for a in 0..AZIMUTHS {
+            let dir = a * SLOPES.len() + t;
+            let coarsest = decoded[usize::from(entry.codes[dir * LEVELS * FRACTIONS + share])];
+            assert!(coarsest >= 30.0, "azimuth {a}: {coarsest} m at 2^-4");
+            // Full resolution (the patch's 32 cells) has no error.
+            let full = entry.codes[(dir * LEVELS + 5) * FRACTIONS];
+            assert_eq!(full, ZERO, "azimuth {a}");
+        }
+    }
+
+    /// On a plane every quarter of cells rises as its central differences
+    /// do, so a patch's pixel area per direction is the plane's: `(r + t)
+    /// cos` per unit area where it faces the ray, none where it faces away.
+    #[test]
+    fn a_planes_area_is_its_slopes() {
+        let (gx, gz) = (0.3f32, 0.1f32);
+        // Local z falls as rows rise: a row further down is further -z.
+        let map = Heightmap::from_fn(17, 17, |r, c| gx * 4.0 * c as f32 - gz * 4.0 * r as f32)
+            .expect("a heightmap");
+        let grid = PatchGrid::for_size(17, 17, 16);
+        let entry = patch_entry(&map, grid.sample_rect(grid.patch_id(0)), (4.0, 4.0), 100.0);
+        for a in 0..AZIMUTHS {
+            let [ux, uz] = azimuth(a);
+            for (ti, &t) in SLOPES.iter().enumerate() {
+                let cos = 1.0 / (1.0 + t * t).sqrt();
+                let expected = 289.0 * (gx * ux + gz * uz + t).max(0.0) * 16.0 * cos;
+                let got = entry.area[a * SLOPES.len() + ti];
+                assert!(
+                    (got - expected).abs() <= 1e-3 * expected.max(1.0),
+                    "azimuth {a}, slope {t}: {got} against {expected}"
+                );
             }
         }
     }
