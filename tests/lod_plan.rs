@@ -664,3 +664,75 @@ fn the_model_has_an_entry_for_every_patch_and_every_whole_block() {
         "{cut} blocks cut by the far sides"
     );
 }
+
+/// The geomip path glides a block towards its next coarser level only
+/// where the view model puts no pixel over tau there. On terraces seen
+/// from a low eye the face-on bound accepts coarser levels that the model,
+/// which sees the walls' risers, does not: those blocks keep their level
+/// whole (`block_glide` 0) though the bound alone would glide them. Without
+/// the model every block the bound places glides as the bound says.
+#[test]
+fn geomip_blocks_glide_only_where_the_model_counts_nothing_over_tau() {
+    let map = Heightmap::from_fn(129, 129, |r, c| {
+        let (x, z) = (c as f32 - 64.0, r as f32 - 64.0);
+        let cone = (120.0 - 2.0 * (x * x + z * z).sqrt()).max(0.0);
+        10.0 * (cone / 10.0).floor() + 0.5 * (0.7 * z).sin() * (0.5 * x).cos()
+    })
+    .unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let table = terrain.error_table();
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let sight = terrain.sight_table().expect("a view model");
+    let view = view_of(
+        &terrain,
+        DVec3::new(-700.0, 60.0, -500.0),
+        DVec3::new(200.0, 0.0, 300.0),
+        1.0,
+    );
+    let levels = vkterrain::lod::geomip::level_count(16);
+    let glide = |b: &PlannedBlock| {
+        let k = usize::from(b.patch_level).min(levels - 1);
+        vkterrain::lod::geomip::block_glide(b, k, &hierarchy, &view)
+    };
+    let template = |sight| {
+        plan(
+            &terrain,
+            &hierarchy,
+            &view,
+            &PlanInputs {
+                table: &table,
+                sight,
+                merge: false,
+                cull: true,
+                reading: SightReading::Template,
+                seen: None,
+            },
+        )
+    };
+    let modelled = template(Some(sight));
+    let (mut held, mut gliding) = (0, 0);
+    for b in &modelled.blocks {
+        let bound_alone = glide(&PlannedBlock {
+            coarser_over_px: 0.0,
+            ..*b
+        });
+        if b.chosen {
+            assert_eq!(b.coarser_over_px, 0.0, "{b:?}");
+            assert_eq!(glide(b), 0.0, "{b:?}");
+        } else if b.coarser_over_px > 0.0 {
+            assert_eq!(glide(b), 0.0, "{b:?}");
+            held += usize::from(bound_alone > 0.0);
+        } else {
+            assert_eq!(glide(b), bound_alone, "{b:?}");
+            gliding += usize::from(bound_alone > 0.0);
+        }
+    }
+    assert!(held >= 1, "{held} blocks held, {gliding} gliding");
+    let bound = template(None);
+    assert!(bound.blocks.iter().all(|b| b.coarser_over_px == 0.0));
+    assert!(
+        bound.blocks.iter().filter(|b| glide(b) > 0.0).count() >= held,
+        "the bound alone glides"
+    );
+}

@@ -26,6 +26,9 @@
 
 use glam::Vec3;
 
+use super::hierarchy::Hierarchy;
+use super::plan::PlannedBlock;
+use super::view::LodView;
 use crate::terrain::error_table::ErrorTable;
 use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::Terrain;
@@ -229,6 +232,32 @@ pub fn morph_factor(distance: f32, d0: f32, level: usize) -> f32 {
     let end = d0 * (1u32 << (level + 1)) as f32;
     let start = 0.7 * end;
     super::factors::saturate((distance - start) / (end - start))
+}
+
+/// How far the error plan's `block`, drawn at level index `k` (2^k
+/// segments a side), glides towards its next coarser level: as far as
+/// the view has come from the distance where the bound accepts its level
+/// to where it accepts the next, from its box's nearest point. None where
+/// the share chose its level, at the coarsest level, and where the view
+/// model puts pixels over tau at the coarser level
+/// (`PlannedBlock::coarser_over_px`): the bound is face-on, a ray grazing
+/// a step sees more of it, and the share did not count those pixels.
+pub fn block_glide(block: &PlannedBlock, k: usize, hierarchy: &Hierarchy, view: &LodView) -> f32 {
+    if block.chosen || k == 0 || block.coarser_over_px > 0.0 {
+        return 0.0;
+    }
+    let node = hierarchy.node(block.node());
+    let (lo, hi) = node.aabb();
+    let d = super::box_distance(lo - view.eye_local, hi - view.eye_local);
+    let at = |k: usize| node.patch_max[k] * view.pixels_per_radian / view.tau.px();
+    // This level is accepted from `at(k)` on, the next coarser one from
+    // `at(k - 1)`.
+    let (from, to) = (at(k), at(k - 1));
+    if to <= from {
+        1.0
+    } else {
+        super::factors::saturate((d - from) / (to - from))
+    }
 }
 
 /// Balances levels so neighbours differ by at most one, only ever lowering

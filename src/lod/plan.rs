@@ -156,6 +156,12 @@ pub struct PlannedBlock {
     /// Its error bound at its level, face-on from its nearest point, in
     /// pixels (0 at full resolution).
     pub predicted_px: f32,
+    /// The pixels the view model puts over tau at the next coarser level
+    /// where the share did not choose the level: what a block drawn part
+    /// of the way towards that level (the geomip path's glide) risks. 0
+    /// where the share chose the level, at the coarsest level, and where
+    /// the model was not read.
+    pub coarser_over_px: f32,
 }
 
 impl PlannedBlock {
@@ -396,6 +402,10 @@ impl Planner {
                 block.patch_level = level as u8;
                 block.full_resolution = level >= c.full;
                 block.chosen = level < c.bound;
+                block.coarser_over_px = match block.chosen || level == 0 {
+                    true => 0.0,
+                    false => c.over[level - 1],
+                };
                 block.predicted_px = if block.full_resolution {
                     0.0
                 } else {
@@ -599,6 +609,7 @@ fn plan_block(
         } else {
             row[bound] * scale
         },
+        coarser_over_px: 0.0,
     };
     let Some(sight) = sight.filter(|_| d > 0.0) else {
         return (planned, None);

@@ -272,7 +272,7 @@ impl GeomipGeometry {
                 }
                 chosen.visible = visible;
             }
-            Some(pixels) => {
+            Some(_) => {
                 let sight = match settings.error_measure {
                     ErrorMeasure::Sight => terrain.sight_table(),
                     _ => None,
@@ -291,29 +291,12 @@ impl GeomipGeometry {
                     },
                 );
                 // A block's patches take its level (`geomip::level_of_index`),
-                // and glide towards the next coarser one as far as the block
-                // has come from where the bound accepts its level to where it
-                // accepts the next (none where the share chose it).
+                // and glide towards the next coarser one (`geomip::block_glide`).
                 let cols = grid.patch_cols();
                 for block in &frame_plan.blocks {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = geomip::level_of_index(k, count);
-                    let glide = if block.chosen || k == 0 {
-                        0.0
-                    } else {
-                        let id = block.node();
-                        let errors = hierarchy.node(id).patch_max;
-                        let d = block_distance(hierarchy, id, view.eye_local);
-                        let at = |k: usize| errors[k] * view.pixels_per_radian / pixels;
-                        // This level is accepted from `at(k)` on, the next
-                        // coarser one from `at(k - 1)`.
-                        let (from, to) = (at(k), at(k - 1));
-                        if to <= from {
-                            1.0
-                        } else {
-                            crate::lod::saturate((d - from) / (to - from))
-                        }
-                    };
+                    let glide = geomip::block_glide(block, k, hierarchy, &lod_view);
                     let ([c0, c1], [r0, r1]) = block.patch_range(grid);
                     for r in r0..r1 {
                         let row = r * cols + c0..r * cols + c1;
