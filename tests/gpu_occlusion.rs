@@ -12,6 +12,7 @@ use vkterrain::bench::cameras::flythrough;
 use vkterrain::bench::error::differing_pixels;
 use vkterrain::render::occlusion::{pyramid_levels, IDLE_AFTER_NOTHING_HIDDEN, WORTH_CULLING};
 use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
+use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::{Heightmap, Terrain, TerrainInfo};
 
 fn settings(path: RenderPath, occlusion: bool) -> RenderSettings {
@@ -20,6 +21,20 @@ fn settings(path: RenderPath, occlusion: bool) -> RenderSettings {
         lod_metric: LodMetric::Error(1.0),
         occlusion,
         ..RenderSettings::default()
+    }
+}
+
+/// Draws `camera` unculled until the error LOD's counts of a still view
+/// (`render::seen`: four frames, each read a frame or two late) are all
+/// taken in, so that the frames after it have one plan, and two of them
+/// differ only by what culling does.
+fn settle_counts(scene: &mut GpuScene, camera: &Camera, settings: &RenderSettings) {
+    let plain = RenderSettings {
+        occlusion: false,
+        ..*settings
+    };
+    for _ in 0..8 {
+        scene.render(camera, &plain);
     }
 }
 
@@ -256,6 +271,7 @@ fn culling_is_timed_unculled_after_two_culled_frames() {
     let camera = camera([-2.5, 5.0, 54.0], [-2.5, 20.0, -38.0], 50.0);
     let mut scene = GpuScene::new(wall_terrain(0..=128), 256, 192, false);
     let on = settings(RenderPath::Tess, true);
+    settle_counts(&mut scene, &camera, &on);
     let frames: Vec<HeadlessFrame> = (0..3).map(|_| scene.render(&camera, &on)).collect();
     let culled: Vec<bool> = frames
         .iter()
@@ -283,6 +299,7 @@ fn ridge_view(pillar: f32) -> (u32, HeadlessFrame, HeadlessFrame) {
     // Row r lies at z = 64 - r, column c at x = c - 64.
     let camera = camera([-2.5, 5.0, 54.0], [-2.5, 20.0, -38.0], 50.0);
     let settings = settings(RenderPath::Tess, true);
+    settle_counts(&mut scene, &camera, &settings);
     // The first frame draws every patch first; the second has last
     // frame's visibility to start from.
     scene.render(&camera, &settings);

@@ -532,9 +532,8 @@ impl ViewCodes<'_> {
     /// or for a block's pooled shares the larger of the two: pooled over
     /// patches unlike each other, its pixels' errors fall in steps (a rough
     /// patch's, then a smooth one's), which a line between two stored shares
-    /// can pass below. 0 for a
-    /// level the table does not hold (full resolution and finer, whose
-    /// error is 0).
+    /// can pass below. 0 for a level the table does not hold (full
+    /// resolution and finer, whose error is 0).
     pub fn over_fraction(&self, k: usize) -> f32 {
         if k >= LEVELS {
             return 0.0;
