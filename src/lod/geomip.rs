@@ -247,8 +247,7 @@ pub fn block_glide(block: &PlannedBlock, k: usize, hierarchy: &Hierarchy, view: 
         return 0.0;
     }
     let node = hierarchy.node(block.node());
-    let (lo, hi) = node.aabb();
-    let d = super::box_distance(lo - view.eye_local, hi - view.eye_local);
+    let d = node.distance(view.eye_local);
     let at = |k: usize| node.patch_max[k] * view.pixels_per_radian / view.tau.px();
     // This level is accepted from `at(k)` on, the next coarser one from
     // `at(k - 1)`.

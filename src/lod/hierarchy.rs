@@ -51,6 +51,12 @@ impl Node {
         let [y_lo, y_hi] = self.bounds;
         (Vec3::new(lo[0], y_lo, lo[1]), Vec3::new(hi[0], y_hi, hi[1]))
     }
+
+    /// Distance from `eye` (terrain-local) to the nearest point of its box.
+    pub fn distance(&self, eye: Vec3) -> f32 {
+        let (lo, hi) = self.aabb();
+        super::box_distance(lo - eye, hi - eye)
+    }
 }
 
 /// The quadtree over one terrain's patches.

@@ -537,16 +537,10 @@ pub(super) enum GeomipChoice {
     Drawn(Option<(f32, Option<f32>)>),
 }
 
-/// Distance from the eye to node `id`'s box: its footprint, its heights.
-fn block_distance(hierarchy: &Hierarchy, id: NodeId, eye: glam::Vec3) -> f32 {
-    let (lo, hi) = hierarchy.node(id).aabb();
-    crate::lod::box_distance(lo - eye, hi - eye)
-}
-
 /// Distance from `eye_local` to the nearest point of patch `p`'s box (its
 /// node's in `hierarchy`: one read, where the terrain's box is three).
 fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: glam::Vec3) -> f32 {
-    block_distance(hierarchy, NodeId::patch(p), eye_local)
+    hierarchy.node(NodeId::patch(p)).distance(eye_local)
 }
 
 /// Sets the flag (one per patch) of each of `visible`.
