@@ -1535,3 +1535,90 @@ fn each_patch_stays_within_its_predicted_error() {
     eprintln!("{checked} patches measured; largest excess {worst:?}");
     assert!(checked > 1000, "only {checked} patches measured");
 }
+
+/// The tessellator splits a patch's quads as the error LOD's view model
+/// expects (`sight::tess_splits_bc`). The map's heights at the level's
+/// vertices alternate +10 and -10, so each quad's A and D corners (upper
+/// left, lower right) share one height and its B and C corners the other:
+/// its centre lies at A's height under the A-D diagonal and at B's under
+/// B-C. Looked at from straight above, every quad's centre shows which.
+#[test]
+fn the_tessellator_splits_quads_as_the_view_model_expects() {
+    if skip_gpu() {
+        return;
+    }
+    let cells = 32usize;
+    for level in 1..=4u32 {
+        let segments = 1usize << level;
+        let step = cells / segments;
+        let vertex = |r: usize, c: usize| {
+            if (r / step + c / step) % 2 == 0 {
+                10.0f32
+            } else {
+                -10.0
+            }
+        };
+        let map = Heightmap::from_fn(cells + 1, cells + 1, vertex).unwrap();
+        let info = TerrainInfo::new(map, DVec2::ONE, cells as u32, DVec2::ZERO).unwrap();
+        let terrain = Terrain::new(info.clone(), 0.0).unwrap();
+        let centre = info.sample_position(cells / 2, cells / 2);
+        let cam = camera([centre.x, 200.0, centre.y], [centre.x, 0.0, centre.y], 12.0);
+        let mut scene = GpuScene::new(terrain, 1024, 1024, false);
+        let settings = RenderSettings {
+            lod: DistanceLod {
+                min_dist: 0.0,
+                max_dist: 0.0,
+                min_exp: level as f32,
+                max_exp: level as f32,
+            },
+            shading: Shading::Flat,
+            clear_color: [0.0; 3],
+            occlusion: false,
+            ..RenderSettings::default()
+        };
+        let frame = scene.render(&cam, &settings);
+        let stats = frame.measurements.statistics.unwrap();
+        assert_eq!(
+            stats.clipping_invocations,
+            2 * (segments * segments) as u64,
+            "level {level}: one patch of {segments}^2 quads"
+        );
+        // Per quad: the pixels seen within a fifth of a cell of its centre,
+        // and how many lie on the side of A's height.
+        let mut seen = vec![[0usize; 2]; segments * segments];
+        for p in world_positions(&frame, &cam).into_iter().flatten() {
+            let g = info.world_to_grid(p.x, p.z);
+            let (qj, qi) = ((g.x / step as f64) as usize, (g.y / step as f64) as usize);
+            if qi >= segments || qj >= segments {
+                continue;
+            }
+            let middle = DVec2::new(
+                (qj as f64 + 0.5) * step as f64,
+                (qi as f64 + 0.5) * step as f64,
+            );
+            if (g - middle).abs().max_element() > 0.2 {
+                continue;
+            }
+            let a = f64::from(vertex(qi * step, qj * step));
+            let cell = &mut seen[qi * segments + qj];
+            cell[0] += 1;
+            cell[1] += usize::from(p.y * a > 0.0);
+        }
+        for qi in 0..segments {
+            for qj in 0..segments {
+                let [pixels, at_a] = seen[qi * segments + qj];
+                assert!(
+                    pixels >= 4,
+                    "level {level} quad ({qi}, {qj}): {pixels} pixels"
+                );
+                let bc = vkterrain::terrain::sight::tess_splits_bc(qi, qj, segments);
+                let expected = if bc { 0 } else { pixels };
+                assert_eq!(
+                    at_a, expected,
+                    "level {level} quad ({qi}, {qj}): {at_a} of {pixels} pixels at A's height, split B-C: {bc}"
+                );
+            }
+        }
+        scene.finish();
+    }
+}

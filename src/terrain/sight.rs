@@ -28,11 +28,21 @@
 //! central differences are flat and its own error is one sample's. A
 //! level's error over the patch is then a distribution over its pixels.
 //!
+//! **Which surface.** Each quad of a level is split as the paths draw it:
+//! the tessellator in four quadrants, each quad's diagonal parallel to the
+//! line from its quadrant's corner of the patch to the centre
+//! (`tess_splits_bc`, checked against the device by
+//! `the_tessellator_splits_quads_as_the_view_model_expects`), the geomip
+//! path along every quad's B-C diagonal. In the two quadrants where they
+//! differ a sample's error is the larger of the two splits'.
+//!
 //! **The table.** For each direction of a lattice (`AZIMUTHS` horizontal
 //! directions times the `SLOPES` a ray may fall) and each level of a
 //! patch, laid over it as the tessellator cuts it (on the far remainders,
 //! patches narrower than the rest, its vertices fall between samples), the
-//! table keeps the errors that `FRACTIONS` of the patch's pixels exceed,
+//! table keeps the errors that `FRACTIONS` of the patch's pixels exceed
+//! (each the largest error in the histogram bin, an eighth of an octave
+//! wide, where that share is crossed: at most one bin above the exact one),
 //! and the patch's pixel area per `K^2 / d^2`, and its mean height, to
 //! which the rays that show it fall. A frame reads the directions its view
 //! of the patch spans and the fraction of pixels over its tolerance at
@@ -78,7 +88,7 @@ const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
 /// part of its on-disk cache key.
-pub const MODEL_VERSION: u32 = 7;
+pub const MODEL_VERSION: u32 = 9;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -662,8 +672,8 @@ fn fraction_over(error_at: impl Fn(usize) -> f32, error: f32) -> f32 {
 }
 
 /// Bins per octave of the errors' histogram, and its octaves.
-const BINS_PER_OCTAVE: f32 = 4.0;
-const BINS: usize = 64;
+const BINS_PER_OCTAVE: f32 = 8.0;
+const BINS: usize = 128;
 
 /// Columns and rows of blocks at each level the table keeps.
 fn level_sizes(grid: &PatchGrid) -> Vec<(usize, usize)> {
@@ -868,9 +878,12 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                     at(r0 + qz, c0 + qx),
                 ];
                 let here = heights[i * stride + j];
-                let bc = split_bc(corners, u, v, u + v <= 1.0);
-                let ad = split_ad(corners, u, v, u >= v);
-                delta[i * stride + j] = (here - bc).abs().max((here - ad).abs()) as f32;
+                let bc = (here - split_bc(corners, u, v, u + v <= 1.0)).abs();
+                delta[i * stride + j] = if tess_splits_bc(qi, qj, segments) {
+                    bc
+                } else {
+                    bc.max((here - split_ad(corners, u, v, u >= v)).abs())
+                } as f32;
                 let [a, b, c, dd] = corners;
                 drawn[i * stride + j] = [
                     (((1.0 - v) * (b - a) + v * (dd - c)) / quad_x) as f32,
@@ -997,6 +1010,21 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     }
 }
 
+/// Whether the tessellator splits quad (`row`, `col`) of a patch cut into
+/// `segments` x `segments` quads along its B-C diagonal (upper-right to
+/// lower-left), as the geomip path splits every quad. With equal spacing
+/// and a power-of-two factor of at least 2, the tessellator lays its quads
+/// in four quadrants, each quad's diagonal parallel to the line from its
+/// quadrant's corner of the patch to the centre: B-C in the quadrants at
+/// the B and C corners, A-D in the others, where the two paths differ and
+/// the view model keeps the larger error of the two. That is the pattern
+/// of the D3D11 reference tessellator (its rings stitched with mirrored
+/// diagonals), which fixed-function tessellators and lavapipe follow. One
+/// quad (`segments` 1) may be split either way.
+pub fn tess_splits_bc(row: usize, col: usize, segments: usize) -> bool {
+    segments >= 2 && (row < segments / 2) != (col < segments / 2)
+}
+
 /// The reference's one-sided slopes at a sample: towards +x and -x, then
 /// +z and -z. The area a sample stands for is the four quarters of cells
 /// around it, each rising along a ray by its own pair of slopes: a peak
@@ -1022,17 +1050,27 @@ impl Slopes {
 }
 
 /// Weights of errors in bins `1 / BINS_PER_OCTAVE` octave wide below a
-/// largest possible error, and the total weight the fractions are of.
+/// largest possible error, the largest error in each bin, and the total
+/// weight the fractions are of.
 struct Histogram {
     top: f32,
     largest: f32,
     total: f32,
     bins: [f32; BINS],
+    bin_largest: [f32; BINS],
 }
 
-/// The quarter-octave steps within an octave: 2^(1/4), 2^(1/2), 2^(3/4).
-const QUARTERS: [f32; 3] = [1.189_207_1, std::f32::consts::SQRT_2, 1.681_792_8];
-const _: () = assert!(BINS_PER_OCTAVE == 4.0);
+/// The eighth-octave steps within an octave: 2^(1/8) to 2^(7/8).
+const EIGHTHS: [f32; 7] = [
+    1.090_507_7,
+    1.189_207_1,
+    1.296_839_6,
+    std::f32::consts::SQRT_2,
+    1.542_210_8,
+    1.681_792_8,
+    1.834_008_1,
+];
+const _: () = assert!(BINS_PER_OCTAVE == 8.0);
 
 impl Histogram {
     fn new(top: f32) -> Self {
@@ -1041,25 +1079,27 @@ impl Histogram {
             largest: 0.0,
             total: 0.0,
             bins: [0.0; BINS],
+            bin_largest: [0.0; BINS],
         }
     }
 
     /// Adds `weight` at `error` (at most `top`), in the bin whose upper
-    /// edge is the first at or above it: floor(4 log2(top / error)),
-    /// from the float's exponent and three comparisons.
+    /// edge is the first at or above it: floor(8 log2(top / error)),
+    /// from the float's exponent and seven comparisons.
     fn add(&mut self, error: f32, weight: f32) {
         self.largest = self.largest.max(error);
         let x = (self.top / error).max(1.0);
         let bits = x.to_bits();
         let octave = ((bits >> 23) & 0xff) as i32 - 127;
         let mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
-        let quarter = QUARTERS.iter().filter(|&&q| mantissa >= q).count() as i32;
-        let bin = (4 * octave + quarter).clamp(0, BINS as i32 - 1) as usize;
+        let step = EIGHTHS.iter().filter(|&&q| mantissa >= q).count() as i32;
+        let bin = (8 * octave + step).clamp(0, BINS as i32 - 1) as usize;
         self.bins[bin] += weight;
+        self.bin_largest[bin] = self.bin_largest[bin].max(error);
     }
 
     /// The errors above which at most each of `FRACTION_EXPONENTS` of the
-    /// total lie, each rounded up to its bin's upper edge.
+    /// total lie, each rounded up to the largest error in its bin.
     fn quantiles(&self, out: &mut [f32]) {
         if self.largest <= 0.0 || self.total <= 0.0 {
             out.fill(0.0);
@@ -1076,8 +1116,7 @@ impl Histogram {
             for (b, &w) in self.bins.iter().enumerate() {
                 over += w;
                 if over > allowed {
-                    let edge = self.top * (-(b as f32) / BINS_PER_OCTAVE).exp2();
-                    *slot = edge.min(self.largest);
+                    *slot = self.bin_largest[b];
                     break;
                 }
             }
@@ -1150,6 +1189,53 @@ mod tests {
                     (j, row[j], if j == 0 { f32::INFINITY } else { row[j - 1] })
                 });
                 prop_assert_eq!(first_within(|j| row[j], error), linear);
+            }
+        }
+
+        /// Each stored error is the largest error in the bin where its
+        /// share is crossed: never below the exact weighted quantile (the
+        /// error at which the weight of the errors at or above it first
+        /// exceeds the share; none for the whole), an error that was added,
+        /// and within the bin's eighth of an octave above the quantile.
+        #[test]
+        fn stored_errors_bound_the_quantiles_within_a_bin(
+            added in prop::collection::vec((0.001f32..100.0, 1u16..256), 1..400),
+        ) {
+            // Weights in 64ths add up exactly in any order.
+            let added: Vec<(f32, f32)> =
+                added.into_iter().map(|(e, w)| (e, f32::from(w) / 64.0)).collect();
+            let top = 100.0;
+            let mut histogram = Histogram::new(top);
+            for &(error, weight) in &added {
+                histogram.total += weight;
+                histogram.add(error, weight);
+            }
+            let mut stored = [0.0f32; FRACTIONS];
+            histogram.quantiles(&mut stored);
+            let mut sorted = added.clone();
+            sorted.sort_by(|a, b| b.0.total_cmp(&a.0));
+            for (&exponent, &got) in FRACTION_EXPONENTS.iter().zip(&stored) {
+                let allowed = match exponent {
+                    i32::MIN => 0.0,
+                    e => (e as f32).exp2() * histogram.total,
+                };
+                let mut over = 0.0;
+                let exact = sorted
+                    .iter()
+                    .find(|&&(_, w)| {
+                        over += w;
+                        over > allowed
+                    })
+                    .map_or(0.0, |&(e, _)| e);
+                prop_assert!(
+                    got == exact || added.iter().any(|&(e, _)| e == got),
+                    "{got} was not added"
+                );
+                prop_assert!(got >= exact, "share 2^{exponent}: {got} below {exact}");
+                prop_assert!(
+                    got <= exact * (1.0 / BINS_PER_OCTAVE).exp2() * 1.000_01,
+                    "share 2^{exponent}: {got} over a bin above {exact}"
+                );
             }
         }
 
