@@ -1450,11 +1450,13 @@ fn reference_height(info: &TerrainInfo, x: f64, z: f64) -> Option<f64> {
 ///
 /// The slack: 0.02 px for positions rebuilt from 32-bit depth at pixel
 /// centres (a full-resolution patch on the rough map reads 0.011 px), and
-/// 5 % for the tessellator's transition rings. Where an edge's factor is
+/// 10 % for the tessellator's transition rings. Where an edge's factor is
 /// finer than the inside's, the triangles joining the two are of no
-/// level's regular grid, so no table row measured them: 4.8 % over the
-/// prediction is the most seen here (DEM, oblique, 2 px, a patch at two
-/// segments inside).
+/// level's regular grid, so no table row measured them: 7.3 % over the
+/// prediction is the most seen here (DEM, straight down, 0.5 px, a patch
+/// at two segments inside whose four neighbours are all finer, so that
+/// every triangle of it is a transition's; 4.8 % before the view model
+/// read each path's own diagonal and chose other levels).
 #[test]
 fn each_patch_stays_within_its_predicted_error() {
     use vkterrain::lod::hierarchy::Hierarchy;
@@ -1517,7 +1519,7 @@ fn each_patch_stays_within_its_predicted_error() {
                     };
                     let over = m - f64::from(pred);
                     assert!(
-                        over <= 0.02 + 0.05 * f64::from(pred),
+                        over <= 0.02 + 0.1 * f64::from(pred),
                         "{name}/{view_name}/{tau} px: patch {p} measured {m:.4} px, predicted {pred:.4}"
                     );
                     if over > worst.0 {
