@@ -77,6 +77,17 @@ fn crack_cameras(terrain: &Terrain) -> Vec<(&'static str, Camera)> {
     ]
 }
 
+/// The distance LOD at one factor, 2^`exp`, for every edge and inside at
+/// any distance.
+fn one_factor(exp: f32) -> DistanceLod {
+    DistanceLod {
+        min_dist: 0.0,
+        max_dist: 0.0,
+        min_exp: exp,
+        max_exp: exp,
+    }
+}
+
 fn flat_settings(terrain: &Terrain, mode: DistanceMode) -> RenderSettings {
     let (_, size, _) = extent(terrain);
     RenderSettings {
@@ -214,12 +225,7 @@ fn wireframe_draws_edges_only() {
     let mut scene = GpuScene::new(terrain, 256, 256, true);
     // Factor 1 (2 with even spacing): a coarse mesh, easy to see through.
     let fill = RenderSettings {
-        lod: DistanceLod {
-            min_dist: 0.0,
-            max_dist: 1.0,
-            min_exp: 0.0,
-            max_exp: 0.0,
-        },
+        lod: one_factor(0.0),
         ..flat_settings(&scene.terrain, DistanceMode::Smooth)
     };
     let lines = RenderSettings {
@@ -250,12 +256,7 @@ fn culling_skips_patches_outside_the_frustum() {
     // one pass. The CPU's frustum test decides which patches are drawn at
     // all; the control shader repeats it per patch.
     let settings = RenderSettings {
-        lod: DistanceLod {
-            min_dist: 0.0,
-            max_dist: 1.0,
-            min_exp: 3.0,
-            max_exp: 3.0,
-        },
+        lod: one_factor(3.0),
         occlusion: false,
         ..RenderSettings::default()
     };
@@ -378,12 +379,7 @@ fn check_depth_against_height_at(
         fov,
     );
     let settings = RenderSettings {
-        lod: DistanceLod {
-            min_dist: 0.0,
-            max_dist: 1.0,
-            min_exp: 6.0,
-            max_exp: 6.0,
-        },
+        lod: one_factor(6.0),
         path,
         lod_metric,
         // A tiny tolerance on the bounds: every patch at full resolution.
@@ -656,12 +652,7 @@ fn flat_terrain_at_minimum_tessellation() {
     let cams = crack_cameras(&terrain);
     let mut scene = GpuScene::new(terrain, 128, 128, false);
     let settings = RenderSettings {
-        lod: DistanceLod {
-            min_dist: 0.0,
-            max_dist: 0.0,
-            min_exp: 0.0,
-            max_exp: 0.0,
-        },
+        lod: one_factor(0.0),
         shading: Shading::Flat,
         clear_color: [0.0; 3],
         occlusion: false,
@@ -1571,12 +1562,7 @@ fn the_tessellator_splits_quads_as_the_view_model_expects() {
         let cam = camera([centre.x, 200.0, centre.y], [centre.x, 0.0, centre.y], 12.0);
         let mut scene = GpuScene::new(terrain, 1024, 1024, false);
         let settings = RenderSettings {
-            lod: DistanceLod {
-                min_dist: 0.0,
-                max_dist: 0.0,
-                min_exp: level as f32,
-                max_exp: level as f32,
-            },
+            lod: one_factor(level as f32),
             shading: Shading::Flat,
             clear_color: [0.0; 3],
             occlusion: false,
