@@ -1,16 +1,23 @@
 //! CPU terrain model on a 4097x4097 heightmap: Y bounds and the error table
 //! (all cores), height_at (one core), and a memcpy of the heightmap's bytes
 //! in the same run so the figures read as ratios to memory bandwidth. Then
-//! the error LOD's frame plan on the default scene's bench views, with the
-//! view model and with the bound alone (one core, 1280x720, tau 1 px), and
-//! the geomip path's refining and balancing of that plan's blocks, from
-//! beyond the blocks' sides beside from every side patch's neighbours.
+//! the error LOD's frame plan on the bench views of the default scene and,
+//! once `scripts/bench` has generated it, of the 4097^2 terrain, with the
+//! view model (warm, and with the caches flushed first) and with the bound
+//! alone (one core, 1280x720, tau 1 px), and the geomip path's refining
+//! and balancing of the default scene's plan's blocks, from beyond the
+//! blocks' sides beside from every side patch's neighbours.
 
+use std::ffi::OsStr;
 use std::hint::black_box;
+use std::path::Path;
+
+use clap::Parser;
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
+use vkterrain::cli::args::TerrainArgs;
 use vkterrain::lod::geomip;
 use vkterrain::lod::hierarchy::Hierarchy;
 use vkterrain::lod::plan::{plan, PlanInputs, SightReading};
@@ -121,29 +128,87 @@ fn default_scene_terrain() -> Terrain {
         .terrain
 }
 
-fn frame_plan(c: &mut Criterion) {
-    let terrain = default_scene_terrain();
-    let (table, _) = terrain.error_tables();
-    let sight = terrain.sight_table();
-    let hierarchy = Hierarchy::new(&terrain, table);
-    let mut group = c.benchmark_group("frame_plan");
-    for view in named_views(terrain.info()) {
-        let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
-        for (measure, sight) in [("sight", sight), ("bound", None)] {
-            let inputs = PlanInputs {
-                table,
-                sight,
-                merge: true,
-                cull: true,
-                reading: SightReading::Tessellated,
-                seen: None,
-            };
-            group.bench_function(format!("{measure}/{}", view.name), |b| {
-                b.iter(|| black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs)))
-            });
-        }
+/// The terrain `scripts/bench` generates and measures as `large-4097`,
+/// where it has generated it: 4097^2 samples 4 m apart, 16,384 patches.
+fn large_terrain() -> Option<Terrain> {
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: TerrainArgs,
     }
-    group.finish();
+    let target = std::env::var_os("CARGO_TARGET_DIR").unwrap_or_else(|| "target".into());
+    let path = Path::new(&target).join("bench-data/large-4097.png");
+    if !path.exists() {
+        return None;
+    }
+    let scene = Cli::parse_from([
+        OsStr::new("large-4097"),
+        OsStr::new("--heightmap"),
+        path.as_os_str(),
+        OsStr::new("--cell-spacing"),
+        OsStr::new("4"),
+        OsStr::new("--height-scale"),
+        OsStr::new("1400"),
+    ])
+    .args
+    .scene()
+    .expect("the large terrain's scene");
+    let loaded =
+        LoadedScene::load(&scene, Loading::WHOLE_TERRAIN).expect("the large terrain loads");
+    Some(loaded.terrain)
+}
+
+/// Reads a line of each 64 bytes of `junk` (written, and larger than the
+/// last-level cache), so that what runs next finds its data in memory, as
+/// a frame's choice does after the frame before it was drawn.
+fn flush_caches(junk: &[u8]) {
+    black_box(junk.iter().step_by(64).fold(0u8, |a, &x| a ^ x));
+}
+
+/// The error LOD's plan for each bench view, with the view model and
+/// with the bound alone, on the default scene and, where `scripts/bench`
+/// has generated it, the 4097^2 terrain; and with the view model again
+/// after the caches are flushed (`cold`), which is what a frame's choice
+/// costs on lavapipe, whose frame between two choices runs through the
+/// same cores and caches.
+fn frame_plan(c: &mut Criterion) {
+    let junk = vec![1u8; 96 << 20];
+    let terrains = [
+        Some(("default", default_scene_terrain())),
+        large_terrain().map(|t| ("large-4097", t)),
+    ];
+    for (name, terrain) in terrains.into_iter().flatten() {
+        let (table, _) = terrain.error_tables();
+        let sight = terrain.sight_table();
+        let hierarchy = Hierarchy::new(&terrain, table);
+        let mut group = c.benchmark_group(format!("frame_plan/{name}"));
+        for view in named_views(terrain.info()) {
+            let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
+            for (measure, sight) in [("sight", sight), ("bound", None)] {
+                let inputs = PlanInputs {
+                    table,
+                    sight,
+                    merge: true,
+                    cull: true,
+                    reading: SightReading::Tessellated,
+                    seen: None,
+                };
+                let plan_once =
+                    || black_box(plan(&terrain, &hierarchy, black_box(&lod_view), &inputs));
+                group.bench_function(format!("{measure}/{}", view.name), |b| b.iter(plan_once));
+                if measure == "sight" {
+                    group.bench_function(format!("{measure}-cold/{}", view.name), |b| {
+                        b.iter_batched_ref(
+                            || flush_caches(&junk),
+                            |_| plan_once(),
+                            BatchSize::PerIteration,
+                        )
+                    });
+                }
+            }
+        }
+        group.finish();
+    }
 }
 
 /// The geomip path's levels after its plan: each block's patches at its
