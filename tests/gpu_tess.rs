@@ -774,6 +774,43 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
     }
 }
 
+/// A renderer reads the view model only for the error LOD's real-time
+/// measure, and only then asks the terrain for it (an 8193^2 terrain's is
+/// 497 MB): distance frames, and error frames by the bound, leave it
+/// unbuilt, on both paths; the first frame that reads it builds it, before
+/// its choice is timed, and the time joins the tables'.
+#[test]
+fn the_view_model_is_built_by_the_first_frame_that_reads_it() {
+    if skip_gpu() {
+        return;
+    }
+    let mut scene = GpuScene::new(cliff_terrain(), 96, 64, false);
+    let cam = crack_cameras(&scene.terrain)[0].1;
+    let error = |path, error_measure| RenderSettings {
+        path,
+        lod_metric: LodMetric::Error(1.0),
+        error_measure,
+        ..RenderSettings::default()
+    };
+    for path in [RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute] {
+        let distance = RenderSettings {
+            path,
+            ..RenderSettings::default()
+        };
+        scene.render(&cam, &distance);
+        scene.render(&cam, &error(path, ErrorMeasure::Bound));
+        assert!(!scene.terrain.sight_table_asked(), "{path:?}");
+    }
+    scene.render(&cam, &error(RenderPath::Brute, ErrorMeasure::Sight));
+    assert!(!scene.terrain.sight_table_asked(), "brute reads no model");
+    let tables_ms = scene.renderer().error_table_ms();
+    scene.render(&cam, &error(RenderPath::Geomip, ErrorMeasure::Sight));
+    assert!(scene.terrain.sight_table_asked());
+    assert!(scene.terrain.sight_table().is_some());
+    assert!(scene.renderer().error_table_ms() > tables_ms);
+    scene.finish();
+}
+
 #[test]
 fn error_bounded_factors_grow_with_zoom_and_shrink_with_tolerance() {
     use vkterrain::lod::{patch_error_factors, Across};

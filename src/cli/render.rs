@@ -417,7 +417,8 @@ pub struct StartupStats {
     pub material_ms: f64,
     /// Per-patch Y bounds and control points.
     pub bounds_ms: f64,
-    /// The per-patch error table.
+    /// The per-patch error tables, and the view model where the frame's
+    /// LOD reads it.
     pub error_table_ms: f64,
     /// Uploads to the GPU and pipeline creation (the rest of building the
     /// renderer).
@@ -505,6 +506,8 @@ pub fn render_scene(
         let (mut renderer, mut headless) =
             offscreen(gpu, &terrain, &appearance, &options, (width, height))
                 .context("preparing the terrain for the GPU")?;
+        // Before the frame, so that its CPU time is the frame's alone.
+        renderer.build_view_model(&terrain, settings);
         let error_table_ms = renderer.error_table_ms();
         let gpu_setup_ms = ms(started) - error_table_ms;
         let frame = headless

@@ -138,9 +138,12 @@ pub struct TerrainRenderer {
     max_patches_per_draw: Option<u32>,
     /// The slot `prepare` last set up, whose choice the accessors report.
     last_prepared: usize,
-    /// Milliseconds spent computing the error table in `new` (0 when no
-    /// path needs it).
+    /// Milliseconds spent computing the error tables in `new` (0 when no
+    /// path needs them), and the view model where a frame asked for it
+    /// (`build_view_model`).
     error_table_ms: f64,
+    /// Whether `build_view_model` has asked the terrain for its model.
+    view_model_built: bool,
     /// The quadtree the level choices walk, built with the first path
     /// that draws patches.
     hierarchy: Option<Hierarchy>,
@@ -322,6 +325,7 @@ impl TerrainRenderer {
             samples,
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms: 0.0,
+            view_model_built: false,
             hierarchy: None,
             seen: SeenState::default(),
             last_prepared: 0,
@@ -473,17 +477,35 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// The terrain's error tables, and its view model (`terrain::sight`)
-    /// where the CPU holds its heights, so no frame waits for them; the
-    /// first call's time is kept for `error_table_ms`.
+    /// The terrain's error tables; the first call's time is kept for
+    /// `error_table_ms`.
     fn error_tables<'t>(&mut self, terrain: &'t Terrain) -> &'t (ErrorTable, ErrorTable) {
-        let start = std::time::Instant::now();
+        let start = Instant::now();
         let tables = terrain.error_tables();
-        terrain.sight_table();
         if self.error_table_ms == 0.0 {
             self.error_table_ms = start.elapsed().as_secs_f64() * 1e3;
         }
         tables
+    }
+
+    /// Builds, or reads from its cache, the view model (`terrain::sight`)
+    /// a frame of `settings` reads, where it reads one and the CPU holds
+    /// the terrain's heights: the error LOD's choice by the model, on
+    /// either path. A renderer asks for it only then, so one that draws
+    /// by distance alone never holds it (an 8193^2 terrain's is 497 MB).
+    /// `prepare` calls this before the choice is timed; a caller that
+    /// times its frames calls it first, to keep the build out of them. Its
+    /// first build's time is added to `error_table_ms`.
+    pub fn build_view_model(&mut self, terrain: &Terrain, settings: &RenderSettings) {
+        let reads = settings.path != RenderPath::Brute
+            && matches!(settings.lod_metric, LodMetric::Error(_))
+            && settings.error_measure == ErrorMeasure::Sight;
+        if reads && !self.view_model_built {
+            let start = Instant::now();
+            terrain.sight_table();
+            self.view_model_built = true;
+            self.error_table_ms += start.elapsed().as_secs_f64() * 1e3;
+        }
     }
 
     /// Per frame slot, the tess path's choice buffers (starting as
@@ -504,8 +526,9 @@ impl TerrainRenderer {
         Ok(())
     }
 
-    /// Milliseconds `new` spent computing the per-patch error tables and
-    /// the view model (or reading the model from the cache).
+    /// Milliseconds spent computing the per-patch error tables (in `new`)
+    /// and the view model or reading it from the cache (the first time a
+    /// frame asked for it, `build_view_model`).
     pub fn error_table_ms(&self) -> f64 {
         self.error_table_ms
     }
@@ -542,6 +565,7 @@ impl TerrainRenderer {
         settings: &RenderSettings,
     ) -> Result<()> {
         self.ensure(terrain, settings.path, settings.wireframe)?;
+        self.build_view_model(terrain, settings);
         if settings.show_culled && self.culled_pipelines.is_none() && self.tess.is_some() {
             let target = self.pipeline_target();
             self.culled_pipelines = Some(CulledPipelines {

@@ -213,6 +213,12 @@ impl Terrain {
             .as_deref()
     }
 
+    /// Whether `sight_table` has been asked for: only then does the
+    /// terrain hold its view model.
+    pub fn sight_table_asked(&self) -> bool {
+        self.sight.get().is_some()
+    }
+
     /// Widens each patch's Y bounds to those of the square block of
     /// `block_cells` cells (aligned to multiples of it) that holds it. A
     /// surface drawn from every `block_cells`-th sample then still lies
