@@ -289,6 +289,8 @@ fn row(
         gpu_memory_bytes: 1 << 20,
         predicted_max_px: tau.map(|t| f64::from(t) * 1.5),
         predicted_p99_px: tau.map(f64::from),
+        predicted_over_share: tau.map(|_| 0.004),
+        over_share: tau.map(|_| 0.002),
         max_px: 2.0 * p99,
         p99_px: p99,
         mean_px: 0.1 * p99,

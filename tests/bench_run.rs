@@ -11,6 +11,7 @@ use vkterrain::bench::run::{
     configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath, TIMED_FRAMES,
 };
 use vkterrain::gpu::Gpu;
+use vkterrain::lod::plan::EXCEED_SHARE;
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
 
 struct Count(u64, u64);
@@ -117,6 +118,26 @@ fn a_quick_run_measures_every_configuration() {
                     "{}: predicted p99 {predicted} px over tau",
                     r.config
                 );
+            }
+            // The view model's share over tau is what the error LOD's
+            // choice spent of its budget, never more; every row with a
+            // tau has its measured share.
+            assert_eq!(
+                r.predicted_over_share.is_some(),
+                r.lod == Some(RowLod::Error),
+                "{}",
+                r.config
+            );
+            if let Some(share) = r.predicted_over_share {
+                assert!(
+                    (0.0..=EXCEED_SHARE * 1.001).contains(&share),
+                    "{}: the model put {share} of the pixels over tau",
+                    r.config
+                );
+            }
+            assert_eq!(r.over_share.is_some(), r.tau.is_some(), "{}", r.config);
+            if let Some(share) = r.over_share {
+                assert!((0.0..=1.0).contains(&share), "{}: {share}", r.config);
             }
             // Every row but brute's chooses levels and times it, in every
             // frame; the frame's time is the CPU's and the GPU's.

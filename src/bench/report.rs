@@ -93,7 +93,7 @@ pub fn csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "scene,device,driver,width,height,camera,frames,path,lod,tau,config,gpu_ms,cpu_ms,\
          lod_ms,lod_ms_max,frame_ms,\
-         triangles,tes_invocations,fragment_invocations,covered_pixels,gpu_memory_bytes,predicted_max_px,predicted_p99_px,max_px,p99_px,mean_px,error_pixels,\
+         triangles,tes_invocations,fragment_invocations,covered_pixels,gpu_memory_bytes,predicted_max_px,predicted_p99_px,predicted_over_share,over_share,max_px,p99_px,mean_px,error_pixels,\
          mismatched_pixels,occlusion,patches_occluded,patches_drawn_hidden,culling_gpu_ms,\
          differing_pixels\n",
     );
@@ -122,6 +122,8 @@ pub fn csv(rows: &[Row]) -> String {
             r.gpu_memory_bytes.to_string(),
             opt(r.predicted_max_px.map(|v| format!("{v:.4}"))),
             opt(r.predicted_p99_px.map(|v| format!("{v:.4}"))),
+            opt(r.predicted_over_share.map(|v| format!("{v:.6}"))),
+            opt(r.over_share.map(|v| format!("{v:.6}"))),
             format!("{:.4}", r.max_px),
             format!("{:.4}", r.p99_px),
             format!("{:.4}", r.mean_px),
@@ -486,13 +488,18 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
         w,
         "At tau = 1 px: the frame's 99th percentile and the largest error each error mode's \
          level choice expected on screen (`predicted_p99_px` and `predicted_max_px`, the \
-         largest over the frames), beside the measured p99 and max.\n"
+         largest over the frames), beside the measured p99 and max; then the share of the \
+         terrain's pixels the view model put over tau at the levels chosen \
+         (`predicted_over_share`, the mean over the frames measured), beside the share \
+         measured over tau (`over_share`). The model's share is what the choice spent of \
+         its 0.5 % (`lod::plan::EXCEED_SHARE`); a measured share below it is a margin the \
+         model did not need, one above it ground the model does not see.\n"
     );
     let _ = writeln!(
         w,
-        "| scene | device | camera | tess predicted p99 / measured p99 / predicted max / measured max px | geomip, the same |"
+        "| scene | device | camera | tess predicted p99 / measured p99 / predicted max / measured max px | tess model's / measured share over tau | geomip predicted p99 / measured p99 / predicted max / measured max px | geomip model's / measured share over tau |"
     );
-    let _ = writeln!(w, "|---|---|---|---|---|");
+    let _ = writeln!(w, "|---|---|---|---|---|---|---|");
     for ((scene, device, camera), group) in groups(rows) {
         let cell = |path: RowPath| {
             error_row_at_1px(&group, path, false).map_or("n/a".to_string(), |r| {
@@ -506,11 +513,24 @@ fn predicted_section(w: &mut String, rows: &[Row]) {
                 )
             })
         };
+        let shares = |path: RowPath| {
+            error_row_at_1px(&group, path, false).map_or("n/a".to_string(), |r| {
+                let share =
+                    |s: Option<f64>| s.map_or("n/a".into(), |s| format!("{:.3} %", 100.0 * s));
+                format!(
+                    "{} / {}",
+                    share(r.predicted_over_share),
+                    share(r.over_share)
+                )
+            })
+        };
         let _ = writeln!(
             w,
-            "| {scene} | {device} | {camera} | {} | {} |",
+            "| {scene} | {device} | {camera} | {} | {} | {} | {} |",
             cell(RowPath::Tess),
-            cell(RowPath::Geomip)
+            shares(RowPath::Tess),
+            cell(RowPath::Geomip),
+            shares(RowPath::Geomip)
         );
     }
     let _ = writeln!(w);

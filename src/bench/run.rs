@@ -408,6 +408,16 @@ pub struct Row {
     /// null where the view was not measured.
     #[serde(default)]
     pub predicted_p99_px: Option<f64>,
+    /// The share of the terrain's pixels the view model put over tau at
+    /// the levels chosen (`TerrainRenderer::predicted_over_share`), the
+    /// mean over the frames measured; null where the choice did not read
+    /// the model.
+    #[serde(default)]
+    pub predicted_over_share: Option<f64>,
+    /// The share of the pixels measured whose error is over tau, over all
+    /// frames; null without a tau.
+    #[serde(default)]
+    pub over_share: Option<f64>,
     pub max_px: f64,
     pub p99_px: f64,
     pub mean_px: f64,
@@ -452,6 +462,10 @@ struct Gathered {
     covered_pixels: Vec<u64>,
     predicted_max_px: Option<f64>,
     predicted_p99_px: Option<f64>,
+    /// The view model's share over tau of each frame measured.
+    predicted_over_share: Vec<f64>,
+    /// Pixels measured over tau, over all frames.
+    over_tau: usize,
     errors: ErrorHistogram,
     patches_occluded: Vec<u64>,
     patches_drawn_hidden: Vec<u64>,
@@ -935,8 +949,14 @@ impl<'a> Bench<'a> {
                     self.time_while_cheap(camera, config, levels, (since, first_sample), g)?;
                 }
                 progress.advance(&message);
-                g.errors
-                    .add(&pixel_errors(&DepthView::of(&frame), &reference_view, k));
+                let errors = pixel_errors(&DepthView::of(&frame), &reference_view, k);
+                if let Some(tau) = config.tau() {
+                    g.over_tau += errors.iter().filter(|e| e.px > f64::from(tau)).count();
+                }
+                g.errors.add(&errors);
+                let renderer = &renderer_for(&mut self.renderers, config).renderer;
+                g.predicted_over_share
+                    .extend(renderer.predicted_over_share().map(f64::from));
                 if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
                     unoccluded.push((*config, frame.readback.rgba.clone()));
                 }
@@ -1053,6 +1073,13 @@ impl<'a> Bench<'a> {
                     gpu_memory_bytes: bytes,
                     predicted_max_px: g.predicted_max_px,
                     predicted_p99_px: g.predicted_p99_px,
+                    predicted_over_share: (!g.predicted_over_share.is_empty()).then(|| {
+                        g.predicted_over_share.iter().sum::<f64>()
+                            / g.predicted_over_share.len() as f64
+                    }),
+                    over_share: config
+                        .tau()
+                        .map(|_| g.over_tau as f64 / stats.pixels.max(1) as f64),
                     max_px: stats.max_px,
                     p99_px: stats.p99_px,
                     mean_px: stats.mean_px,

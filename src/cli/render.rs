@@ -393,6 +393,9 @@ pub struct FrameStats {
     /// The frame's 99th percentile error the error LOD's choice expects,
     /// in pixels; null where the view was not measured.
     pub predicted_p99_px: Option<f32>,
+    /// The share of the terrain's pixels the view model puts over tau at
+    /// the levels chosen; null where the error LOD did not read the model.
+    pub predicted_over_share: Option<f32>,
     /// What streaming did for the frame (null for a terrain uploaded
     /// whole): tiles resident, uploaded, evicted, and the largest error a
     /// tile drawn from the base level adds.
@@ -537,6 +540,7 @@ pub fn render_scene(
             culling_gpu_ms: frame.measurements.occlusion.and_then(|o| o.culling_ms),
             predicted_max_px: renderer.predicted_max_px(),
             predicted_p99_px: renderer.predicted_p99_px(),
+            predicted_over_share: renderer.predicted_over_share(),
             stream: renderer.stream_stats(),
             gpu_memory_bytes: gpu_memory.values().sum(),
             gpu_memory,

@@ -230,6 +230,11 @@ pub struct FramePlan {
     pub patches_in_view: usize,
     /// The largest of the blocks' and merged nodes' predicted errors.
     pub predicted_max_px: f32,
+    /// The share of the frame's terrain pixels the view model puts over
+    /// tau at the levels chosen: what the greedy share spent of its
+    /// budget (`EXCEED_SHARE`) over the pixels it took the budget of.
+    /// None where the model was not read.
+    pub predicted_over_share: Option<f32>,
 }
 
 /// A block whose level the greedy share decides.
@@ -363,7 +368,8 @@ impl Planner {
             plan.nodes_visited,
             plan.patches_in_view,
             plan.predicted_max_px,
-        ) = (0, 0, 0.0);
+            plan.predicted_over_share,
+        ) = (0, 0, 0.0, None);
         self.pending.clear();
         self.parts.clear();
         walk(
@@ -393,10 +399,13 @@ impl Planner {
             frame_pixels +=
                 unread_pixels(plan, &self.pending, terrain.grid(), seen, &mut self.read);
         }
+        let pixels = frame_pixels.min(view.viewport_pixels());
+        let mut over = 0.0f64;
         if !self.candidates.is_empty() {
-            let budget = EXCEED_SHARE * frame_pixels.min(view.viewport_pixels());
+            let budget = EXCEED_SHARE * pixels;
             let levels = self.share.levels(&self.candidates, budget as f32);
             for (c, &level) in self.candidates.iter().zip(levels) {
+                over += f64::from(c.over[level]);
                 let block = &mut plan.blocks[c.slot];
                 let patch_max = hierarchy.node(block.node()).patch_max;
                 block.patch_level = level as u8;
@@ -413,6 +422,13 @@ impl Planner {
                 };
             }
         }
+        plan.predicted_over_share = inputs.sight.map(|_| {
+            if pixels > 0.0 {
+                (over / pixels) as f32
+            } else {
+                0.0
+            }
+        });
         plan.predicted_max_px = plan
             .blocks
             .iter()

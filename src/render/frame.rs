@@ -231,6 +231,9 @@ pub(super) struct PreparedFrame {
     /// screen, in pixels (error LOD).
     pub(super) predicted_max_px: Option<f32>,
     pub(super) predicted_p99_px: Option<f32>,
+    /// The share of the frame's terrain pixels the view model puts over
+    /// tau (`FramePlan::predicted_over_share`; error LOD by the model).
+    pub(super) predicted_over_share: Option<f32>,
     /// Merged nodes drawn (tess path, error LOD).
     pub(super) merged_nodes: usize,
     /// Patches in view, drawn on their own or in merged nodes.

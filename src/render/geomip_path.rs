@@ -244,6 +244,7 @@ impl GeomipGeometry {
         // theirs; the coarsest constrains no neighbour.
         let chosen = &mut self.chosen;
         chosen.reset(grid.patch_count(), (count - 1) as u8);
+        let mut over_share = None;
         let PatchLevels { levels, morph } = &mut chosen.levels;
         match tau {
             None => {
@@ -309,6 +310,7 @@ impl GeomipGeometry {
                     }
                     chosen.rects.push(([c0, c1], [r0, r1]));
                 }
+                over_share = frame_plan.predicted_over_share;
                 // A block's patches share its level: only its sides can
                 // lower a neighbour.
                 geomip::refine_and_balance_blocks(levels, grid, &chosen.drawn, &chosen.rects);
@@ -317,6 +319,7 @@ impl GeomipGeometry {
         }
         GeomipChoice::Levels {
             error_lod: tau.is_some(),
+            over_share,
         }
     }
 
@@ -334,7 +337,7 @@ impl GeomipGeometry {
     ) -> Option<(f32, Option<f32>)> {
         let error_lod = match choice {
             GeomipChoice::Drawn(predicted) => return predicted,
-            GeomipChoice::Levels { error_lod } => error_lod,
+            GeomipChoice::Levels { error_lod, .. } => error_lod,
         };
         let predict = error_lod.then_some(hierarchy);
         let chosen = &self.chosen;
@@ -528,11 +531,15 @@ impl GeomipGeometry {
 /// What the geomip path's level choice made: the levels of the patches in
 /// view, or (given levels, the view measure) the draws themselves, with
 /// what the choice expects.
+#[derive(Clone, Copy, Debug)]
 pub(super) enum GeomipChoice {
     /// Levels for every patch, kept in the geometry (`ChosenPatches`).
     Levels {
         /// Chosen by the error LOD (it reports what it expects).
         error_lod: bool,
+        /// The view model's share of pixels over tau at those levels
+        /// (`FramePlan::predicted_over_share`).
+        over_share: Option<f32>,
     },
     Drawn(Option<(f32, Option<f32>)>),
 }

@@ -33,7 +33,7 @@ use ash::vk;
 
 use super::appearance::GpuAppearance;
 use super::frame::{build_frames, DescriptorPlan, FrameSlot};
-use super::geomip_path::GeomipGeometry;
+use super::geomip_path::{GeomipChoice, GeomipGeometry};
 use super::occlusion::{LastFrame, Occlusion};
 use super::pipelines::{
     build_pipelines, create_culled_pipeline, create_sky_pipeline, CulledPipelines, PathPipelines,
@@ -621,7 +621,8 @@ impl TerrainRenderer {
             prepared.lod_ms,
             prepared.predicted_max_px,
             prepared.predicted_p99_px,
-        ) = (None, None, None);
+            prepared.predicted_over_share,
+        ) = (None, None, None, None);
         prepared.merged_nodes = 0;
         match (settings.path, settings.lod_metric) {
             (RenderPath::Geomip, _) => {
@@ -639,6 +640,9 @@ impl TerrainRenderer {
                         (&mut prepared.geomip, &mut frame.planner),
                     );
                     prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+                    if let GeomipChoice::Levels { over_share, .. } = choice {
+                        prepared.predicted_over_share = over_share;
+                    }
                     let predicted = geomip.emit(
                         terrain,
                         hierarchy,
@@ -727,6 +731,7 @@ impl TerrainRenderer {
         prepared.lod_ms = Some(planned.lod_ms);
         prepared.predicted_max_px = Some(planned.predicted_max_px);
         prepared.predicted_p99_px = planned.predicted_p99_px;
+        prepared.predicted_over_share = planned.predicted_over_share;
         prepared.merged_nodes = planned.merged_nodes;
         prepared.patches_in_view = planned.patches_in_view;
         Ok(())
@@ -753,6 +758,15 @@ impl TerrainRenderer {
     /// and streamed terrains.
     pub fn predicted_p99_px(&self) -> Option<f32> {
         self.frames[self.last_prepared].prepared.predicted_p99_px
+    }
+
+    /// The share of the last prepared frame's terrain pixels that the view
+    /// model puts over tau at the levels chosen (`lod::plan`): None where
+    /// the error LOD did not read the model.
+    pub fn predicted_over_share(&self) -> Option<f32> {
+        self.frames[self.last_prepared]
+            .prepared
+            .predicted_over_share
     }
 
     /// Milliseconds the last prepared frame spent choosing its levels: the

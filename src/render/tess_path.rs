@@ -135,6 +135,7 @@ impl TessGeometry {
                 .as_ref()
                 .map_or(frame_plan.predicted_max_px, |s| s.predicted_max_px),
             predicted_p99_px: seen.map(|s| s.predicted_p99_px),
+            predicted_over_share: frame_plan.predicted_over_share,
             merged_nodes: frame_plan.merged.len(),
             patches_in_view: frame_plan.patches_in_view,
         })
@@ -183,6 +184,8 @@ pub(super) struct PlannedFrame {
     pub(super) merged_batches: Vec<(u32, u32)>,
     pub(super) predicted_max_px: f32,
     pub(super) predicted_p99_px: Option<f32>,
+    /// The view model's share of pixels over tau (`FramePlan`).
+    pub(super) predicted_over_share: Option<f32>,
     pub(super) merged_nodes: usize,
     pub(super) patches_in_view: usize,
 }
