@@ -142,8 +142,6 @@ pub struct TerrainRenderer {
     /// path needs them), and the view model where a frame asked for it
     /// (`build_view_model`).
     error_table_ms: f64,
-    /// Whether `build_view_model` has asked the terrain for its model.
-    view_model_built: bool,
     /// The quadtree the level choices walk, built with the first path
     /// that draws patches.
     hierarchy: Option<Hierarchy>,
@@ -325,7 +323,6 @@ impl TerrainRenderer {
             samples,
             max_patches_per_draw: device.workarounds.max_patches_per_draw,
             error_table_ms: 0.0,
-            view_model_built: false,
             hierarchy: None,
             seen: SeenState::default(),
             last_prepared: 0,
@@ -494,16 +491,16 @@ impl TerrainRenderer {
     /// either path. A renderer asks for it only then, so one that draws
     /// by distance alone never holds it (an 8193^2 terrain's is 497 MB).
     /// `prepare` calls this before the choice is timed; a caller that
-    /// times its frames calls it first, to keep the build out of them. Its
-    /// first build's time is added to `error_table_ms`.
+    /// times its frames calls it first, to keep the build out of them. The
+    /// build's time is added to `error_table_ms` (none where the terrain
+    /// already held its model).
     pub fn build_view_model(&mut self, terrain: &Terrain, settings: &RenderSettings) {
         let reads = settings.path != RenderPath::Brute
             && matches!(settings.lod_metric, LodMetric::Error(_))
             && settings.error_measure == ErrorMeasure::Sight;
-        if reads && !self.view_model_built {
+        if reads && !terrain.sight_table_asked() {
             let start = Instant::now();
             terrain.sight_table();
-            self.view_model_built = true;
             self.error_table_ms += start.elapsed().as_secs_f64() * 1e3;
         }
     }
