@@ -738,7 +738,8 @@ where the tested render shows what the reference shows there (how far the silhou
 searched up to 32 pixels and counted as 32 beyond. Pixels that are sky in both are left out. \
 max, p99 and mean are over every remaining pixel of every frame of a row; p99 is the \
 ceil(0.99 n)-th smallest error, taken from a histogram of 1000 logarithmic bins per decade \
-(within 0.12 % of the exact value).\n\n\
+as the largest error in its bin (never below the exact value, within 0.23 % above it, and \
+exact where errors take whole values, as a silhouette moved by whole pixels does).\n\n\
 Where one surface hides another (a ridge in front of a valley), a pixel's two positions can lie \
 on different hills, and its error is large even when both surfaces are close: such pixels are \
 counted as they are, never filtered out.\n\n\
