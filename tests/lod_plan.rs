@@ -10,10 +10,11 @@ use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
 use vkterrain::lod::plan::{
     patches_in_view, plan, FramePlan, PlanInputs, PlannedBlock, SightReading,
 };
-use vkterrain::lod::seen::SeenPixels;
+use vkterrain::lod::seen::{SeenPixels, NOT_DRAWN};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::error_table::LEVEL_COUNT;
 use vkterrain::terrain::sight::{Block, BlockShares, LatticePoint, SightTable, LEVELS};
 use vkterrain::terrain::{ErrorTable, Heightmap, PatchGrid, Terrain, TerrainInfo};
 
@@ -308,8 +309,16 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
         block_holding(frame, grid, p).map(|b| (b.patch_level, b.full_resolution))
     };
     let unseen = with(None);
+    // Counted at the levels chosen without counts, at full resolution:
+    // no pixel lost to a coarser level.
+    let full = vec![LEVEL_COUNT as u8; grid.patch_count()];
     let counts = |f: &dyn Fn(usize) -> u32| -> SeenPixels {
-        SeenPixels::new(grid, &(0..grid.patch_count()).map(f).collect::<Vec<_>>()).unwrap()
+        SeenPixels::new(
+            grid,
+            &(0..grid.patch_count()).map(f).collect::<Vec<_>>(),
+            &full,
+        )
+        .unwrap()
     };
     let everything = counts(&|_| 1 << 24);
     assert_eq!(with(Some(&everything)).blocks, unseen.blocks);
@@ -344,6 +353,67 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     assert!(coarser > 0, "no hidden patch was drawn coarser");
 }
 
+/// A block that showed fewer pixels than the model gives it may have been
+/// hidden, or drawn at a level that lost them (a spike drawn away shows
+/// what lies behind it). The pixels the model put over tau at the level a
+/// count was taken at are taken as lost, not hidden. A third of the patch
+/// columns show a few pixels: counted at full resolution, some of their
+/// patches are coarsened; the same counts taken at the coarsest level
+/// leave none of them coarser and some finer. Counts of patches not drawn
+/// read as taken at full resolution.
+#[test]
+fn pixels_a_coarser_level_lost_are_not_taken_as_hidden() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let table = terrain.error_table();
+    let sight = terrain.sight_table();
+    let hierarchy = Hierarchy::new(&terrain, &table);
+    let grid = terrain.grid();
+    let (_, hi) = terrain.info().min_max();
+    let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
+    let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), 1.0);
+    let unseen = planned_seen(&terrain, (&hierarchy, &table, sight), &view, None);
+    // A third of the patch columns show a few pixels, the rest more than
+    // any patch covers.
+    let counts: Vec<u32> = (0..grid.patch_count())
+        .map(|p| {
+            if grid.patch_id(p).col % 3 == 0 {
+                40
+            } else {
+                1 << 24
+            }
+        })
+        .collect();
+    let counted_at = |level: u8| {
+        let seen = SeenPixels::new(grid, &counts, &vec![level; counts.len()]).unwrap();
+        planned_seen(&terrain, (&hierarchy, &table, sight), &view, Some(&seen))
+    };
+    let (at_full, at_coarsest) = (counted_at(LEVEL_COUNT as u8), counted_at(0));
+    assert_eq!(at_full.blocks.len(), unseen.blocks.len());
+    assert_eq!(at_coarsest.blocks.len(), unseen.blocks.len());
+    let (mut finer, mut coarsened) = (0, 0);
+    for ((full, coarsest), before) in at_full
+        .blocks
+        .iter()
+        .zip(&at_coarsest.blocks)
+        .zip(&unseen.blocks)
+    {
+        assert_eq!((full.col, full.row), (coarsest.col, coarsest.row));
+        if full.level > 0 || full.col % 3 != 0 {
+            continue;
+        }
+        coarsened += usize::from(full.patch_level < before.patch_level);
+        assert!(
+            coarsest.patch_level >= full.patch_level,
+            "{coarsest:?} coarser than {full:?}"
+        );
+        finer += usize::from(coarsest.patch_level > full.patch_level);
+    }
+    assert!(coarsened > 0, "the counts hid nothing");
+    assert!(finer > 0, "no block kept finer by its lost pixels");
+    // Not drawn when counted: its shortfall is all hidden.
+    assert_eq!(counted_at(NOT_DRAWN).blocks, at_full.blocks);
+}
+
 /// Ground the view model does not read still counts towards the frame's
 /// share over tau. On the DEM's grazing view the eye is inside the box of
 /// the patch below it, so that patch keeps the bound's choice (full
@@ -370,7 +440,7 @@ fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
         let counts: Vec<u32> = (0..grid.patch_count())
             .map(|p| if p == below { below_shows } else { 1 << 24 })
             .collect();
-        let seen = SeenPixels::new(grid, &counts).unwrap();
+        let seen = SeenPixels::new(grid, &counts, &vec![0; counts.len()]).unwrap();
         planned_seen(&terrain, (&hierarchy, &table, sight), &view, Some(&seen))
     };
     let (hidden, shown) = (with(0), with(400_000));

@@ -33,9 +33,11 @@
 //! near (one near the eye) is read in parts, each from its own nearest
 //! point and direction, the parts outside the frustum left out
 //! (`model_parts`). Once earlier frames of the view have counted the
-//! pixels each patch shows (`lod::seen`), a block is read at the pixels
-//! it showed, and the frame's pixels include those of ground whose model
-//! is not read, which the bound keeps within tau (`unread_pixels`).
+//! pixels each patch shows (`lod::seen`), a block is read at the share of
+//! its pixels that showed, taken of those the level it was drawn at kept
+//! (what that level put over tau may have been drawn away, not hidden),
+//! and the frame's pixels include those of ground whose model is not read,
+//! which the bound keeps within tau (`unread_pixels`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
 //! own errors as before.
@@ -55,7 +57,7 @@ use glam::{Vec2, Vec3};
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
 use super::hierarchy::{Hierarchy, Node, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
-use super::seen::SeenPixels;
+use super::seen::{SeenPixels, NOT_DRAWN};
 use super::view::LodView;
 use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
 use crate::terrain::sight::{
@@ -237,6 +239,31 @@ pub struct FramePlan {
     pub predicted_over_share: Option<f32>,
 }
 
+impl FramePlan {
+    /// The level index each patch of `grid` is drawn at (row-major): its
+    /// block's (the full-resolution index at full resolution), 0 in a
+    /// merged node, `seen::NOT_DRAWN` outside the plan. What a frame that
+    /// counts its pixels keeps beside them (`SeenPixels`).
+    pub fn patch_levels(&self, grid: &PatchGrid, levels: &mut Vec<u8>) {
+        let cols = grid.patch_cols();
+        levels.clear();
+        levels.resize(grid.patch_count(), NOT_DRAWN);
+        let mut fill = |([c0, c1], [r0, r1]): ([usize; 2], [usize; 2]), level: u8| {
+            for r in r0..r1 {
+                levels[r * cols + c0..r * cols + c1].fill(level);
+            }
+        };
+        for block in &self.blocks {
+            fill(block.patch_range(grid), block.patch_level);
+        }
+        for node in &self.merged {
+            let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
+            let range = ([c, (c + s).min(cols)], [r, (r + s).min(grid.patch_rows())]);
+            fill(range, 0);
+        }
+    }
+}
+
 /// A block whose level the greedy share decides.
 #[derive(Debug)]
 struct Candidate {
@@ -353,6 +380,11 @@ pub struct Planner {
 }
 
 impl Planner {
+    /// The plan of the last frame planned.
+    pub fn last_plan(&self) -> &FramePlan {
+        &self.plan
+    }
+
     /// Plans one frame (see `plan`).
     pub fn plan(
         &mut self,
@@ -797,15 +829,27 @@ fn read_model(
         }
         // Pixels nearer ground hid in earlier frames of this view are
         // none of the block's: each share of its pixels over tau is
-        // taken of the pixels it showed. A block the model does not see
-        // is over tau nowhere, and its pixels are the ones it showed.
+        // taken of the share of its pixels that showed. A block drawn
+        // coarser than the reference also shows fewer pixels where what
+        // the coarser level lost (a spike drawn away) shows the ground or
+        // sky behind: those are not hidden, and they are the pixels over
+        // tau. So the share shown is taken of the pixels the level it was
+        // drawn at when counted kept: its modelled pixels less those the
+        // model put over tau there. A block the model does not see is
+        // over tau nowhere, and its pixels are the ones it showed.
         if let Some(seen) = seen {
             let (cols, rows) = p.patches;
             let shown = seen.block_pixels(cols, rows) as f64;
             if !modelled {
                 block_pixels = shown;
             } else if shown < block_pixels {
-                let kept = (shown / block_pixels) as f32;
+                let lost = seen.drawn_level(cols[0], rows[0]).map_or(0.0, |k| {
+                    f64::from(over.get(usize::from(k)).copied().unwrap_or(0.0))
+                });
+                let kept = match block_pixels - lost {
+                    drawn if drawn > shown => (shown / drawn) as f32,
+                    _ => 1.0,
+                };
                 over.iter_mut().for_each(|o| *o *= kept);
                 block_pixels = shown;
             }

@@ -11,18 +11,32 @@
 //! several frames of one view are kept as each patch's largest, so a
 //! patch that showed through once, drawn coarser, keeps the pixels it
 //! showed and the choice settles instead of swinging between levels.
+//!
+//! A block can also show fewer pixels than the model counts because it was
+//! drawn coarser than the reference: a spike drawn away shows the ground or
+//! sky behind it. Those pixels are not hidden, and they are exactly the
+//! ones over tau. So each count keeps the level its patch was drawn at
+//! (`SeenPixels::drawn_level`), and the plan takes the pixels the model put
+//! over tau at that level as possibly missing rather than hidden.
 
 use crate::terrain::PatchGrid;
 
+/// A patch's drawn level where no frame counted it drawn (outside the
+/// frustum): `SeenPixels::drawn_level` reads None.
+pub const NOT_DRAWN: u8 = u8::MAX;
+
 /// Each patch's largest count of pixels shown, over the frames counted,
-/// with a summed-area table over the patch grid so that a block's pixels
-/// are four reads.
+/// and the level it was drawn at in that frame, with a summed-area table
+/// over the patch grid so that a block's pixels are four reads.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SeenPixels {
     cols: usize,
     rows: usize,
     /// Per patch, row-major (`PatchGrid::patch_index`).
     counts: Vec<u32>,
+    /// Per patch, the level index it was drawn at when its count was
+    /// taken (`FramePlan::patch_levels`), `NOT_DRAWN` where it was not.
+    levels: Vec<u8>,
     /// (rows + 1) x (cols + 1): the pixels of the patches above and left
     /// of each boundary point.
     sums: Vec<u64>,
@@ -37,18 +51,22 @@ pub struct SeenCountError {
 }
 
 impl SeenPixels {
-    /// One frame's counts, a patch each in row-major order.
-    pub fn new(grid: &PatchGrid, counts: &[u32]) -> Result<Self, SeenCountError> {
-        if counts.len() != grid.patch_count() {
-            return Err(SeenCountError {
-                got: counts.len(),
-                patches: grid.patch_count(),
-            });
+    /// One frame's counts and the levels its patches were drawn at, a
+    /// patch each in row-major order.
+    pub fn new(grid: &PatchGrid, counts: &[u32], levels: &[u8]) -> Result<Self, SeenCountError> {
+        for got in [counts.len(), levels.len()] {
+            if got != grid.patch_count() {
+                return Err(SeenCountError {
+                    got,
+                    patches: grid.patch_count(),
+                });
+            }
         }
         let mut seen = SeenPixels {
             cols: grid.patch_cols(),
             rows: grid.patch_rows(),
             counts: counts.to_vec(),
+            levels: levels.to_vec(),
             sums: Vec::new(),
         };
         seen.sum();
@@ -56,16 +74,27 @@ impl SeenPixels {
     }
 
     /// Adds another frame's counts of the same view: each patch keeps the
-    /// larger of its two counts.
-    pub fn merge(&mut self, counts: &[u32]) -> Result<(), SeenCountError> {
-        if counts.len() != self.counts.len() {
-            return Err(SeenCountError {
-                got: counts.len(),
-                patches: self.counts.len(),
-            });
+    /// larger of its two counts, with the level it was drawn at then; of
+    /// two equal counts, the finer level's, which lost no more.
+    pub fn merge(&mut self, counts: &[u32], levels: &[u8]) -> Result<(), SeenCountError> {
+        for got in [counts.len(), levels.len()] {
+            if got != self.counts.len() {
+                return Err(SeenCountError {
+                    got,
+                    patches: self.counts.len(),
+                });
+            }
         }
-        for (kept, &c) in self.counts.iter_mut().zip(counts) {
-            *kept = (*kept).max(c);
+        for ((kept, level), (&c, &l)) in self
+            .counts
+            .iter_mut()
+            .zip(&mut self.levels)
+            .zip(counts.iter().zip(levels))
+        {
+            let finer = l != NOT_DRAWN && (*level == NOT_DRAWN || l > *level);
+            if c > *kept || (c == *kept && finer) {
+                (*kept, *level) = (c, l);
+            }
         }
         self.sum();
         Ok(())
@@ -103,6 +132,15 @@ impl SeenPixels {
             - self.sums[r1 * w + c0]
     }
 
+    /// The level index patch (`col`, `row`) was drawn at when its count
+    /// was taken; None where it was not drawn or lies outside the grid.
+    pub fn drawn_level(&self, col: usize, row: usize) -> Option<u8> {
+        if col >= self.cols || row >= self.rows {
+            return None;
+        }
+        Some(self.levels[row * self.cols + col]).filter(|&l| l != NOT_DRAWN)
+    }
+
     /// Every patch's pixels.
     pub fn total(&self) -> u64 {
         self.sums[self.sums.len() - 1]
@@ -121,7 +159,7 @@ mod tests {
     fn a_block_sums_its_own_patches_only() {
         let g = grid(5, 3);
         let counts: Vec<u32> = (0..15).map(|i| 1 << i).collect();
-        let seen = SeenPixels::new(&g, &counts).unwrap();
+        let seen = SeenPixels::new(&g, &counts, &[0; 15]).unwrap();
         for c0 in 0..5 {
             for c1 in c0..=6 {
                 for r0 in 0..3 {
@@ -143,15 +181,26 @@ mod tests {
     #[test]
     fn merged_counts_keep_each_patchs_largest() {
         let g = grid(2, 2);
-        let mut seen = SeenPixels::new(&g, &[5, 0, 7, 1]).unwrap();
-        seen.merge(&[3, 4, 9, 0]).unwrap();
+        let mut seen = SeenPixels::new(&g, &[5, 0, 7, 1], &[1, NOT_DRAWN, 2, 3]).unwrap();
+        seen.merge(&[3, 4, 9, 1], &[4, 4, 4, 4]).unwrap();
         assert_eq!(
             (0..4).map(|i| seen.patch(i)).collect::<Vec<_>>(),
             [5, 4, 9, 1]
         );
+        // Each count's level comes with it; a tie keeps the finer.
+        let levels = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(c, r)| seen.drawn_level(c, r));
+        assert_eq!(levels, [Some(1), Some(4), Some(4), Some(4)]);
+        seen.merge(&[0, 0, 0, 1], &[0, 0, 0, 2]).unwrap();
+        assert_eq!(seen.drawn_level(1, 1), Some(4));
+        assert_eq!(seen.drawn_level(2, 0), None);
         assert_eq!(seen.block_pixels([0, 2], [0, 2]), 19);
         assert_eq!(seen.block_pixels([1, 2], [0, 2]), 5);
-        assert!(seen.merge(&[1, 2, 3]).is_err());
-        assert!(SeenPixels::new(&g, &[1]).is_err());
+        assert!(seen.merge(&[1, 2, 3], &[0; 4]).is_err());
+        assert!(seen.merge(&[1, 2, 3, 4], &[0; 3]).is_err());
+        assert!(SeenPixels::new(&g, &[1], &[0; 4]).is_err());
+        assert!(SeenPixels::new(&g, &[1; 4], &[0]).is_err());
+        let fresh = SeenPixels::new(&g, &[1; 4], &[NOT_DRAWN, 0, 0, 0]).unwrap();
+        assert_eq!(fresh.drawn_level(0, 0), None);
+        assert_eq!(fresh.drawn_level(1, 0), Some(0));
     }
 }

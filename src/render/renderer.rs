@@ -724,6 +724,13 @@ impl TerrainRenderer {
         )?;
         frame.tess_batches = planned.tess_batches;
         frame.merged_batches = planned.merged_batches;
+        // A frame that counts its pixels keeps the levels it drew them at.
+        if let Some(levels) = frame.seen.levels_mut() {
+            frame
+                .planner
+                .last_plan()
+                .patch_levels(terrain.grid(), levels);
+        }
         let prepared = &mut frame.prepared;
         prepared.lod_ms = Some(planned.lod_ms);
         prepared.predicted_max_px = Some(planned.predicted_max_px);

@@ -26,7 +26,7 @@ use super::view::FrameView;
 use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::{Buffer, BufferDesc};
 use crate::gpu::Device;
-use crate::lod::seen::SeenPixels;
+use crate::lod::seen::{SeenPixels, NOT_DRAWN};
 use crate::render::error::{RenderError, Result};
 use crate::shader_constants::BINDING_SEEN_PIXELS;
 use crate::terrain::PatchGrid;
@@ -45,6 +45,9 @@ pub(super) struct SeenBuffer {
     /// The view and tolerance the slot's last frame counted, if it
     /// counted.
     counted: Option<(FrameView, f32)>,
+    /// The level each patch was drawn at in the frame that counts
+    /// (`FramePlan::patch_levels`), set once its levels are chosen.
+    levels: Vec<u8>,
 }
 
 impl SeenBuffer {
@@ -69,6 +72,7 @@ impl SeenBuffer {
             buffer,
             patches,
             counted: None,
+            levels: Vec::new(),
         })
     }
 
@@ -88,8 +92,15 @@ impl SeenBuffer {
         self.counted.is_some()
     }
 
-    /// The counts of the slot's last frame, and the view it counted,
-    /// where it counted (the frame must have completed).
+    /// Where the slot's frame counts, the buffer its patches' levels go in
+    /// (`FramePlan::patch_levels`); None where it does not count.
+    pub(super) fn levels_mut(&mut self) -> Option<&mut Vec<u8>> {
+        self.counting().then_some(&mut self.levels)
+    }
+
+    /// The counts of the slot's last frame, with the levels its patches
+    /// were drawn at, and the view it counted, where it counted (the frame
+    /// must have completed).
     fn take(&mut self) -> Result<Option<(FrameView, f32, Vec<u32>)>> {
         let Some((view, tau)) = self.counted.take() else {
             return Ok(None);
@@ -116,6 +127,9 @@ impl SeenBuffer {
         if counting {
             bytes[HEADER_BYTES..].fill(0);
         }
+        // Set once the frame's levels are chosen; until then, none drawn.
+        self.levels.clear();
+        self.levels.resize(self.patches, NOT_DRAWN);
         self.counted = view.filter(|_| counting);
         Ok(())
     }
@@ -172,10 +186,11 @@ impl SeenState {
         count: Option<f32>,
     ) -> Result<()> {
         if let Some((counted, tau, counts)) = buffer.take()? {
+            let levels = &buffer.levels;
             if let Some(entry) = self.entries.iter_mut().find(|e| e.tau == tau) {
                 match &mut entry.pixels {
-                    Some((held, pixels)) if *held == counted => pixels.merge(&counts),
-                    _ => SeenPixels::new(grid, &counts).map(|p| {
+                    Some((held, pixels)) if *held == counted => pixels.merge(&counts, levels),
+                    _ => SeenPixels::new(grid, &counts, levels).map(|p| {
                         entry.pixels = Some((counted, p));
                     }),
                 }
