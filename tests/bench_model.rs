@@ -250,23 +250,41 @@ fn pooled_histogram_matches_exact_statistics() {
         stats.p99_px
     );
     assert_eq!(ErrorHistogram::default().stats().pixels, 0);
-    // Errors of a few exact values (silhouettes moved by whole pixels):
-    // the percentile is one of them, not a bin's centre beside it.
+    // Silhouettes moved by whole pixels measure whole pixels: where the
+    // percentile falls on them it is theirs, not a bin's centre beside it,
+    // nor a larger error of the same bin.
     let whole: Vec<PixelError> = (0..1000)
-        .map(|i| PixelError {
-            index: i,
-            px: if i < 985 {
-                0.25
-            } else {
-                1.0 + f64::from(u8::from(i >= 995))
-            },
-            mismatched: i >= 985,
+        .map(|i| {
+            let (px, mismatched) = match i {
+                0..985 => (0.25, false),
+                985..995 => (1.0, true),
+                995 => (1.0015, false),
+                _ => (2.0, true),
+            };
+            PixelError {
+                index: i,
+                px,
+                mismatched,
+            }
         })
         .collect();
     let mut histogram = ErrorHistogram::default();
     histogram.add(&whole);
     let stats = histogram.stats();
+    assert_eq!(stats.mismatched, 14);
     assert_eq!((stats.p99_px, stats.max_px), (1.0, 2.0));
+    // One rank further, past the mismatches at 1 px: the bin's others at
+    // their largest.
+    let mut histogram = ErrorHistogram::default();
+    histogram.add(&whole[10..]);
+    histogram.add(
+        &[PixelError {
+            index: 0,
+            px: 1.0015,
+            mismatched: false,
+        }; 11],
+    );
+    assert_eq!(histogram.stats().p99_px, 1.0015);
 }
 
 fn row(

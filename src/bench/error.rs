@@ -18,6 +18,8 @@
 //!
 //! Statistics are over every pixel that is terrain in either render.
 
+use std::collections::BTreeMap;
+
 use glam::{DMat4, DVec3, DVec4};
 
 /// Furthest a silhouette is searched for, in pixels.
@@ -160,17 +162,24 @@ pub fn pixel_errors(
 }
 
 /// Errors pooled over many frames, in logarithmic bins: max and mean are
-/// exact, the 99th percentile is the largest error in its bin, never below
-/// the exact value and within 0.23 % above it (bins are 1/1000 of a decade
-/// wide from 1e-4 px up). Where errors take a few exact values (a
-/// silhouette moved by a whole pixel measures 1 px) it is exact.
+/// exact. A coverage mismatch's error is one of a few exact values (the
+/// distance between two pixel centres, or the search radius), kept
+/// exactly; the others are binned, 1/1000 of a decade wide from 1e-4 px
+/// up, with each bin's largest. The 99th percentile takes a bin's binned
+/// errors at their largest: never below the exact value, within 0.23 %
+/// above it, and exact where it falls on a mismatch's distance (a
+/// silhouette moved by one whole pixel measures 1 px).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ErrorHistogram {
     /// Bin 0 holds errors below `SMALLEST`; bin i > 0 holds errors in
-    /// [SMALLEST * 10^((i-1)/1000), SMALLEST * 10^(i/1000)).
+    /// [SMALLEST * 10^((i-1)/1000), SMALLEST * 10^(i/1000)). Mismatches
+    /// included.
     bins: Vec<u64>,
-    /// The largest error in each bin.
+    /// The largest error in each bin that is not a mismatch's.
     bin_max: Vec<f64>,
+    /// Mismatches' errors (their bits: positive floats order as their
+    /// bits) and how many of each.
+    mismatch_errors: BTreeMap<u64, u64>,
     sum: f64,
     max: f64,
     mismatched: usize,
@@ -181,6 +190,7 @@ impl Default for ErrorHistogram {
         ErrorHistogram {
             bins: vec![0; 1 + Self::DECADES * Self::PER_DECADE],
             bin_max: vec![0.0; 1 + Self::DECADES * Self::PER_DECADE],
+            mismatch_errors: BTreeMap::new(),
             sum: 0.0,
             max: 0.0,
             mismatched: 0,
@@ -194,19 +204,27 @@ impl ErrorHistogram {
     /// Up to 1e4 px, far beyond any image: larger errors share the last bin.
     const DECADES: usize = 8;
 
+    fn bin(&self, px: f64) -> usize {
+        if px < Self::SMALLEST {
+            0
+        } else {
+            let i = ((px / Self::SMALLEST).log10() * Self::PER_DECADE as f64) as usize + 1;
+            i.min(self.bins.len() - 1)
+        }
+    }
+
     pub fn add(&mut self, errors: &[PixelError]) {
         for e in errors {
             self.sum += e.px;
             self.max = self.max.max(e.px);
             self.mismatched += usize::from(e.mismatched);
-            let bin = if e.px < Self::SMALLEST {
-                0
-            } else {
-                let i = ((e.px / Self::SMALLEST).log10() * Self::PER_DECADE as f64) as usize + 1;
-                i.min(self.bins.len() - 1)
-            };
+            let bin = self.bin(e.px);
             self.bins[bin] += 1;
-            self.bin_max[bin] = self.bin_max[bin].max(e.px);
+            if e.mismatched {
+                *self.mismatch_errors.entry(e.px.to_bits()).or_default() += 1;
+            } else {
+                self.bin_max[bin] = self.bin_max[bin].max(e.px);
+            }
         }
     }
 
@@ -220,11 +238,29 @@ impl ErrorHistogram {
         let mut seen = 0;
         let mut p99 = self.max;
         for (i, &n) in self.bins.iter().enumerate() {
-            seen += n;
-            if seen >= rank {
-                p99 = self.bin_max[i];
+            if seen + n >= rank {
+                // The bin's mismatches at their own errors, its others at
+                // their largest, in order.
+                let mut left = rank - seen;
+                let mismatches = self
+                    .mismatch_errors
+                    .iter()
+                    .map(|(&bits, &count)| (f64::from_bits(bits), count))
+                    .filter(|&(px, _)| self.bin(px) == i);
+                let binned = n - mismatches.clone().map(|(_, c)| c).sum::<u64>();
+                let mut in_order: Vec<(f64, u64)> = mismatches.collect();
+                in_order.push((self.bin_max[i], binned));
+                in_order.sort_by(|a, b| a.0.total_cmp(&b.0));
+                for (px, count) in in_order {
+                    if count >= left {
+                        p99 = px;
+                        break;
+                    }
+                    left -= count;
+                }
                 break;
             }
+            seen += n;
         }
         ErrorStats {
             max_px: self.max,

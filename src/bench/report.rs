@@ -737,9 +737,10 @@ in the other is a coverage mismatch; its error is the distance in pixels to the 
 where the tested render shows what the reference shows there (how far the silhouette moved), \
 searched up to 32 pixels and counted as 32 beyond. Pixels that are sky in both are left out. \
 max, p99 and mean are over every remaining pixel of every frame of a row; p99 is the \
-ceil(0.99 n)-th smallest error, taken from a histogram of 1000 logarithmic bins per decade \
-as the largest error in its bin (never below the exact value, within 0.23 % above it, and \
-exact where errors take whole values, as a silhouette moved by whole pixels does).\n\n\
+ceil(0.99 n)-th smallest error. Mismatches' errors are kept exactly; the others are \
+binned, 1000 logarithmic bins per decade, and read at their bin's largest: the percentile is \
+never below the exact value, within 0.23 % above it, and exact where it falls on a \
+mismatch's distance (a silhouette moved by one whole pixel measures exactly 1 px).\n\n\
 Where one surface hides another (a ridge in front of a valley), a pixel's two positions can lie \
 on different hills, and its error is large even when both surfaces are close: such pixels are \
 counted as they are, never filtered out.\n\n\
