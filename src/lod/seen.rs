@@ -42,9 +42,9 @@ pub struct SeenPixels {
     sums: Vec<u64>,
 }
 
-/// Why counts do not fit a grid.
+/// Why counts, or the levels beside them, do not fit a grid.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{got} pixel counts for a grid of {patches} patches")]
+#[error("{got} pixel counts or drawn levels for a grid of {patches} patches")]
 pub struct SeenCountError {
     pub got: usize,
     pub patches: usize,
