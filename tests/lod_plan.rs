@@ -27,6 +27,14 @@ fn view_of(terrain: &Terrain, eye: DVec3, target: DVec3, tau: f32) -> LodView {
     FrameView::new(terrain, &camera, 1280, 720).lod_view(Tau::new(tau).unwrap())
 }
 
+/// The DEM seen from far beyond its corner, 500 m over its highest point:
+/// most of it small on screen, decided in blocks.
+fn distant_view(terrain: &Terrain, tau: f32) -> LodView {
+    let (_, hi) = terrain.info().min_max();
+    let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
+    view_of(terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), tau)
+}
+
 fn planned(
     terrain: &Terrain,
     table: &ErrorTable,
@@ -253,11 +261,9 @@ fn the_share_only_coarsens_the_bounds_choice() {
     let terrain = dem_terrain(16, DVec2::ZERO);
     let table = terrain.error_table();
     let sight = terrain.sight_table();
-    let (_, hi) = terrain.info().min_max();
     let mut chosen = 0;
     for tau in [0.5, 1.0, 4.0] {
-        let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
-        let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), tau);
+        let view = distant_view(&terrain, tau);
         let bound = planned(&terrain, &table, None, &view);
         let shared = planned(&terrain, &table, sight, &view);
         // Without the model every block is a single patch at the bound's
@@ -299,9 +305,7 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     let sight = terrain.sight_table();
     let hierarchy = Hierarchy::new(&terrain, &table);
     let grid = terrain.grid();
-    let (_, hi) = terrain.info().min_max();
-    let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
-    let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), 1.0);
+    let view = distant_view(&terrain, 1.0);
     let with = |seen: Option<&SeenPixels>| {
         planned_seen(&terrain, (&hierarchy, &table, sight), &view, seen)
     };
@@ -368,9 +372,7 @@ fn pixels_a_coarser_level_lost_are_not_taken_as_hidden() {
     let sight = terrain.sight_table();
     let hierarchy = Hierarchy::new(&terrain, &table);
     let grid = terrain.grid();
-    let (_, hi) = terrain.info().min_max();
-    let eye = DVec3::new(-18_000.0, f64::from(hi) + 500.0, -12_000.0);
-    let view = view_of(&terrain, eye, DVec3::new(5_000.0, 0.0, 5_000.0), 1.0);
+    let view = distant_view(&terrain, 1.0);
     let unseen = planned_seen(&terrain, (&hierarchy, &table, sight), &view, None);
     // A third of the patch columns show a few pixels, the rest more than
     // any patch covers.

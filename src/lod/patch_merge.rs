@@ -54,7 +54,7 @@ use super::factors::{
     error_tess_factor, patch_box_distance, shared_edge_errors, strip_distance, PatchTessFactors,
 };
 use crate::terrain::error_table::{PatchErrors, LEVEL_COUNT};
-use crate::terrain::PatchId;
+use crate::terrain::{PatchGrid, PatchId};
 
 /// The coarsest node: 2^6 x 2^6 patches, whose sides towards other levels
 /// need 64 segments, the largest factor.
@@ -78,6 +78,16 @@ impl MergedNode {
     /// Patches a side.
     pub fn span(&self) -> u32 {
         1 << self.level
+    }
+
+    /// The columns and rows of its patches in `grid` (a node at the
+    /// grid's far sides may be cut by them).
+    pub fn patch_range(&self, grid: &PatchGrid) -> ([usize; 2], [usize; 2]) {
+        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
+        (
+            [c0, (c0 + s).min(grid.patch_cols())],
+            [r0, (r0 + s).min(grid.patch_rows())],
+        )
     }
 
     /// Whether patch `id` lies in the node.

@@ -257,9 +257,7 @@ impl FramePlan {
             fill(block.patch_range(grid), block.patch_level);
         }
         for node in &self.merged {
-            let (c, r, s) = (node.col as usize, node.row as usize, node.span() as usize);
-            let range = ([c, (c + s).min(cols)], [r, (r + s).min(grid.patch_rows())]);
-            fill(range, 0);
+            fill(node.patch_range(grid), 0);
         }
     }
 }
@@ -885,10 +883,7 @@ fn unread_pixels(
         .zip(read.iter())
         .filter(|(_, &read)| !read)
         .map(|(b, _)| b.patch_range(grid));
-    let merged = plan.merged.iter().map(|m| {
-        let (col, row, span) = (m.col as usize, m.row as usize, m.span() as usize);
-        ([col, col + span], [row, row + span])
-    });
+    let merged = plan.merged.iter().map(|m| m.patch_range(grid));
     blocks
         .chain(merged)
         .map(|(cols, rows)| seen.block_pixels(cols, rows) as f64)

@@ -98,9 +98,9 @@ impl SeenBuffer {
         self.counting().then_some(&mut self.levels)
     }
 
-    /// The counts of the slot's last frame, with the levels its patches
-    /// were drawn at, and the view it counted, where it counted (the frame
-    /// must have completed).
+    /// The counts of the slot's last frame, and the view it counted,
+    /// where it counted (the frame must have completed); the levels its
+    /// patches were drawn at stay in `levels` until the slot is armed.
     fn take(&mut self) -> Result<Option<(FrameView, f32, Vec<u32>)>> {
         let Some((view, tau)) = self.counted.take() else {
             return Ok(None);
@@ -126,10 +126,11 @@ impl SeenBuffer {
         bytes[..HEADER_BYTES].copy_from_slice(&u32::from(counting).to_ne_bytes());
         if counting {
             bytes[HEADER_BYTES..].fill(0);
+            // Set once the frame's levels are chosen; until then, none
+            // drawn.
+            self.levels.clear();
+            self.levels.resize(self.patches, NOT_DRAWN);
         }
-        // Set once the frame's levels are chosen; until then, none drawn.
-        self.levels.clear();
-        self.levels.resize(self.patches, NOT_DRAWN);
         self.counted = view.filter(|_| counting);
         Ok(())
     }
