@@ -229,10 +229,24 @@ impl Hierarchy {
     /// The patches a node covers: columns and rows, end exclusive.
     pub fn patch_range(&self, id: NodeId) -> ([usize; 2], [usize; 2]) {
         let span = 1usize << id.level;
-        let (cols, rows) = (self.levels[0].cols, self.levels[0].rows);
-        let (c0, r0) = (id.col as usize * span, id.row as usize * span);
-        ([c0, (c0 + span).min(cols)], [r0, (r0 + span).min(rows)])
+        square_range(
+            [self.levels[0].cols, self.levels[0].rows],
+            [id.col as usize * span, id.row as usize * span],
+            span,
+        )
     }
+}
+
+/// The patches of a square `span` patches a side from patch `first`
+/// (column, row), cut by the far sides of a grid of `size` (columns, rows):
+/// its columns and rows, end exclusive. A node's, a merged node's and a
+/// planned block's patches.
+pub fn square_range(size: [usize; 2], first: [usize; 2], span: usize) -> ([usize; 2], [usize; 2]) {
+    let [c0, r0] = first;
+    (
+        [c0, (c0 + span).min(size[0])],
+        [r0, (r0 + span).min(size[1])],
+    )
 }
 
 /// A node's footprint in local x and z: (lower-left, upper-right) corners,

@@ -53,6 +53,7 @@ use glam::Vec3;
 use super::factors::{
     error_tess_factor, patch_box_distance, shared_edge_errors, strip_distance, PatchTessFactors,
 };
+use super::hierarchy::square_range;
 use crate::terrain::error_table::{PatchErrors, LEVEL_COUNT};
 use crate::terrain::{PatchGrid, PatchId};
 
@@ -83,10 +84,10 @@ impl MergedNode {
     /// The columns and rows of its patches in `grid` (a node at the
     /// grid's far sides may be cut by them).
     pub fn patch_range(&self, grid: &PatchGrid) -> ([usize; 2], [usize; 2]) {
-        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
-        (
-            [c0, (c0 + s).min(grid.patch_cols())],
-            [r0, (r0 + s).min(grid.patch_rows())],
+        square_range(
+            [grid.patch_cols(), grid.patch_rows()],
+            [self.col as usize, self.row as usize],
+            self.span() as usize,
         )
     }
 

@@ -55,7 +55,7 @@ use std::collections::binary_heap::{BinaryHeap, PeekMut};
 use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
-use super::hierarchy::{Hierarchy, Node, NodeId};
+use super::hierarchy::{square_range, Hierarchy, Node, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::seen::{SeenPixels, NOT_DRAWN};
 use super::view::LodView;
@@ -184,10 +184,10 @@ impl PlannedBlock {
     /// The columns and rows of its patches in `grid` (a block at the
     /// grid's far sides may be cut by them).
     pub fn patch_range(&self, grid: &PatchGrid) -> ([usize; 2], [usize; 2]) {
-        let (c0, r0, s) = (self.col as usize, self.row as usize, self.span() as usize);
-        (
-            [c0, (c0 + s).min(grid.patch_cols())],
-            [r0, (r0 + s).min(grid.patch_rows())],
+        square_range(
+            [grid.patch_cols(), grid.patch_rows()],
+            [self.col as usize, self.row as usize],
+            self.span() as usize,
         )
     }
 

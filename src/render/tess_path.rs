@@ -323,32 +323,26 @@ impl ChoiceBuffers {
         bits.copy_from_slice(&self.full_bits);
         // The first patch in the low byte of each word: the bytes in
         // memory order on a little-endian host, as the shader reads them.
-        let fill = |bytes: &mut [u8], (col, row, span): (u32, u32, u32), value: u8| {
-            let (c, r, s) = (col as usize, row as usize, span as usize);
-            let (c1, r1) = ((c + s).min(cols), (r + s).min(grid.patch_rows()));
-            for row in r..r1 {
-                bytes[row * cols + c..row * cols + c1].fill(value);
+        let fill = |bytes: &mut [u8], ([c0, c1], [r0, r1]): ([usize; 2], [usize; 2]), value: u8| {
+            for row in r0..r1 {
+                bytes[row * cols + c0..row * cols + c1].fill(value);
             }
         };
         for node in &self.merged {
-            fill(merged_levels, (node.col, node.row, node.span()), 0);
+            fill(merged_levels, node.patch_range(grid), 0);
         }
         for node in &plan.merged {
-            fill(
-                merged_levels,
-                (node.col, node.row, node.span()),
-                node.level as u8,
-            );
+            fill(merged_levels, node.patch_range(grid), node.level as u8);
         }
         self.merged.clear();
         self.merged.extend_from_slice(&plan.merged);
         for block in &self.chosen {
-            fill(chosen_levels, (block.col, block.row, block.span()), 0);
+            fill(chosen_levels, block.patch_range(grid), 0);
         }
         self.chosen.clear();
         for block in plan.blocks.iter().filter(|b| b.chosen) {
             let value = ChosenLevel::of(block.patch_level);
-            fill(chosen_levels, (block.col, block.row, block.span()), value);
+            fill(chosen_levels, block.patch_range(grid), value);
             self.chosen.push(*block);
         }
         let indices = terrain.indices();
