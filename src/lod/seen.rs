@@ -100,15 +100,18 @@ impl SeenPixels {
         Ok(())
     }
 
+    /// Rebuilds the summed table from the counts, row by row in place:
+    /// its first row and column stay 0, every other entry is written.
     fn sum(&mut self) {
         let w = self.cols + 1;
-        self.sums.clear();
         self.sums.resize(w * (self.rows + 1), 0);
-        for r in 0..self.rows {
+        for (r, counts) in self.counts.chunks_exact(self.cols).enumerate() {
+            let (above, below) = self.sums.split_at_mut((r + 1) * w);
+            let above = &above[r * w..];
             let mut across = 0u64;
             for c in 0..self.cols {
-                across += u64::from(self.counts[r * self.cols + c]);
-                self.sums[(r + 1) * w + c + 1] = self.sums[r * w + c + 1] + across;
+                across += u64::from(counts[c]);
+                below[c + 1] = above[c + 1] + across;
             }
         }
     }
@@ -158,24 +161,31 @@ mod tests {
     #[test]
     fn a_block_sums_its_own_patches_only() {
         let g = grid(5, 3);
-        let counts: Vec<u32> = (0..15).map(|i| 1 << i).collect();
-        let seen = SeenPixels::new(&g, &counts, &[0; 15]).unwrap();
-        for c0 in 0..5 {
-            for c1 in c0..=6 {
-                for r0 in 0..3 {
-                    for r1 in r0..=4 {
-                        let mut expect = 0u64;
-                        for r in r0..r1.min(3) {
-                            for c in c0..c1.min(5) {
-                                expect += u64::from(counts[r * 5 + c]);
+        let check = |seen: &SeenPixels, counts: &[u32]| {
+            for c0 in 0..5 {
+                for c1 in c0..=6 {
+                    for r0 in 0..3 {
+                        for r1 in r0..=4 {
+                            let mut expect = 0u64;
+                            for r in r0..r1.min(3) {
+                                for c in c0..c1.min(5) {
+                                    expect += u64::from(counts[r * 5 + c]);
+                                }
                             }
+                            assert_eq!(seen.block_pixels([c0, c1], [r0, r1]), expect);
                         }
-                        assert_eq!(seen.block_pixels([c0, c1], [r0, r1]), expect);
                     }
                 }
             }
-        }
+        };
+        let counts: Vec<u32> = (0..15).map(|i| 1 << i).collect();
+        let mut seen = SeenPixels::new(&g, &counts, &[0; 15]).unwrap();
+        check(&seen, &counts);
         assert_eq!(seen.total(), (1 << 15) - 1);
+        // A merge rewrites the sums over the old ones.
+        let more: Vec<u32> = counts.iter().map(|c| 3 * c + 1).collect();
+        seen.merge(&more, &[0; 15]).unwrap();
+        check(&seen, &more);
     }
 
     #[test]

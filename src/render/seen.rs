@@ -98,21 +98,31 @@ impl SeenBuffer {
         self.counting().then_some(&mut self.levels)
     }
 
-    /// The counts of the slot's last frame, and the view it counted,
-    /// where it counted (the frame must have completed); the levels its
-    /// patches were drawn at stay in `levels` until the slot is armed.
-    fn take(&mut self) -> Result<Option<(FrameView, f32, Vec<u32>)>> {
-        let Some((view, tau)) = self.counted.take() else {
-            return Ok(None);
+    /// Hands `read` the counts of the slot's last frame, the view and
+    /// tolerance it counted, and the levels its patches were drawn at,
+    /// where it counted (the frame must have completed). The counts are
+    /// read where the frame wrote them, not copied out first.
+    fn take(
+        &mut self,
+        read: impl FnOnce((FrameView, f32), &[u32], &[u8]) -> Result<()>,
+    ) -> Result<()> {
+        let Some(counted) = self.counted.take() else {
+            return Ok(());
         };
         let bytes = self
             .buffer
             .mapped()
             .ok_or(RenderError::NotMapped("the seen pixels"))?;
-        let counts = bytemuck::pod_collect_to_vec(
-            &bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()],
-        );
-        Ok(Some((view, tau, counts)))
+        let bytes = &bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()];
+        match bytemuck::try_cast_slice(bytes) {
+            Ok(counts) => read(counted, counts, &self.levels),
+            // A map not aligned for words (none seen): read them out.
+            Err(_) => read(
+                counted,
+                &bytemuck::pod_collect_to_vec::<u8, u32>(bytes),
+                &self.levels,
+            ),
+        }
     }
 
     /// Sets the slot's next frame to count `view` at a tolerance (zeroing
@@ -186,18 +196,18 @@ impl SeenState {
         view: &FrameView,
         count: Option<f32>,
     ) -> Result<()> {
-        if let Some((counted, tau, counts)) = buffer.take()? {
-            let levels = &buffer.levels;
+        buffer.take(|(counted, tau), counts, levels| {
             if let Some(entry) = self.entries.iter_mut().find(|e| e.tau == tau) {
                 match &mut entry.pixels {
-                    Some((held, pixels)) if *held == counted => pixels.merge(&counts, levels),
-                    _ => SeenPixels::new(grid, &counts, levels).map(|p| {
+                    Some((held, pixels)) if *held == counted => pixels.merge(counts, levels),
+                    _ => SeenPixels::new(grid, counts, levels).map(|p| {
                         entry.pixels = Some((counted, p));
                     }),
                 }
                 .map_err(|e| RenderError::Unsupported(e.to_string()))?;
             }
-        }
+            Ok(())
+        })?;
         self.current = count;
         let Some(tau) = count else {
             return buffer.arm(None);
