@@ -105,7 +105,8 @@ impl SeenPixels {
     fn sum(&mut self) {
         let w = self.cols + 1;
         self.sums.resize(w * (self.rows + 1), 0);
-        for (r, counts) in self.counts.chunks_exact(self.cols).enumerate() {
+        // A grid without columns has no counts and no rows to sum.
+        for (r, counts) in self.counts.chunks_exact(self.cols.max(1)).enumerate() {
             let (above, below) = self.sums.split_at_mut((r + 1) * w);
             let above = &above[r * w..];
             let mut across = 0u64;
@@ -186,6 +187,17 @@ mod tests {
         let more: Vec<u32> = counts.iter().map(|c| 3 * c + 1).collect();
         seen.merge(&more, &[0; 15]).unwrap();
         check(&seen, &more);
+    }
+
+    #[test]
+    fn a_grid_without_columns_sums_to_nothing() {
+        // One sample across: no patch columns, one row of none.
+        let g = PatchGrid::for_size(1, 5, 4);
+        assert_eq!((g.patch_cols(), g.patch_rows()), (0, 1));
+        let mut seen = SeenPixels::new(&g, &[], &[]).unwrap();
+        seen.merge(&[], &[]).unwrap();
+        assert_eq!(seen.total(), 0);
+        assert_eq!(seen.block_pixels([0, 4], [0, 4]), 0);
     }
 
     #[test]
