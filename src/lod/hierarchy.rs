@@ -249,6 +249,16 @@ pub fn square_range(size: [usize; 2], first: [usize; 2], span: usize) -> ([usize
     )
 }
 
+/// The indices of the patches of columns `c0..c1` and rows `r0..r1` of a
+/// grid `cols` patches wide, one range a row, rows in order: a rectangle
+/// of a row-major per-patch array, filled or listed row by row.
+pub fn rect_rows(
+    cols: usize,
+    ([c0, c1], [r0, r1]): ([usize; 2], [usize; 2]),
+) -> impl Iterator<Item = std::ops::Range<usize>> {
+    (r0..r1).map(move |r| r * cols + c0..r * cols + c1)
+}
+
 /// A node's footprint in local x and z: (lower-left, upper-right) corners,
 /// from its first and last patches' corners.
 pub fn node_footprint(
@@ -266,4 +276,26 @@ pub fn node_footprint(
     });
     // Upper-left has the smallest x and largest z, lower-right the reverse.
     ([first[0].x, last[3].z], [last[3].x, first[0].z])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A square cut by the grid's far sides, and its rows as ranges of a
+    /// row-major array: every patch of the rectangle once, in index
+    /// order, and none outside it.
+    #[test]
+    fn a_cut_square_lists_its_patches_row_by_row() {
+        let rect = square_range([5, 4], [3, 2], 4);
+        assert_eq!(rect, ([3, 5], [2, 4]));
+        let rows: Vec<_> = rect_rows(5, rect).collect();
+        assert_eq!(rows, vec![13..15, 18..20]);
+        let listed: Vec<usize> = rect_rows(5, rect).flatten().collect();
+        let expected: Vec<usize> = (0..20)
+            .filter(|p| (3..5).contains(&(p % 5)) && (2..4).contains(&(p / 5)))
+            .collect();
+        assert_eq!(listed, expected);
+        assert_eq!(rect_rows(5, ([2, 2], [0, 4])).flatten().count(), 0);
+    }
 }

@@ -55,7 +55,7 @@ use std::collections::binary_heap::{BinaryHeap, PeekMut};
 use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
-use super::hierarchy::{square_range, Hierarchy, Node, NodeId};
+use super::hierarchy::{rect_rows, square_range, Hierarchy, Node, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::seen::{SeenPixels, NOT_DRAWN};
 use super::view::LodView;
@@ -194,9 +194,7 @@ impl PlannedBlock {
     /// Its patches' indices in `grid`, row by row (a patch-level block
     /// has one).
     pub fn patches<'g>(&self, grid: &'g PatchGrid) -> impl Iterator<Item = usize> + 'g {
-        let cols = grid.patch_cols();
-        let ([c0, c1], [r0, r1]) = self.patch_range(grid);
-        (r0..r1).flat_map(move |r| (c0..c1).map(move |c| r * cols + c))
+        rect_rows(grid.patch_cols(), self.patch_range(grid)).flatten()
     }
 }
 
@@ -248,9 +246,9 @@ impl FramePlan {
         let cols = grid.patch_cols();
         levels.clear();
         levels.resize(grid.patch_count(), NOT_DRAWN);
-        let mut fill = |([c0, c1], [r0, r1]): ([usize; 2], [usize; 2]), level: u8| {
-            for r in r0..r1 {
-                levels[r * cols + c0..r * cols + c1].fill(level);
+        let mut fill = |rect, level: u8| {
+            for row in rect_rows(cols, rect) {
+                levels[row].fill(level);
             }
         };
         for block in &self.blocks {

@@ -18,7 +18,7 @@ use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip::{self, PatchLevels};
-use crate::lod::hierarchy::{Hierarchy, NodeId};
+use crate::lod::hierarchy::{rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use crate::lod::view::Tau;
@@ -298,9 +298,8 @@ impl GeomipGeometry {
                     let k = usize::from(block.patch_level).min(count - 1);
                     let level = geomip::level_of_index(k, count);
                     let glide = geomip::block_glide(block, k, hierarchy, &lod_view);
-                    let ([c0, c1], [r0, r1]) = block.patch_range(grid);
-                    for r in r0..r1 {
-                        let row = r * cols + c0..r * cols + c1;
+                    let rect = block.patch_range(grid);
+                    for row in rect_rows(cols, rect) {
                         levels[row.clone()].fill(level as u8);
                         // Every morph factor starts at none.
                         if glide > 0.0 {
@@ -308,7 +307,7 @@ impl GeomipGeometry {
                         }
                         chosen.drawn[row].fill(true);
                     }
-                    chosen.rects.push(([c0, c1], [r0, r1]));
+                    chosen.rects.push(rect);
                 }
                 over_share = frame_plan.predicted_over_share;
                 // A block's patches share its level: only its sides can

@@ -17,6 +17,7 @@
 //! patch drawn coarser that then shows through keeps what it showed. A
 //! moving camera never counts, and pays nothing.
 
+use std::borrow::Cow;
 use std::mem::size_of;
 
 use ash::vk;
@@ -114,15 +115,7 @@ impl SeenBuffer {
             .mapped()
             .ok_or(RenderError::NotMapped("the seen pixels"))?;
         let bytes = &bytes[HEADER_BYTES..HEADER_BYTES + self.patches * size_of::<u32>()];
-        match bytemuck::try_cast_slice(bytes) {
-            Ok(counts) => read(counted, counts, &self.levels),
-            // A map not aligned for words (none seen): read them out.
-            Err(_) => read(
-                counted,
-                &bytemuck::pod_collect_to_vec::<u8, u32>(bytes),
-                &self.levels,
-            ),
-        }
+        read(counted, &counts_of(bytes), &self.levels)
     }
 
     /// Sets the slot's next frame to count `view` at a tolerance (zeroing
@@ -143,6 +136,16 @@ impl SeenBuffer {
         }
         self.counted = view.filter(|_| counting);
         Ok(())
+    }
+}
+
+/// The counts in `bytes` (native-endian words, as the shader wrote them):
+/// read in place, or copied out where the bytes are not aligned for words
+/// (no map seen so far).
+fn counts_of(bytes: &[u8]) -> Cow<'_, [u32]> {
+    match bytemuck::try_cast_slice(bytes) {
+        Ok(counts) => Cow::Borrowed(counts),
+        Err(_) => Cow::Owned(bytemuck::pod_collect_to_vec(bytes)),
     }
 }
 
@@ -240,5 +243,35 @@ impl SeenState {
         }
         self.entries.push(entry);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Counts are the same words whether the bytes lie where words may
+    /// start (read in place) or one byte off (copied out).
+    #[test]
+    fn counts_read_alike_aligned_or_not() {
+        let words: Vec<u32> = vec![0, 1, 255, 256, 70_000, u32::MAX];
+        let mut bytes = vec![0u8; words.len() * 4 + 4];
+        let aligned = (0..4)
+            .find(|&o| (bytes.as_ptr() as usize + o) % 4 == 0)
+            .expect("an aligned offset among four");
+        let unaligned = (aligned + 1) % 4;
+        for (offset, in_place) in [(aligned, true), (unaligned, false)] {
+            let slice = &mut bytes[offset..offset + words.len() * 4];
+            for (chunk, w) in slice.chunks_exact_mut(4).zip(&words) {
+                chunk.copy_from_slice(&w.to_ne_bytes());
+            }
+            let counts = counts_of(slice);
+            assert_eq!(
+                matches!(counts, Cow::Borrowed(_)),
+                in_place,
+                "offset {offset}"
+            );
+            assert_eq!(&*counts, words.as_slice(), "offset {offset}");
+        }
     }
 }

@@ -23,7 +23,7 @@ use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::PipelineLayout;
 use crate::gpu::Device;
-use crate::lod::hierarchy::Hierarchy;
+use crate::lod::hierarchy::{rect_rows, Hierarchy};
 use crate::lod::order::{DrawOrder, PatchMarks};
 use crate::lod::patch_merge::MergedNode;
 use crate::lod::plan::{FramePlan, PlanInputs, PlannedBlock, Planner, SightReading};
@@ -323,9 +323,9 @@ impl ChoiceBuffers {
         bits.copy_from_slice(&self.full_bits);
         // The first patch in the low byte of each word: the bytes in
         // memory order on a little-endian host, as the shader reads them.
-        let fill = |bytes: &mut [u8], ([c0, c1], [r0, r1]): ([usize; 2], [usize; 2]), value: u8| {
-            for row in r0..r1 {
-                bytes[row * cols + c0..row * cols + c1].fill(value);
+        let fill = |bytes: &mut [u8], rect, value: u8| {
+            for row in rect_rows(cols, rect) {
+                bytes[row].fill(value);
             }
         };
         for node in &self.merged {
