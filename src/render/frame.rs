@@ -7,7 +7,7 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::appearance::GpuAppearance;
-use super::geomip_path::{GeomipConstants, GeomipDraw};
+use super::geomip_path::{ChosenPatches, GeomipConstants, GeomipDraw};
 use super::occlusion::{DrawCommand, DRAW_COMMAND_BYTES, MAX_LISTED_DRAWS};
 use super::seen::SeenBuffer;
 use super::settings::RenderSettings;
@@ -66,6 +66,9 @@ pub(super) struct FrameSlot {
     /// The error LOD's choice, with the buffers it fills kept from this
     /// slot's last frame.
     pub(super) planner: Planner,
+    /// The geomip path's levels for every patch, with its buffers kept
+    /// from this slot's last frame.
+    pub(super) geomip_choice: ChosenPatches,
     /// The pixels each patch showed, in a frame that counts them.
     pub(super) seen: SeenBuffer,
 }
@@ -286,6 +289,7 @@ pub(super) fn build_frames(
             geomip_list,
             prepared: PreparedFrame::default(),
             planner: Planner::default(),
+            geomip_choice: ChosenPatches::default(),
             seen,
         });
     }

@@ -44,15 +44,13 @@ pub(super) struct GeomipGeometry {
     /// Levels set from outside (`set_geomip_levels`) instead of chosen,
     /// balanced, with no morph.
     pub(super) given: Option<geomip::PatchLevels>,
-    /// The last choice's levels and patches in view, kept from frame to
-    /// frame so that a choice fills memory it filled the frame before.
-    chosen: ChosenPatches,
 }
 
 /// A choice of levels for every patch (`GeomipGeometry::choose`), read by
-/// `GeomipGeometry::emit`.
+/// `GeomipGeometry::emit`: a frame slot's, kept from its last frame so
+/// that a choice fills memory it filled before.
 #[derive(Debug, Default)]
-struct ChosenPatches {
+pub(super) struct ChosenPatches {
     /// Every patch's level and morph factor.
     levels: geomip::PatchLevels,
     /// One flag per patch: whether it is drawn.
@@ -200,7 +198,6 @@ impl GeomipGeometry {
             layout,
             errors,
             given: None,
-            chosen: ChosenPatches::default(),
         })
     }
 }
@@ -216,7 +213,7 @@ impl GeomipGeometry {
         hierarchy: &Hierarchy,
         view: &FrameView,
         settings: &RenderSettings,
-        (draws, planner): (&mut Vec<GeomipDraw>, &mut Planner),
+        (draws, planner, chosen): (&mut Vec<GeomipDraw>, &mut Planner, &mut ChosenPatches),
     ) -> GeomipChoice {
         let grid = terrain.grid();
         let count = geomip::level_count(grid.cells_per_patch());
@@ -227,13 +224,13 @@ impl GeomipGeometry {
         let lod_view = view.lod_view(tau.and_then(|t| Tau::new(t).ok()).unwrap_or_default());
         if let Some(given) = &self.given {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
-            let mut chosen = given.clone();
+            let mut levels = given.clone();
             let mut drawn = vec![false; grid.patch_count()];
             mark_drawn(&mut drawn, &visible);
             let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
-            let lowered = geomip::refine_beside(&mut chosen.levels, grid, &drawn, &edges);
-            geomip::balance_from(&mut chosen.levels, grid, &lowered);
-            self.set_draws(terrain, (view, settings), (&visible, &chosen), draws, None);
+            let lowered = geomip::refine_beside(&mut levels.levels, grid, &drawn, &edges);
+            geomip::balance_from(&mut levels.levels, grid, &lowered);
+            self.set_draws(terrain, (view, settings), (&visible, &levels), draws, None);
             return GeomipChoice::Drawn(None);
         }
         if let (Some(pixels), ErrorMeasure::View) = (tau, settings.error_measure) {
@@ -242,7 +239,6 @@ impl GeomipGeometry {
         }
         // Every patch starts at the coarsest level, and those in view get
         // theirs; the coarsest constrains no neighbour.
-        let chosen = &mut self.chosen;
         chosen.reset(grid.patch_count(), (count - 1) as u8);
         let mut over_share = None;
         let PatchLevels { levels, morph } = &mut chosen.levels;
@@ -331,7 +327,7 @@ impl GeomipGeometry {
         hierarchy: &Hierarchy,
         view: &FrameView,
         settings: &RenderSettings,
-        choice: GeomipChoice,
+        (choice, chosen): (GeomipChoice, &ChosenPatches),
         draws: &mut Vec<GeomipDraw>,
     ) -> Option<(f32, Option<f32>)> {
         let error_lod = match choice {
@@ -339,7 +335,6 @@ impl GeomipGeometry {
             GeomipChoice::Levels { error_lod, .. } => error_lod,
         };
         let predict = error_lod.then_some(hierarchy);
-        let chosen = &self.chosen;
         self.set_draws(
             terrain,
             (view, settings),

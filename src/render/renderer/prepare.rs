@@ -107,7 +107,11 @@ impl TerrainRenderer {
                         hierarchy,
                         view,
                         settings,
-                        (&mut prepared.geomip, &mut frame.planner),
+                        (
+                            &mut prepared.geomip,
+                            &mut frame.planner,
+                            &mut frame.geomip_choice,
+                        ),
                     );
                     prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
                     if let GeomipChoice::Levels { over_share, .. } = choice {
@@ -118,7 +122,7 @@ impl TerrainRenderer {
                         hierarchy,
                         view,
                         settings,
-                        choice,
+                        (choice, &frame.geomip_choice),
                         &mut prepared.geomip,
                     );
                     prepared.predicted_max_px = predicted.map(|p| p.0);
