@@ -301,6 +301,12 @@ impl Candidate {
             })
             .max_by(|a, b| a.0.total_cmp(&b.0))
     }
+
+    /// The coarsest level below `k` whose pixels over tau exceed those at
+    /// `k` by at most `slack`, if any.
+    fn coarsest_within(&self, k: usize, slack: f32) -> Option<usize> {
+        (0..k).find(|&j| self.over[j] - self.over[k] <= slack)
+    }
 }
 
 /// A node's box: its footprint's x and z, its heights' y.
@@ -897,18 +903,31 @@ struct GreedyShare {
     next: Vec<u8>,
     /// Each candidate's level so far.
     levels: Vec<usize>,
+    /// Refinements that can be taken back within the budget, keyed by the
+    /// triangles they save (`step_key`).
+    trims: Vec<u64>,
 }
 
 impl GreedyShare {
     /// Each candidate's level: from every one at its coarsest, the step
     /// that relieves the most pixels over tau per triangle added goes
-    /// first, until what remains over tau fits `budget`.
+    /// first, until what remains over tau fits `budget`. A step is all or
+    /// nothing, and the last can overshoot (a block sent to full resolution
+    /// for a few pixels more than the rest could give), so what is left of
+    /// the budget then takes refinements back: those that save the most
+    /// triangles first, each to the coarsest level the budget still
+    /// allows.
     fn levels(&mut self, candidates: &[Candidate], budget: f32) -> &[usize] {
         // A candidate's next step is keyed by its pixels relieved per
         // triangle added, then the earlier candidate: one integer whose
         // order is that one (`step_key`), so the heap compares words. The
         // level it goes to is kept beside it.
-        let GreedyShare { heap, next, levels } = self;
+        let GreedyShare {
+            heap,
+            next,
+            levels,
+            trims,
+        } = self;
         next.clear();
         next.resize(candidates.len(), 0);
         levels.clear();
@@ -937,6 +956,25 @@ impl GreedyShare {
                 }
                 None => {
                     PeekMut::pop(top);
+                }
+            }
+        }
+        let mut slack = budget - over;
+        if slack > 0.0 {
+            trims.clear();
+            trims.extend(candidates.iter().zip(levels.iter()).enumerate().filter_map(
+                |(i, (c, &k))| {
+                    let j = c.coarsest_within(k, slack)?;
+                    Some(step_key(c.triangles(k) - c.triangles(j), i))
+                },
+            ));
+            trims.sort_unstable_by(|a, b| b.cmp(a));
+            for &key in trims.iter() {
+                let i = step_candidate(key);
+                let (c, k) = (&candidates[i], levels[i]);
+                if let Some(j) = c.coarsest_within(k, slack) {
+                    slack -= c.over[j] - c.over[k];
+                    levels[i] = j;
                 }
             }
         }
@@ -1040,6 +1078,33 @@ mod tests {
     use super::*;
     use crate::lod::view::Tau;
     use crate::terrain::camera::Frustum;
+
+    /// The greedy share's last step can overshoot the budget; what is
+    /// left of it takes back the refinements it can afford.
+    #[test]
+    fn budget_left_after_the_last_step_takes_refinements_back() {
+        let candidate = |over: [f32; 2], patches: f32| {
+            let mut levels = [0.0; LEVEL_COUNT + 1];
+            levels[..2].copy_from_slice(&over);
+            Candidate {
+                slot: 0,
+                over: levels,
+                bound: 1,
+                full: 5,
+                patches,
+                full_triangles: 2048.0,
+                scale: 1.0,
+            }
+        };
+        // The first relieves 30 pixels for 6 triangles, the second 100 for
+        // 60: the first is refined first, leaving 100 over a budget of 80,
+        // and the second's step then leaves none, 80 under the budget.
+        let candidates = [candidate([30.0, 0.0], 1.0), candidate([100.0, 0.0], 10.0)];
+        let mut share = GreedyShare::default();
+        assert_eq!(share.levels(&candidates, 80.0), &[0, 1]);
+        // With 10 left, neither refinement can be taken back.
+        assert_eq!(share.levels(&candidates, 10.0), &[1, 1]);
+    }
 
     /// A 1280x720 view from `eye` (terrain-local) looking along `forward`,
     /// 60 degrees high.
