@@ -50,8 +50,6 @@
 //! adds no pixel over tau to what the share counted. Edges take the larger
 //! errors of the two patches sharing them, so both sides still agree.
 
-use std::collections::binary_heap::{BinaryHeap, PeekMut};
-
 use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
@@ -277,6 +275,8 @@ struct Candidate {
     full_triangles: f32,
     /// Pixels a unit of length covers face-on at its nearest point.
     scale: f32,
+    /// Its patches' largest errors at each level (its node's).
+    errors: PatchErrors,
 }
 
 impl Candidate {
@@ -441,7 +441,6 @@ impl Planner {
             for (c, &level) in self.candidates.iter().zip(levels) {
                 over += f64::from(c.over[level]);
                 let block = &mut plan.blocks[c.slot];
-                let patch_max = hierarchy.node(block.node()).patch_max;
                 block.patch_level = level as u8;
                 block.full_resolution = level >= c.full;
                 block.chosen = level < c.bound;
@@ -452,7 +451,7 @@ impl Planner {
                 block.predicted_px = if block.full_resolution {
                     0.0
                 } else {
-                    patch_max[level] * c.scale
+                    c.errors[level] * c.scale
                 };
             }
         }
@@ -688,6 +687,7 @@ fn plan_block(
             patches,
             full_triangles: 2.0 * (cells[0] * cells[1]) as f32,
             scale,
+            errors: hierarchy.node(id).patch_max,
         },
     };
     (planned, Some(pending))
@@ -897,16 +897,19 @@ fn unread_pixels(
 /// The greedy share's buffers, kept from frame to frame.
 #[derive(Debug, Default)]
 struct GreedyShare {
-    /// Each candidate's next step, keyed (`step_key`).
-    heap: BinaryHeap<u64>,
-    /// Each candidate's next step's level.
-    next: Vec<u8>,
+    /// Every candidate's steps, keyed (`step_key`), with the pixels over
+    /// tau each relieves.
+    steps: Vec<(u64, f32)>,
     /// Each candidate's level so far.
     levels: Vec<usize>,
     /// Refinements that can be taken back within the budget, keyed by the
     /// triangles they save (`step_key`).
     trims: Vec<u64>,
 }
+
+/// Below this many steps, the ones still undecided are sorted and taken
+/// in order rather than split again.
+const SORTED_STEPS: usize = 24;
 
 impl GreedyShare {
     /// Each candidate's level: from every one at its coarsest, the step
@@ -918,54 +921,20 @@ impl GreedyShare {
     /// triangles first, each to the coarsest level the budget still
     /// allows.
     fn levels(&mut self, candidates: &[Candidate], budget: f32) -> &[usize] {
-        // A candidate's next step is keyed by its pixels relieved per
-        // triangle added, then the earlier candidate: one integer whose
-        // order is that one (`step_key`), so the heap compares words. The
-        // level it goes to is kept beside it.
-        let GreedyShare {
-            heap,
-            next,
-            levels,
-            trims,
-        } = self;
-        next.clear();
-        next.resize(candidates.len(), 0);
-        levels.clear();
-        levels.resize(candidates.len(), 0);
-        let mut over: f32 = candidates.iter().map(|c| c.over[0]).sum();
-        heap.clear();
-        heap.extend(candidates.iter().enumerate().filter_map(|(i, c)| {
-            let (g, k) = c.best_step(0)?;
-            next[i] = k as u8;
-            Some(step_key(g, i))
-        }));
-        while over > budget {
-            let Some(mut top) = heap.peek_mut() else {
-                break;
-            };
-            let i = step_candidate(*top);
-            let k = usize::from(next[i]);
-            let c = &candidates[i];
-            over -= c.over[levels[i]] - c.over[k];
-            levels[i] = k;
-            // The candidate's next step takes the place of the one taken.
-            match c.best_step(k) {
-                Some((g, k)) => {
-                    next[i] = k as u8;
-                    *top = step_key(g, i);
-                }
-                None => {
-                    PeekMut::pop(top);
-                }
-            }
-        }
-        let mut slack = budget - over;
+        self.refine(candidates, budget);
+        let over: f64 = candidates
+            .iter()
+            .zip(self.levels.iter())
+            .map(|(c, &k)| f64::from(c.over[k]))
+            .sum();
+        let mut slack = budget - over as f32;
+        let GreedyShare { levels, trims, .. } = self;
         if slack > 0.0 {
             trims.clear();
             trims.extend(candidates.iter().zip(levels.iter()).enumerate().filter_map(
                 |(i, (c, &k))| {
                     let j = c.coarsest_within(k, slack)?;
-                    Some(step_key(c.triangles(k) - c.triangles(j), i))
+                    Some(step_key(c.triangles(k) - c.triangles(j), i, 0))
                 },
             ));
             trims.sort_unstable_by(|a, b| b.cmp(a));
@@ -980,11 +949,80 @@ impl GreedyShare {
         }
         levels
     }
+
+    /// The greedy steps alone, into `levels`: from every candidate at its
+    /// coarsest, the steps in order of gain until what remains over tau
+    /// fits `budget`.
+    ///
+    /// A candidate's steps, each to its best finer level from the last
+    /// (`Candidate::best_step`), follow the hull of its pixels over tau
+    /// against its triangles, so their gains never rise. The greedy order
+    /// is then every candidate's steps sorted by gain, and the steps taken
+    /// are the fewest first ones of that order that relieve enough: found
+    /// by splitting the steps around a middle one until the last step is
+    /// known, in time that grows with the steps (a heap's grows faster, with
+    /// the steps taken times their logarithm).
+    fn refine(&mut self, candidates: &[Candidate], budget: f32) {
+        let GreedyShare { steps, levels, .. } = self;
+        steps.clear();
+        let mut total = 0.0f64;
+        for (i, c) in candidates.iter().enumerate() {
+            total += f64::from(c.over[0]);
+            let (mut from, mut last) = (0, f32::INFINITY);
+            while let Some((gain, k)) = c.best_step(from) {
+                // Rounding aside, a hull's gains fall; kept so, a
+                // candidate's steps sort in their order.
+                last = gain.min(last);
+                steps.push((step_key(last, i, k), c.over[from] - c.over[k]));
+                from = k;
+            }
+        }
+        let taken = first_relieving(steps, total - f64::from(budget));
+        levels.clear();
+        levels.resize(candidates.len(), 0);
+        for &(key, _) in &steps[..taken] {
+            let (i, k) = (step_candidate(key), step_level(key));
+            levels[i] = levels[i].max(k);
+        }
+    }
 }
 
-/// A greedy step's heap key: greater for a larger `gain` (ordered as
-/// `f32::total_cmp` orders it), then for an earlier `candidate`.
-fn step_key(gain: f32, candidate: usize) -> u64 {
+/// Reorders `steps` so that the steps in greatest-key order up to the
+/// first whose reliefs, summed with those before it, reach `need` come
+/// first, in that order; returns how many (all of them if they never
+/// reach it, none if nothing is needed).
+fn first_relieving(steps: &mut [(u64, f32)], mut need: f64) -> usize {
+    let by_key = |a: &(u64, f32), b: &(u64, f32)| b.0.cmp(&a.0);
+    // Steps before `lo` are taken, steps from `hi` on are not; the last
+    // one taken lies between.
+    let (mut lo, mut hi) = (0, steps.len());
+    while need > 0.0 && hi - lo > SORTED_STEPS {
+        let mid = (hi - lo) / 2;
+        steps[lo..hi].select_nth_unstable_by(mid, by_key);
+        let relief: f64 = steps[lo..=lo + mid].iter().map(|s| f64::from(s.1)).sum();
+        if relief >= need {
+            hi = lo + mid + 1;
+        } else {
+            need -= relief;
+            lo += mid + 1;
+        }
+    }
+    steps[lo..hi].sort_unstable_by(by_key);
+    for &(_, relief) in &steps[lo..hi] {
+        if need <= 0.0 {
+            break;
+        }
+        need -= f64::from(relief);
+        lo += 1;
+    }
+    lo
+}
+
+/// A greedy step's key: greater for a larger `gain` (ordered as
+/// `f32::total_cmp` orders it), then for an earlier `candidate`, then for
+/// a coarser `level` (candidates below 2^24, levels below 256).
+fn step_key(gain: f32, candidate: usize, level: usize) -> u64 {
+    debug_assert!(candidate < 1 << 24 && level < 1 << 8);
     let bits = gain.to_bits();
     // Negative floats order reversed, below every positive one.
     let ordered = if bits >> 31 == 1 {
@@ -992,12 +1030,18 @@ fn step_key(gain: f32, candidate: usize) -> u64 {
     } else {
         bits | 1 << 31
     };
-    u64::from(ordered) << 32 | u64::from(u32::MAX - candidate as u32)
+    let rank = (0xff_ffff - candidate as u32) << 8 | (0xff - level as u32);
+    u64::from(ordered) << 32 | u64::from(rank)
 }
 
 /// The candidate a `step_key` is of.
 fn step_candidate(key: u64) -> usize {
-    (u32::MAX - key as u32) as usize
+    (0xff_ffff - (key as u32 >> 8)) as usize
+}
+
+/// The level a `step_key` steps to.
+fn step_level(key: u64) -> usize {
+    (0xff - (key as u32 & 0xff)) as usize
 }
 
 /// The patches whose boxes are not outside the frustum (all of them
@@ -1094,6 +1138,7 @@ mod tests {
                 patches,
                 full_triangles: 2048.0,
                 scale: 1.0,
+                errors: [0.0; LEVEL_COUNT],
             }
         };
         // The first relieves 30 pixels for 6 triangles, the second 100 for
@@ -1200,21 +1245,87 @@ mod tests {
         assert_eq!(at_bottom[0].at, LatticePoint::new(4128.0, 0.0, 60.0 / run));
     }
 
+    /// The greedy share's steps taken one at a time: each time, of every
+    /// candidate's next step, the one with the largest gain (the earlier
+    /// candidate between equal gains), until what remains fits `budget`.
+    fn greedy_by_scanning(candidates: &[Candidate], budget: f32) -> Vec<usize> {
+        let mut levels = vec![0; candidates.len()];
+        let mut over: f64 = candidates.iter().map(|c| f64::from(c.over[0])).sum();
+        while over > f64::from(budget) {
+            let best = candidates
+                .iter()
+                .enumerate()
+                .filter_map(|(i, c)| c.best_step(levels[i]).map(|(g, k)| (g, i, k)))
+                .max_by(|a, b| a.0.total_cmp(&b.0).then(b.1.cmp(&a.1)));
+            let Some((_, i, k)) = best else {
+                break;
+            };
+            over -= f64::from(candidates[i].over[levels[i]] - candidates[i].over[k]);
+            levels[i] = k;
+        }
+        levels
+    }
+
+    /// A candidate with whole pixels over tau falling from `first` by
+    /// the fractions `falls` at each finer level, to none at its bound.
+    /// Whole pixels and few sizes make equal gains common.
+    fn falling(first: f32, falls: &[f32], patches: f32) -> Candidate {
+        let mut over = [0.0; LEVEL_COUNT + 1];
+        over[0] = first.floor();
+        for (k, f) in falls.iter().enumerate() {
+            over[k + 1] = (over[k] * f).floor();
+        }
+        Candidate {
+            slot: 0,
+            over,
+            bound: falls.len() + 1,
+            full: 5,
+            patches,
+            full_triangles: 2048.0,
+            scale: 1.0,
+            errors: [0.0; LEVEL_COUNT],
+        }
+    }
+
     proptest! {
-        /// The greedy share's heap key orders steps as their gains do under
-        /// `total_cmp`, the earlier candidate first between equal gains, and
-        /// gives its candidate back.
+        /// The greedy share's key orders steps as their gains do under
+        /// `total_cmp`, then the earlier candidate, then the coarser level,
+        /// and gives its candidate and level back.
         #[test]
         fn step_keys_order_as_gains_then_earlier_candidates(
             a in any::<f32>(),
             b in any::<f32>(),
             i in 0usize..100_000,
             j in 0usize..100_000,
+            k in 0usize..8,
         ) {
             let expected = a.total_cmp(&b).then(j.cmp(&i));
-            prop_assert_eq!(step_key(a, i).cmp(&step_key(b, j)), expected);
-            prop_assert_eq!(step_candidate(step_key(a, i)), i);
-            prop_assert_eq!(step_key(a, i).cmp(&step_key(a, i + 1)), std::cmp::Ordering::Greater);
+            prop_assert_eq!(step_key(a, i, k).cmp(&step_key(b, j, k)), expected);
+            prop_assert_eq!(step_candidate(step_key(a, i, k)), i);
+            prop_assert_eq!(step_level(step_key(a, i, k)), k);
+            prop_assert_eq!(step_key(a, i, k).cmp(&step_key(a, i + 1, 0)), std::cmp::Ordering::Greater);
+            prop_assert_eq!(step_key(a, i, k).cmp(&step_key(a, i, k + 1)), std::cmp::Ordering::Greater);
+        }
+
+        /// The steps found by splitting are those taken one at a time,
+        /// whatever the candidates and the budget.
+        #[test]
+        fn refining_by_splitting_takes_the_steps_one_at_a_time_would(
+            blocks in prop::collection::vec(
+                (0.0f32..64.0, prop::collection::vec(0.0f32..1.0, 0..LEVEL_COUNT - 2), 1.0f32..4.0),
+                0..300,
+            ),
+            budget_share in 0.0f32..1.2,
+        ) {
+            let candidates: Vec<Candidate> = blocks
+                .iter()
+                .map(|(first, falls, patches)| falling(*first, falls, patches.floor()))
+                .collect();
+            let total: f32 = candidates.iter().map(|c| c.over[0]).sum();
+            let budget = budget_share * total;
+            let mut share = GreedyShare::default();
+            share.refine(&candidates, budget);
+            prop_assert_eq!(&share.levels, &greedy_by_scanning(&candidates, budget));
         }
     }
 }
