@@ -417,11 +417,11 @@ fn a_single_frame_run_renders_each_view_once() {
     let report = gpu.shutdown();
     assert_eq!(report.count, 0, "{:#?}", report.messages);
     // Three views, one render of each configuration, plus the oracle's
-    // uniform levels (5 for 16-cell patches) and each occluded row's cut
-    // frame per view.
+    // uniform levels (5 for 16-cell patches) and the cut frame per view
+    // of each occluded row and of the row it is compared with.
     let occluded = configs.iter().filter(|c| c.occlusion()).count() as u64;
     assert_eq!(occluded, 2);
-    assert_eq!(progress.1, 3 * (configs.len() as u64 + 5 + occluded));
+    assert_eq!(progress.1, 3 * (configs.len() as u64 + 5 + 2 * occluded));
     assert_eq!(progress.0, progress.1);
     assert_eq!(rows.len(), 3 * configs.len());
     for r in &rows {

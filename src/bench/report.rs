@@ -777,8 +777,11 @@ passed the last frame's test, then, after a depth pyramid is built and every pat
 tested against it, the patches newly found visible. Their renderer keeps its visibility from \
 frame to frame and sees only its own row's frames, so each fixed view starts as a camera cut \
 from the view before it (that first frame is compared but not timed) and the flythrough runs \
-on from the last fixed view. `differing` counts the pixels, over every compared frame, whose \
-colour differs from the same row's render without occlusion culling at the same camera.\n",
+on from the last fixed view. The row without culling draws the same first frame, for the \
+comparison. `differing` counts the pixels, over every compared frame, whose colour differs \
+from the same row's render without occlusion culling at the same camera and the same frame \
+of its view: a first frame with a first frame, the read-back frame with the read-back \
+frame.\n",
         100.0 * ORACLE_EXCEED_FRACTION,
         timing_ms = SINGLE_FRAME_TIMING.as_millis(),
     )

@@ -887,12 +887,18 @@ impl<'a> Bench<'a> {
                 }
                 _ => None,
             };
+            let compared = |config: &Config| {
+                config.occlusion() || configs.iter().any(|c| c.unoccluded() == Some(*config))
+            };
             // A fixed view is a camera cut for an occluded row: its first
             // frame starts from the last view's visibility. That frame is
-            // compared too, and not timed.
+            // compared too, and not timed, against the first frame of the
+            // row without culling, which draws one as well: a choice that
+            // reads earlier frames of its view (`render::seen`) draws a
+            // view's first frame unlike its later ones, culled or not.
             let mut cuts: Vec<Option<HeadlessFrame>> = Vec::with_capacity(gathered.len());
             for (config, g) in gathered.iter_mut() {
-                let cut = match config.occlusion() && cameras.len() == 1 {
+                let cut = match compared(config) && cameras.len() == 1 {
                     true => Some(self.render(camera, config, levels_of(config))?),
                     false => None,
                 };
@@ -914,9 +920,9 @@ impl<'a> Bench<'a> {
                     }
                 }
             }
-            // The last image of each configuration an occluded one must
-            // equal, from this camera.
-            let mut unoccluded: Vec<(Config, Vec<u8>)> = Vec::new();
+            // The images of each configuration an occluded one must equal,
+            // from this camera: its cut frame's, if any, and its last.
+            let mut unoccluded: Vec<(Config, Vec<Vec<u8>>)> = Vec::new();
             let visible_patches = {
                 let mut seen = vec![false; self.terrain.grid().patch_count()];
                 for &p in reference_patch.iter().flatten() {
@@ -957,16 +963,26 @@ impl<'a> Bench<'a> {
                 let renderer = &renderer_for(&mut self.renderers, config).renderer;
                 g.predicted_over_share
                     .extend(renderer.predicted_over_share().map(f64::from));
+                let images: Vec<&Vec<u8>> = cut
+                    .iter()
+                    .chain([&frame])
+                    .map(|f| &f.readback.rgba)
+                    .collect();
                 if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
-                    unoccluded.push((*config, frame.readback.rgba.clone()));
-                }
-                if let Some(off) = config.unoccluded() {
-                    let Some((_, image)) = unoccluded.iter().find(|(c, _)| *c == off) else {
+                    unoccluded.push((*config, images.into_iter().cloned().collect()));
+                } else if let Some(off) = config.unoccluded() {
+                    let Some((_, off_images)) = unoccluded.iter().find(|(c, _)| *c == off) else {
                         anyhow::bail!("{} runs without {}", config.label(), off.label());
                     };
-                    for f in cut.iter().chain([&frame]) {
-                        *g.differing_pixels.get_or_insert(0) +=
-                            differing_pixels(&f.readback.rgba, image);
+                    if off_images.len() != images.len() {
+                        anyhow::bail!(
+                            "{} and {} drew different frames",
+                            config.label(),
+                            off.label()
+                        );
+                    }
+                    for (image, off_image) in images.into_iter().zip(off_images) {
+                        *g.differing_pixels.get_or_insert(0) += differing_pixels(image, off_image);
                     }
                 }
                 if let Some(o) = frame.measurements.occlusion {
@@ -1020,14 +1036,18 @@ impl<'a> Bench<'a> {
             .iter()
             .filter(|c| matches!(c, Config::Oracle(_)))
             .count() as u64;
-        let occluded = configs.iter().filter(|c| c.occlusion()).count() as u64;
+        // Occluded rows and the rows they are compared with.
+        let occluded = configs
+            .iter()
+            .filter(|c| c.occlusion() || configs.iter().any(|o| o.unoccluded() == Some(**c)))
+            .count() as u64;
         // With more than one repeat, each configuration draws one more
         // frame, read back for its error.
         let per_frame = |repeats: u64| {
             let draws = if repeats > 1 { repeats + 1 } else { repeats };
             draws * configs.len() as u64 + if oracles > 0 { level_count } else { 0 }
         };
-        // Occluded rows render a fixed view once more (its cut frame).
+        // Those rows render a fixed view once more (its cut frame).
         progress.start(
             views
                 .iter()
