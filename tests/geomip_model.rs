@@ -361,6 +361,33 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
     assert!(every.iter().filter(|&&l| l < 4).count() > drawn.iter().filter(|&&d| d).count());
 }
 
+/// Refining and balancing change no level further than `balance_reach`
+/// from a drawn patch, and do change one that far: a lone patch drawn at
+/// the finest level lowers a diamond of patches around it, each ring a
+/// level coarser, out to the ring before the coarsest.
+#[test]
+fn refining_and_balancing_reach_no_further_than_balance_reach() {
+    for cells in [4usize, 16, 32] {
+        let samples = 24 * cells + 1;
+        let grid = vkterrain::terrain::PatchGrid::for_size(samples, samples, cells as u32);
+        let (cols, coarsest) = (grid.patch_cols(), (level_count(cells) - 1) as u8);
+        let reach = balance_reach(cells);
+        for (c, r) in [(12usize, 12usize), (0, 0), (23, 5)] {
+            let mut levels = vec![coarsest; grid.patch_count()];
+            let mut drawn = vec![false; grid.patch_count()];
+            let p = r * cols + c;
+            levels[p] = 0;
+            drawn[p] = true;
+            refine_and_balance_blocks(&mut levels, &grid, &drawn, &[([c, c + 1], [r, r + 1])]);
+            let farthest = (0..grid.patch_count())
+                .filter(|&q| levels[q] < coarsest)
+                .map(|q| (q % cols).abs_diff(c) + (q / cols).abs_diff(r))
+                .max();
+            assert_eq!(farthest, Some(reach), "{cells} cells, patch ({c}, {r})");
+        }
+    }
+}
+
 /// A geomip level and its error table index name the same number of
 /// segments a side (level l: n / 2^l; index k: 2^k), and each mapping
 /// undoes the other.

@@ -338,6 +338,16 @@ pub fn refine_beside(
     lowered
 }
 
+/// How many patches beyond the drawn ones refining and balancing can
+/// change a level, for patches of `cells_per_patch`: a drawn patch at the
+/// finest level refines a culled neighbour to its own (`refine_beside`),
+/// and balancing lowers each ring beyond to one level coarser than the
+/// ring before, until a ring would take the coarsest level, which every
+/// patch starts at (`balance_from`).
+pub fn balance_reach(cells_per_patch: usize) -> usize {
+    level_count(cells_per_patch) - 1
+}
+
 /// `refine_beside` from `edges`, then `balance_from` the edges and the
 /// patches it refined, each only where it is at least two levels finer
 /// than the coarsest (a coarser one lowers no neighbour): the levels of

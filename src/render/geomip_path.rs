@@ -25,7 +25,7 @@ use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
 use crate::shader_constants::OWN_PATCH_CONSTANTS;
-use crate::terrain::grid::PatchId;
+use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::{ErrorTable, Terrain};
 
 pub(super) struct GeomipGeometry {
@@ -61,44 +61,111 @@ pub(super) struct ChosenPatches {
     rects: Vec<([usize; 2], [usize; 2])>,
     /// The distance LOD's distances, one per drawn patch in grid order.
     distances: Vec<f32>,
+    /// Where the last choice may have left entries unlike `reset`'s;
+    /// None: anywhere.
+    written: Option<Written>,
+}
+
+/// Patches of a grid as columns and rows, end exclusive.
+type Rect = ([usize; 2], [usize; 2]);
+
+/// The patches a choice may have changed from `ChosenPatches::reset`'s
+/// state, on the grid it was sized for (its columns, its coarsest level).
+#[derive(Clone, Copy, Debug)]
+struct Written {
+    cols: usize,
+    coarsest: u8,
+    rect: Rect,
 }
 
 impl ChosenPatches {
-    /// Every one of `patches` at level `coarsest`, with no morph and not
-    /// drawn.
-    fn reset(&mut self, patches: usize, coarsest: u8) {
+    /// Every patch of `grid` at level `coarsest`, with no morph and not
+    /// drawn. Where the last choice was on the same grid, only the patches
+    /// it wrote are reset (`Written`), so a frame's choice costs what is
+    /// in view, not the grid.
+    fn reset(&mut self, grid: &PatchGrid, coarsest: u8) {
+        let (patches, cols) = (grid.patch_count(), grid.patch_cols());
         let PatchLevels { levels, morph } = &mut self.levels;
-        levels.clear();
-        levels.resize(patches, coarsest);
-        morph.clear();
-        morph.resize(patches, 0.0);
-        self.drawn.clear();
-        self.drawn.resize(patches, false);
+        match self.written.take() {
+            Some(w) if w.cols == cols && w.coarsest == coarsest && levels.len() == patches => {
+                for row in rect_rows(cols, w.rect) {
+                    levels[row.clone()].fill(coarsest);
+                    morph[row.clone()].fill(0.0);
+                    self.drawn[row].fill(false);
+                }
+            }
+            _ => {
+                levels.clear();
+                levels.resize(patches, coarsest);
+                morph.clear();
+                morph.resize(patches, 0.0);
+                self.drawn.clear();
+                self.drawn.resize(patches, false);
+            }
+        }
         self.visible.clear();
         self.rects.clear();
         self.distances.clear();
     }
 
-    /// `visible` from the drawn flags, in grid order, eight flags at a
-    /// time: a run of eight patches all drawn or none drawn costs one test.
-    fn list_drawn(&mut self) {
+    /// Notes what a choice on `grid` drew (`drawn`: the bounds of its drawn
+    /// patches, None for none) for the next `reset`: those patches, and
+    /// those refining and balancing can have lowered around them
+    /// (`geomip::balance_reach`).
+    fn wrote(&mut self, grid: &PatchGrid, coarsest: u8, drawn: Option<Rect>) {
+        let reach = geomip::balance_reach(grid.cells_per_patch());
+        let rect = drawn.map_or(([0, 0], [0, 0]), |([c0, c1], [r0, r1])| {
+            (
+                [
+                    c0.saturating_sub(reach),
+                    (c1 + reach).min(grid.patch_cols()),
+                ],
+                [
+                    r0.saturating_sub(reach),
+                    (r1 + reach).min(grid.patch_rows()),
+                ],
+            )
+        });
+        self.written = Some(Written {
+            cols: grid.patch_cols(),
+            coarsest,
+            rect,
+        });
+    }
+
+    /// `visible` from the drawn flags of the patches in `within` (of a grid
+    /// `cols` patches wide; none are drawn outside it), in grid order,
+    /// eight flags at a time: a run of eight patches all drawn or none
+    /// drawn costs one test.
+    fn list_drawn(&mut self, cols: usize, within: Rect) {
         let visible = &mut self.visible;
         visible.clear();
-        let flags: &[u8] = bytemuck::cast_slice(&self.drawn);
-        let words = flags.chunks_exact(8);
-        let rest = words.remainder();
-        let mut first = 0;
-        for word in words {
-            let bits = u64::from_le_bytes(word.try_into().expect("eight flags"));
-            match bits {
-                0 => {}
-                ALL_DRAWN => visible.extend(first..first + 8),
-                _ => push_flagged(visible, first, word),
+        for row in rect_rows(cols, within) {
+            let flags: &[u8] = bytemuck::cast_slice(&self.drawn[row.clone()]);
+            let words = flags.chunks_exact(8);
+            let rest = words.remainder();
+            let mut first = row.start as u32;
+            for word in words {
+                let bits = u64::from_le_bytes(word.try_into().expect("eight flags"));
+                match bits {
+                    0 => {}
+                    ALL_DRAWN => visible.extend(first..first + 8),
+                    _ => push_flagged(visible, first, word),
+                }
+                first += 8;
             }
-            first += 8;
+            push_flagged(visible, first, rest);
         }
-        push_flagged(visible, first, rest);
     }
+}
+
+/// The smallest rectangle holding every one of `rects`; None for none.
+fn bounds(rects: impl IntoIterator<Item = Rect>) -> Option<Rect> {
+    rects
+        .into_iter()
+        .reduce(|([a0, a1], [b0, b1]), ([c0, c1], [d0, d1])| {
+            ([a0.min(c0), a1.max(c1)], [b0.min(d0), b1.max(d1)])
+        })
 }
 
 /// Pushes `first + i` for each flag `i` of `flags` that is set.
@@ -239,7 +306,8 @@ impl GeomipGeometry {
         }
         // Every patch starts at the coarsest level, and those in view get
         // theirs; the coarsest constrains no neighbour.
-        chosen.reset(grid.patch_count(), (count - 1) as u8);
+        let coarsest = (count - 1) as u8;
+        chosen.reset(grid, coarsest);
         let mut over_share = None;
         let PatchLevels { levels, morph } = &mut chosen.levels;
         match tau {
@@ -267,7 +335,15 @@ impl GeomipGeometry {
                         morph[p as usize] = geomip::morph_factor(d, settings.lod.min_dist, level);
                     }
                 }
+                let cols = grid.patch_cols();
+                let drawn = bounds(
+                    visible
+                        .iter()
+                        .map(|&p| (p as usize % cols, p as usize / cols))
+                        .map(|(c, r)| ([c, c + 1], [r, r + 1])),
+                );
                 chosen.visible = visible;
+                chosen.wrote(grid, coarsest, drawn);
             }
             Some(_) => {
                 let sight = match settings.error_measure {
@@ -309,7 +385,9 @@ impl GeomipGeometry {
                 // A block's patches share its level: only its sides can
                 // lower a neighbour.
                 geomip::refine_and_balance_blocks(levels, grid, &chosen.drawn, &chosen.rects);
-                chosen.list_drawn();
+                let drawn = bounds(chosen.rects.iter().copied());
+                chosen.list_drawn(cols, drawn.unwrap_or_default());
+                chosen.wrote(grid, coarsest, drawn);
             }
         }
         GeomipChoice::Levels {
@@ -556,24 +634,86 @@ mod tests {
     use super::*;
 
     /// Every drawn patch is listed once, in grid order, whatever runs of
-    /// drawn and not drawn the flags hold, the last short word included.
+    /// drawn and not drawn the flags hold within the rectangle read, the
+    /// last short word of each row included.
     #[test]
     fn list_drawn_lists_each_drawn_patch_in_grid_order() {
+        let (cols, rows) = (67usize, 3usize);
         let mut chosen = ChosenPatches::default();
-        for len in [0usize, 5, 8, 29, 67] {
-            // Runs of all, none and some drawn.
-            let drawn: Vec<bool> = (0..len)
-                .map(|p| match (p / 8) % 3 {
-                    0 => true,
-                    1 => false,
-                    _ => p % 3 == 0,
+        for within in [
+            ([0, 0], [0, 0]),
+            ([0, 5], [1, 2]),
+            ([3, 11], [0, 3]),
+            ([0, 67], [0, 3]),
+            ([30, 59], [1, 3]),
+        ] {
+            let ([c0, c1], [r0, r1]) = within;
+            // Runs of all, none and some drawn, inside the rectangle only.
+            let drawn: Vec<bool> = (0..cols * rows)
+                .map(|p| {
+                    let (c, r) = (p % cols, p / cols);
+                    (c0..c1).contains(&c)
+                        && (r0..r1).contains(&r)
+                        && match (p / 8) % 3 {
+                            0 => true,
+                            1 => false,
+                            _ => p % 3 == 0,
+                        }
                 })
                 .collect();
-            chosen.reset(len, 0);
-            chosen.drawn.copy_from_slice(&drawn);
-            chosen.list_drawn();
-            let expected: Vec<u32> = (0..len as u32).filter(|&p| drawn[p as usize]).collect();
-            assert_eq!(chosen.visible, expected, "{len} patches");
+            chosen.drawn = drawn.clone();
+            chosen.list_drawn(cols, within);
+            let expected: Vec<u32> = (0..(cols * rows) as u32)
+                .filter(|&p| drawn[p as usize])
+                .collect();
+            assert_eq!(chosen.visible, expected, "{within:?}");
         }
+    }
+
+    /// A reset after a choice leaves every patch as a reset of a fresh
+    /// choice does, where the choice wrote only within the reach of what
+    /// it drew; on another grid, or at another coarsest level, the whole
+    /// grid is reset.
+    #[test]
+    fn a_reset_restores_what_the_last_choice_wrote() {
+        // 32 x 16 patches of 16 cells: levels 0 to 4.
+        let grid = PatchGrid::for_size(513, 257, 16);
+        let (cols, coarsest) = (grid.patch_cols(), 4u8);
+        let reach = geomip::balance_reach(grid.cells_per_patch());
+        let mut fresh = ChosenPatches::default();
+        fresh.reset(&grid, coarsest);
+        let mut chosen = ChosenPatches::default();
+        chosen.reset(&grid, coarsest);
+        // A block drawn at the finest level, near the grid's first
+        // corner, and what refining and balancing can lower around it.
+        let block: Rect = ([2, 6], [1, 3]);
+        for p in 0..grid.patch_count() {
+            let (c, r) = (p % cols, p / cols);
+            let (dc, dr) = (
+                (block.0[0].saturating_sub(c)).max(c.saturating_sub(block.0[1] - 1)),
+                (block.1[0].saturating_sub(r)).max(r.saturating_sub(block.1[1] - 1)),
+            );
+            if dc + dr == 0 {
+                chosen.levels.levels[p] = 0;
+                chosen.levels.morph[p] = 0.5;
+                chosen.drawn[p] = true;
+            } else if dc + dr <= reach {
+                chosen.levels.levels[p] = (dc + dr - 1) as u8;
+            }
+        }
+        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.reset(&grid, coarsest);
+        assert_eq!(chosen.levels.levels, fresh.levels.levels);
+        assert_eq!(chosen.levels.morph, fresh.levels.morph);
+        assert_eq!(chosen.drawn, fresh.drawn);
+        // Another coarsest level, then another grid: everything anew.
+        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.reset(&grid, 3);
+        assert!(chosen.levels.levels.iter().all(|&l| l == 3));
+        let other = PatchGrid::for_size(257, 257, 16);
+        chosen.wrote(&grid, 3, None);
+        chosen.reset(&other, 3);
+        assert_eq!(chosen.levels.levels.len(), other.patch_count());
+        assert_eq!(chosen.drawn.len(), other.patch_count());
     }
 }
