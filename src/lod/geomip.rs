@@ -370,8 +370,8 @@ pub fn refine_and_balance(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool], e
 /// exclusive, each block's patches at its level in `levels`), the rest at
 /// the coarsest: the same levels, in time that grows with the blocks'
 /// sides. Inside a block no side changes level, so only the patches just
-/// beyond a block's sides are looked at, once to refine the culled ones
-/// and once to seed the balancing.
+/// beyond a block's sides are looked at, once each: refining the culled
+/// ones and seeding the balancing in the same pass.
 pub fn refine_and_balance_blocks(
     levels: &mut [u8],
     grid: &PatchGrid,
@@ -385,18 +385,16 @@ pub fn refine_and_balance_blocks(
         .iter()
         .map(|&([c0, _], [r0, _])| levels[grid.patch_index(PatchId { row: r0, col: c0 })])
         .collect();
+    // One look beyond each side: a culled patch takes the finest level of
+    // the blocks beside it, a drawn one at most one coarser than each.
+    // Both are minima over the blocks, so one pass in any order gives
+    // them; a culled patch at its blocks' finest is never more than one
+    // coarser than any of them.
     for (block, &level) in blocks.iter().zip(&own) {
         for_each_beyond(grid, block, |i, q| {
-            if !drawn[i] && levels[i] > level {
-                levels[i] = level;
-                queue.push(q);
-            }
-        });
-    }
-    for (block, &level) in blocks.iter().zip(&own) {
-        for_each_beyond(grid, block, |i, q| {
-            if levels[i] > level + 1 {
-                levels[i] = level + 1;
+            let limit = if drawn[i] { level + 1 } else { level };
+            if levels[i] > limit {
+                levels[i] = limit;
                 queue.push(q);
             }
         });
