@@ -259,6 +259,18 @@ pub fn rect_rows(
     (r0..r1).map(move |r| r * cols + c0..r * cols + c1)
 }
 
+/// The smallest rectangle of patches (columns, rows, end exclusive)
+/// holding every one of `rects`; None for none.
+pub fn rect_bounds(
+    rects: impl IntoIterator<Item = ([usize; 2], [usize; 2])>,
+) -> Option<([usize; 2], [usize; 2])> {
+    rects
+        .into_iter()
+        .reduce(|([a0, a1], [b0, b1]), ([c0, c1], [d0, d1])| {
+            ([a0.min(c0), a1.max(c1)], [b0.min(d0), b1.max(d1)])
+        })
+}
+
 /// A node's footprint in local x and z: (lower-left, upper-right) corners,
 /// from its first and last patches' corners.
 pub fn node_footprint(

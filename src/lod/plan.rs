@@ -53,7 +53,7 @@
 use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
-use super::hierarchy::{rect_rows, square_range, Hierarchy, Node, NodeId};
+use super::hierarchy::{rect_bounds, rect_rows, square_range, Hierarchy, Node, NodeId};
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::seen::{SeenPixels, NOT_DRAWN};
 use super::view::LodView;
@@ -1084,14 +1084,9 @@ pub fn patches_in_view(
 /// and read off it row by row, in time that grows with that box, not with
 /// the grid.
 fn in_grid_order(rects: &[([usize; 2], [usize; 2])], cols: usize) -> Vec<u32> {
-    let Some(&([c0, c1], [r0, r1])) = rects.first() else {
+    let Some(([c0, c1], [r0, r1])) = rect_bounds(rects.iter().copied()) else {
         return Vec::new();
     };
-    let (c0, c1, r0, r1) = rects
-        .iter()
-        .fold((c0, c1, r0, r1), |(a, b, c, d), (cs, rs)| {
-            (a.min(cs[0]), b.max(cs[1]), c.min(rs[0]), d.max(rs[1]))
-        });
     let width = c1 - c0;
     let mut marked = vec![false; width * (r1 - r0)];
     let mut count = 0;

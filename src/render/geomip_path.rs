@@ -18,7 +18,7 @@ use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip::{self, PatchLevels};
-use crate::lod::hierarchy::{rect_rows, Hierarchy, NodeId};
+use crate::lod::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use crate::lod::view::Tau;
@@ -58,7 +58,7 @@ pub(super) struct ChosenPatches {
     /// The drawn patches, in grid order.
     visible: Vec<u32>,
     /// The error LOD's blocks as columns and rows of patches.
-    rects: Vec<([usize; 2], [usize; 2])>,
+    rects: Vec<Rect>,
     /// The distance LOD's distances, one per drawn patch in grid order.
     distances: Vec<f32>,
     /// Where the last choice may have left entries unlike `reset`'s;
@@ -157,15 +157,6 @@ impl ChosenPatches {
             push_flagged(visible, first, rest);
         }
     }
-}
-
-/// The smallest rectangle holding every one of `rects`; None for none.
-fn bounds(rects: impl IntoIterator<Item = Rect>) -> Option<Rect> {
-    rects
-        .into_iter()
-        .reduce(|([a0, a1], [b0, b1]), ([c0, c1], [d0, d1])| {
-            ([a0.min(c0), a1.max(c1)], [b0.min(d0), b1.max(d1)])
-        })
 }
 
 /// Pushes `first + i` for each flag `i` of `flags` that is set.
@@ -336,7 +327,7 @@ impl GeomipGeometry {
                     }
                 }
                 let cols = grid.patch_cols();
-                let drawn = bounds(
+                let drawn = rect_bounds(
                     visible
                         .iter()
                         .map(|&p| (p as usize % cols, p as usize / cols))
@@ -385,7 +376,7 @@ impl GeomipGeometry {
                 // A block's patches share its level: only its sides can
                 // lower a neighbour.
                 geomip::refine_and_balance_blocks(levels, grid, &chosen.drawn, &chosen.rects);
-                let drawn = bounds(chosen.rects.iter().copied());
+                let drawn = rect_bounds(chosen.rects.iter().copied());
                 chosen.list_drawn(cols, drawn.unwrap_or_default());
                 chosen.wrote(grid, coarsest, drawn);
             }
