@@ -200,6 +200,19 @@ impl Config {
         }
     }
 
+    /// Whether `configs` hold an occluded row of this configuration,
+    /// which is compared with its images.
+    pub fn has_occluded_row(&self, configs: &[Config]) -> bool {
+        configs.iter().any(|c| c.unoccluded() == Some(*self))
+    }
+
+    /// Whether a fixed view's first frame of this configuration is drawn
+    /// apart and compared: an occluded row's (a camera cut) and its
+    /// counterpart's.
+    pub fn draws_cut_frame(&self, configs: &[Config]) -> bool {
+        self.occlusion() || self.has_occluded_row(configs)
+    }
+
     /// A short description naming every parameter.
     pub fn label(&self) -> String {
         match self {
@@ -887,9 +900,6 @@ impl<'a> Bench<'a> {
                 }
                 _ => None,
             };
-            let compared = |config: &Config| {
-                config.occlusion() || configs.iter().any(|c| c.unoccluded() == Some(*config))
-            };
             // A fixed view is a camera cut for an occluded row: its first
             // frame starts from the last view's visibility. That frame is
             // compared too, and not timed, against the first frame of the
@@ -898,7 +908,7 @@ impl<'a> Bench<'a> {
             // view's first frame unlike its later ones, culled or not.
             let mut cuts: Vec<Option<HeadlessFrame>> = Vec::with_capacity(gathered.len());
             for (config, g) in gathered.iter_mut() {
-                let cut = match compared(config) && cameras.len() == 1 {
+                let cut = match config.draws_cut_frame(configs) && cameras.len() == 1 {
                     true => Some(self.render(camera, config, levels_of(config))?),
                     false => None,
                 };
@@ -968,7 +978,7 @@ impl<'a> Bench<'a> {
                     .chain([&frame])
                     .map(|f| &f.readback.rgba)
                     .collect();
-                if configs.iter().any(|c| c.unoccluded() == Some(*config)) {
+                if config.has_occluded_row(configs) {
                     unoccluded.push((*config, images.into_iter().cloned().collect()));
                 } else if let Some(off) = config.unoccluded() {
                     let Some((_, off_images)) = unoccluded.iter().find(|(c, _)| *c == off) else {
@@ -1039,7 +1049,7 @@ impl<'a> Bench<'a> {
         // Occluded rows and the rows they are compared with.
         let occluded = configs
             .iter()
-            .filter(|c| c.occlusion() || configs.iter().any(|o| o.unoccluded() == Some(**c)))
+            .filter(|c| c.draws_cut_frame(configs))
             .count() as u64;
         // With more than one repeat, each configuration draws one more
         // frame, read back for its error.
