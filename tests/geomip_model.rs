@@ -402,3 +402,32 @@ fn a_level_and_its_table_index_have_the_same_segments() {
         }
     }
 }
+
+/// A patch whose box holds the eye is predicted from its ground: its
+/// error seen from the ground's distance less that error, infinite where
+/// the drawn surface may reach the eye, and 0 without its ground (the
+/// choice keeps such a patch at level 0); from outside its box, from the
+/// box's nearest point as before.
+#[test]
+fn a_patch_holding_the_eye_is_predicted_from_its_ground() {
+    let error = |level: usize| [0.0, 2.0, 10.0, 40.0][level];
+    let patch = |level, ground| DrawnPatch {
+        lo: Vec3::new(-100.0, 0.0, -100.0),
+        hi: Vec3::new(100.0, 200.0, 100.0),
+        level,
+        morph: 0.0,
+        coarser: 0,
+        ground,
+    };
+    let eye = Vec3::new(10.0, 60.0, -20.0);
+    let px = |level, ground| predicted_px(error, &patch(level, ground), eye, 1000.0);
+    assert_eq!(px(2, Some(50.0)), 10.0 * 1000.0 / 40.0);
+    assert_eq!(px(3, Some(50.0)), 40.0 * 1000.0 / 10.0);
+    assert_eq!(px(3, Some(30.0)), f32::INFINITY);
+    assert_eq!(px(2, None), 0.0);
+    assert_eq!(px(0, Some(50.0)), 0.0);
+    // Above the box: its own distance, whatever the ground says.
+    let above = Vec3::new(10.0, 250.0, -20.0);
+    let from_box = predicted_px(error, &patch(2, Some(1.0)), above, 1000.0);
+    assert_eq!(from_box, 10.0 * 1000.0 / 50.0);
+}

@@ -6,7 +6,7 @@ mod common;
 use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use proptest::prelude::*;
-use vkterrain::terrain::{Heightmap, TerrainInfo};
+use vkterrain::terrain::{Heightmap, PatchId, Terrain, TerrainInfo};
 
 fn infos() -> Vec<TerrainInfo> {
     vec![
@@ -226,4 +226,86 @@ fn normals_of_flat_and_sloped_planes() {
         let n = plane.normal_at(x, z);
         assert!((n - want).length() < 1e-5, "({x}, {z}): {n} vs {want}");
     }
+}
+
+/// `Terrain::surface_distances` bounds from below the distance from the
+/// eye to every point within each grow above or below a patch's surface,
+/// for eyes over, beside, under and above rough patches.
+#[test]
+fn surface_distances_bound_every_point_near_a_patchs_surface() {
+    let info = TerrainInfo::new(
+        noise_map(37, 29, 5),
+        DVec2::new(3.0, 2.0),
+        8,
+        DVec2::new(10.0, -4.0),
+    )
+    .unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let (info, grid) = (terrain.info(), terrain.grid());
+    // Local x and z at continuous sample coordinates.
+    let local = |c: f64, r: f64| {
+        let x = info.local_x(0) + c * (info.local_x(1) - info.local_x(0));
+        let z = info.local_z(0) + r * (info.local_z(1) - info.local_z(0));
+        (x as f32, z as f32)
+    };
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut unit = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let grows = [0.0f32, 0.5, 4.0, 30.0];
+    let mut inside = 0;
+    for p in 0..grid.patch_count() {
+        let id = grid.patch_id(p);
+        let rect = grid.sample_rect(id);
+        let span = |lo: usize, hi: usize, u: f64| lo as f64 + u * (hi - lo) as f64;
+        for _ in 0..12 {
+            let (c, r) = (
+                span(rect.col0, rect.col1, 1.6 * unit() - 0.3),
+                span(rect.row0, rect.row1, 1.6 * unit() - 0.3),
+            );
+            let (x, z) = local(c, r);
+            let eye = Vec3::new(x, (160.0 * unit() - 20.0) as f32, z);
+            let bounds = terrain.surface_distances(id, eye, &grows).unwrap();
+            inside += bounds.iter().filter(|&&b| b == 0.0).count();
+            for _ in 0..300 {
+                let (c, r) = (
+                    span(rect.col0, rect.col1, unit()),
+                    span(rect.row0, rect.row1, unit()),
+                );
+                let h = info.whole().interpolate(c, r) as f32;
+                let (x, z) = local(c, r);
+                let off = (2.0 * unit() - 1.0) as f32;
+                for (&g, &bound) in grows.iter().zip(&bounds) {
+                    let d = (Vec3::new(x, h + off * g, z) - eye).length();
+                    assert!(
+                        d >= bound - 1e-3 * bound.max(1.0),
+                        "patch {p}, eye {eye}, grow {g}: a point {d} away, bound {bound}"
+                    );
+                }
+            }
+        }
+    }
+    // Some eyes lie within a grown box, and are told so.
+    assert!(inside > 0);
+}
+
+/// Over flat ground, with a peak at the patch's far corner that puts the
+/// eye inside its box, the nearest the surface comes is the eye's height,
+/// less each grow, and 0 once the grow reaches the eye.
+#[test]
+fn over_flat_ground_the_surface_is_the_eyes_height_away() {
+    let map =
+        Heightmap::from_fn(17, 17, |r, c| if (r, c) == (16, 16) { 100.0 } else { 0.0 }).unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(4.0), 16, DVec2::ZERO).unwrap();
+    let terrain = Terrain::new(info, 0.0).unwrap();
+    let info = terrain.info();
+    let eye = Vec3::new(info.local_x(2) as f32, 10.0, info.local_z(3) as f32);
+    let patch = PatchId { row: 0, col: 0 };
+    assert_eq!(
+        terrain.surface_distances(patch, eye, &[0.0, 2.5, 12.0]),
+        Some([10.0, 7.5, 0.0])
+    );
 }

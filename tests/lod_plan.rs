@@ -417,41 +417,48 @@ fn pixels_a_coarser_level_lost_are_not_taken_as_hidden() {
 }
 
 /// Ground the view model does not read still counts towards the frame's
-/// share over tau. On the DEM's grazing view the eye is inside the box of
-/// the patch below it, so that patch keeps the bound's choice (full
-/// resolution, within tau everywhere) and its model is never read; counts
-/// say how many of the frame's pixels it shows. With those pixels counted
-/// the frame may put more pixels over tau elsewhere: it draws fewer
-/// triangles than with the same counts less that patch's, and some blocks
-/// are coarser. (Not every block: the budget a greedy share's last step
-/// leaves is spent taking refinements back, and a smaller budget can
-/// leave more of it, so one block may end finer with the larger budget.)
+/// share over tau. A merged node is drawn within tau by its bound, and its
+/// model is never read; counts say how many of the frame's pixels it
+/// shows (every other patch here shows 100). With those pixels counted the frame may put more pixels over
+/// tau elsewhere: it draws fewer triangles than with the same counts less
+/// the node's, and some blocks are coarser. (Not every block: the budget
+/// a greedy share's last step leaves is spent taking refinements back,
+/// and a smaller budget can leave more of it, so one block may end finer
+/// with the larger budget.)
 #[test]
 fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
-    let terrain = dem_terrain(32, DVec2::ZERO);
+    let terrain = dem_terrain(16, DVec2::ZERO);
     let table = terrain.error_table();
     let sight = terrain.sight_table();
     let hierarchy = Hierarchy::new(&terrain, &table);
     let grid = terrain.grid();
+    // The DEM's grazing view merges smooth far ground from 4 px on.
     let camera = vkterrain::bench::cameras::named_views(terrain.info())
         .into_iter()
         .find(|v| v.name == "grazing")
         .expect("the grazing view")
         .camera;
-    let view = FrameView::new(&terrain, &camera, 1280, 720).lod_view(Tau::DEFAULT);
-    let at = terrain.info().world_to_grid(camera.eye.x, camera.eye.z);
-    let below = grid.patch_index(grid.patch_at(at.x, at.y));
-    let with = |below_shows: u32| {
+    let view = FrameView::new(&terrain, &camera, 1280, 720).lod_view(Tau::new(4.0).unwrap());
+    let node = *planned_seen(&terrain, (&hierarchy, &table, sight), &view, None)
+        .merged
+        .first()
+        .expect("a merged node");
+    let (cols, rows) = node.patch_range(grid);
+    let in_node = |p: usize| {
+        let id = grid.patch_id(p);
+        (cols[0]..cols[1]).contains(&id.col) && (rows[0]..rows[1]).contains(&id.row)
+    };
+    let with = |node_shows: u32| {
         let counts: Vec<u32> = (0..grid.patch_count())
-            .map(|p| if p == below { below_shows } else { 1 << 24 })
+            .map(|p| if in_node(p) { node_shows } else { 100 })
             .collect();
         let seen = SeenPixels::new(grid, &counts, &vec![0; counts.len()]).unwrap();
         planned_seen(&terrain, (&hierarchy, &table, sight), &view, Some(&seen))
     };
-    let (hidden, shown) = (with(0), with(400_000));
-    let block_of =
-        |frame| *block_holding(frame, grid, below).expect("the patch below the eye is drawn");
-    assert!(block_of(&hidden).full_resolution && block_of(&shown).full_resolution);
+    let (hidden, shown) = (with(0), with(200_000));
+    for frame in [&hidden, &shown] {
+        assert!(frame.merged.contains(&node), "the node is merged");
+    }
     assert_eq!(hidden.blocks.len(), shown.blocks.len());
     let mut coarser = 0;
     for (after, before) in shown.blocks.iter().zip(&hidden.blocks) {
@@ -463,7 +470,7 @@ fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
     }
     assert!(
         coarser > 0,
-        "no block coarser with the pixels below the eye counted"
+        "no block coarser with the node's pixels counted"
     );
     let (drawn_shown, drawn_hidden) = (
         planned_triangles(&shown, grid),
@@ -471,7 +478,7 @@ fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
     );
     assert!(
         drawn_shown < drawn_hidden,
-        "{drawn_shown} triangles with the pixels below the eye counted, {drawn_hidden} without"
+        "{drawn_shown} triangles with the node's pixels counted, {drawn_hidden} without"
     );
 }
 
@@ -830,4 +837,58 @@ fn geomip_blocks_glide_only_where_the_model_counts_nothing_over_tau() {
         bound.blocks.iter().filter(|b| glide(b) > 0.0).count() >= held,
         "the bound alone glides"
     );
+}
+
+/// One 16-cell patch 400 m across: flat ground with bumps a metre high,
+/// and along its far side a ridge rising 400 m, which puts an eye over the
+/// flat ground inside the patch's box.
+fn ridge_patch() -> Terrain {
+    let map = Heightmap::from_fn(17, 17, |r, c| {
+        let bumps = ((r * 7 + c * 3) % 5) as f32 * 0.25;
+        bumps
+            + if c >= 12 {
+                100.0 * (c - 12) as f32
+            } else {
+                0.0
+            }
+    })
+    .unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(25.0), 16, DVec2::ZERO).unwrap();
+    Terrain::new(info, 0.0).unwrap()
+}
+
+/// The patch whose box holds the eye is seen from where its ground lies,
+/// not from inside its box: from 100 m over its flat ground it is drawn
+/// coarser than full resolution, told to the control shader as chosen,
+/// within tau as its error is seen from the nearest its drawn surface can
+/// come; from 2 m over the bumps, at full resolution.
+#[test]
+fn the_patch_holding_the_eye_is_seen_from_its_ground() {
+    let terrain = ridge_patch();
+    let table = terrain.error_table();
+    let info = terrain.info();
+    let (x, z) = (info.local_x(4), info.local_z(8));
+    let tau = 16.0;
+    for (height, coarser) in [(100.0, true), (2.0, false)] {
+        let eye = DVec3::new(x, height, z);
+        let view = view_of(&terrain, eye, DVec3::new(info.local_x(16), 0.0, z), tau);
+        let (lo, hi) = info.min_max();
+        assert!(
+            lo < eye.y as f32 && (eye.y as f32) < hi,
+            "the box holds the eye"
+        );
+        for sight in [None, terrain.sight_table()] {
+            let frame = planned(&terrain, &table, sight, &view);
+            let block = block_holding(&frame, terrain.grid(), 0).expect("the patch is drawn");
+            assert_eq!(
+                !block.full_resolution, coarser,
+                "eye {height} m up: level {}",
+                block.patch_level
+            );
+            if coarser {
+                assert!(block.chosen && usize::from(block.patch_level) < LEVEL_COUNT - 1);
+                assert!(block.predicted_px > 0.0 && block.predicted_px <= tau);
+            }
+        }
+    }
 }

@@ -616,6 +616,10 @@ pub struct DrawnPatch {
     pub morph: f32,
     /// Its sides stitched to a coarser neighbour (`neighbour_masks`).
     pub coarser: u8,
+    /// Where its box holds the eye, the nearest its surface comes
+    /// (`Terrain::surface_distances`); None elsewhere, or where the
+    /// terrain's samples are not held.
+    pub ground: Option<f32>,
 }
 
 /// The error a patch's level choice expects on screen, in pixels: its
@@ -623,8 +627,11 @@ pub struct DrawnPatch {
 /// or while it glides towards the next coarser level, the blend of the
 /// two by its largest morph factor; a side stitched to a coarser
 /// neighbour adds that level's error from the nearest point of that
-/// side. Level 0 is the reference itself (error 0), and so is a patch the
-/// eye is inside, whose level the choice keeps at 0.
+/// side. Level 0 is the reference itself (error 0). A patch whose box
+/// holds the eye is seen from the nearest its drawn surface can come,
+/// its ground's distance less its error (infinite where that is none);
+/// without its ground, it is taken to be drawn at level 0, as the choice
+/// keeps it there.
 pub fn predicted_px(
     error: impl Fn(usize) -> f32,
     patch: &DrawnPatch,
@@ -632,15 +639,20 @@ pub fn predicted_px(
     pixels_per_radian: f32,
 ) -> f32 {
     let (lo, hi) = (patch.lo - eye_local, patch.hi - eye_local);
-    let d = super::factors::box_distance(lo, hi);
     let level = patch.level;
-    if level == 0 || d <= 0.0 {
+    if level == 0 {
         return 0.0;
     }
     let m = patch.morph;
     let e = match m > 0.0 {
         true => (1.0 - m) * error(level) + m * error(level + 1),
         false => error(level),
+    };
+    let d = match (super::factors::box_distance(lo, hi), patch.ground) {
+        (d, _) if d > 0.0 => d,
+        (_, Some(ground)) if ground > e => ground - e,
+        (_, Some(_)) => return f32::INFINITY,
+        (_, None) => return 0.0,
     };
     let mut px = e * pixels_per_radian / d;
     if patch.coarser != 0 {

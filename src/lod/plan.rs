@@ -32,7 +32,12 @@
 //! measure's, on the model's figures). A patch much deeper than it is
 //! near (one near the eye) is read in parts, each from its own nearest
 //! point and direction, the parts outside the frustum left out
-//! (`model_parts`). Once earlier frames of the view have counted the
+//! (`model_parts`). A patch whose box holds the eye has no nearest point
+//! there: it is seen from the nearest its ground comes instead (its cells'
+//! boxes, `Terrain::surface_distances`), both by the bound, each level
+//! from the nearest its drawn surface can come, and by the model, no part
+//! nearer than its ground; a level coarser than its own errors draw from
+//! inside its box is told to the control shader as chosen. Once earlier frames of the view have counted the
 //! pixels each patch shows (`lod::seen`), a block is read at the share of
 //! its pixels that showed, taken of those the level it was drawn at kept
 //! (what that level put over tau may have been drawn away, not hidden),
@@ -61,7 +66,7 @@ use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
 use crate::terrain::sight::{
     Block, BlockShares, BlockView, LatticePoint, SightTable, BLOCK_LEVELS,
 };
-use crate::terrain::{PatchGrid, Terrain};
+use crate::terrain::{PatchGrid, PatchId, Terrain};
 
 /// Share of the frame's terrain pixels the view model's choice may put
 /// over tau: half the 1 % a 99th percentile allows, the other half left to
@@ -443,7 +448,9 @@ impl Planner {
                 let block = &mut plan.blocks[c.slot];
                 block.patch_level = level as u8;
                 block.full_resolution = level >= c.full;
-                block.chosen = level < c.bound;
+                // A patch holding the eye was chosen at its bound already
+                // (`plan_block`): its own errors would draw it finer.
+                block.chosen |= level < c.bound;
                 block.coarser_over_px = match block.chosen || level == 0 {
                     true => 0.0,
                     false => c.over[level - 1],
@@ -646,20 +653,50 @@ fn plan_block(
     let bound = (0..full)
         .find(|&k| within_tolerance(row[k], scale, tau))
         .unwrap_or(full);
+    let mut predicted_px = if bound >= full {
+        0.0
+    } else {
+        row[bound] * scale
+    };
+    // A patch whose box holds the eye is seen from no distance at all by
+    // its box, and its own errors take it to full resolution on the GPU.
+    // Its ground lies some way off all the same: each level is tried from
+    // the nearest its drawn surface can come, by its bound's errors (the
+    // hierarchy's), and a coarser one is told to the control shader as
+    // chosen.
+    let mut chosen = false;
+    let eye_patch = match (d == 0.0 && bound > 0, id.level) {
+        (true, 0) => eye_patch_level(
+            terrain,
+            (pc[0], pr[0]),
+            view,
+            &hierarchy.node(id).patch_max,
+            full,
+        ),
+        _ => None,
+    };
+    let (ground, eye_level) = eye_patch.unwrap_or((d, None));
+    let bound = match eye_level {
+        Some((k, px)) if k < bound => {
+            (chosen, predicted_px) = (true, px);
+            k
+        }
+        _ => bound,
+    };
     let planned = PlannedBlock {
         col: pc[0] as u32,
         row: pr[0] as u32,
         level: id.level,
         patch_level: bound as u8,
         full_resolution: bound >= full,
-        chosen: false,
-        predicted_px: if bound >= full {
-            0.0
-        } else {
-            row[bound] * scale
-        },
+        chosen,
+        predicted_px,
         coarser_over_px: 0.0,
     };
+    // The view model reads a block from its parts' nearest points, none
+    // nearer than its ground (the patch holding the eye: the nearest its
+    // surface comes).
+    let (d, scale) = (ground, view.scale(ground));
     let Some(sight) = sight.filter(|_| d > 0.0) else {
         return (planned, None);
     };
@@ -673,7 +710,7 @@ fn plan_block(
         SightReading::Tessellated => sight.mean_height(block),
         SightReading::Template => None,
     };
-    model_parts((bounds, (near, far)), view, inputs.cull, landing, parts);
+    model_parts((bounds, (d, far)), view, inputs.cull, landing, parts);
     let patches = ((pc[1] - pc[0]) * (pr[1] - pr[0])) as f32;
     let pending = Pending {
         block,
@@ -691,6 +728,30 @@ fn plan_block(
         },
     };
     (planned, Some(pending))
+}
+
+/// Where patch (`col`, `row`), whose errors are `errors` and whose box
+/// holds the eye, lies from the eye: the nearest its surface comes, and
+/// the coarsest level below `full` within tau seen from the nearest its
+/// drawn surface can come at that level, with its error in pixels seen
+/// from there (None where no level is). None where the terrain's samples
+/// are not held (`Terrain::surface_distances`).
+fn eye_patch_level(
+    terrain: &Terrain,
+    (col, row): (usize, usize),
+    view: &LodView,
+    errors: &PatchErrors,
+    full: usize,
+) -> Option<(f32, Option<(usize, f32)>)> {
+    let mut grows = [0.0; LEVEL_COUNT + 1];
+    grows[1..].copy_from_slice(errors);
+    let nearest = terrain.surface_distances(PatchId { row, col }, view.eye_local, &grows)?;
+    let level = (0..full).find_map(|k| {
+        let d = nearest[k + 1];
+        let px = errors[k] * view.scale(d);
+        (d > 0.0 && px <= view.tau.px()).then_some((k, px))
+    });
+    Some((nearest[0], level))
 }
 
 /// The most parts a side a block is read in (`model_parts`).
@@ -738,7 +799,7 @@ fn model_parts(
             if cull && side > 1 && view.frustum.aabb_outside(0.5 * (lo + hi), 0.5 * (hi - lo)) {
                 continue;
             }
-            let d = box_distance(lo, hi);
+            let d = box_distance(lo, hi).max(near);
             // The horizontal run to the part's nearest point, and the fall
             // over it to where the rays land.
             let run = Vec2::new(lo.x.max(-hi.x), lo.z.max(-hi.z))
@@ -865,7 +926,8 @@ fn read_model(
 }
 
 /// The pixels counted of the blocks whose view model was not read (the
-/// patch the eye is over, those without a model) and of the merged nodes:
+/// patch the eye is over where its ground is not known, those without a
+/// model) and of the merged nodes:
 /// ground drawn within tau by its bound, whose pixels are the frame's all
 /// the same, so a 99th percentile over the frame allows its share of them
 /// over tau elsewhere. Only counts tell them: the model does not see them.

@@ -259,6 +259,53 @@ impl Terrain {
         [corner(0), corner(1), corner(2), corner(3)]
     }
 
+    /// Lower bounds on the distance from `eye` (terrain-local) to any point
+    /// of patch `id` that lies within `grows[k]` above or below its
+    /// surface, one for each grow: the nearest of its cells' boxes, each
+    /// grown by that much up and down. A cell's surface lies between the
+    /// lowest and highest of its corners, whichever diagonal splits it, so
+    /// a patch drawn within an error of its surface lies in its cells'
+    /// boxes grown by that error. 0 where the eye is in a grown box. None
+    /// for a tiled terrain, whose samples are not held.
+    pub fn surface_distances<const N: usize>(
+        &self,
+        id: PatchId,
+        eye: Vec3,
+        grows: &[f32; N],
+    ) -> Option<[f32; N]> {
+        let map = self.info.heightmap()?;
+        let rect = self.grid.sample_rect(id);
+        // How far `v` lies outside the span between `a` and `b`.
+        let gap = |v: f32, a: f32, b: f32| (a.min(b) - v).max(v - a.max(b)).max(0.0);
+        let xs: Vec<f32> = (rect.col0..=rect.col1)
+            .map(|c| self.info.local_x(c) as f32)
+            .collect();
+        let mut nearest = [f32::INFINITY; N];
+        for r in rect.row0..rect.row1 {
+            let (z0, z1) = (self.info.local_z(r) as f32, self.info.local_z(r + 1) as f32);
+            let dz = gap(eye.z, z0, z1);
+            if nearest.iter().all(|&n| dz * dz >= n) {
+                continue;
+            }
+            let (above, below) = (map.row(r), map.row(r + 1));
+            for (i, c) in (rect.col0..rect.col1).enumerate() {
+                let dx = gap(eye.x, xs[i], xs[i + 1]);
+                let across = dx * dx + dz * dz;
+                if nearest.iter().all(|&n| across >= n) {
+                    continue;
+                }
+                let corners = [above[c], above[c + 1], below[c], below[c + 1]];
+                let lo = corners.into_iter().fold(f32::INFINITY, f32::min);
+                let hi = corners.into_iter().fold(f32::NEG_INFINITY, f32::max);
+                for (n, &g) in nearest.iter_mut().zip(grows) {
+                    let dy = gap(eye.y, lo - g, hi + g);
+                    *n = n.min(across + dy * dy);
+                }
+            }
+        }
+        Some(nearest.map(f32::sqrt))
+    }
+
     /// A patch's bounding box in local coordinates as (centre, half extents).
     pub fn patch_aabb(&self, id: PatchId) -> (Vec3, Vec3) {
         let [ul, _, _, lr] = self.patch_corners(id);
