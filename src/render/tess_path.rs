@@ -202,10 +202,15 @@ pub(super) struct ChoiceBuffers {
     pub(super) merged_indices: Buffer,
     /// Patches whose error row the last frame wrote.
     written_rows: Vec<u32>,
-    /// The full-resolution bits, built here and copied whole: the mapped
-    /// memory may be write-combined (device-local, host-visible), where a
-    /// read-modify-write of single words reads across the bus each time.
+    /// The full-resolution bits, built here and written to the mapped
+    /// memory a word at a time: that memory may be write-combined
+    /// (device-local, host-visible), where a read-modify-write of single
+    /// words reads across the bus each time.
     full_bits: Vec<u32>,
+    /// The words of `full_bits` the last frame set, which the next one
+    /// clears: a frame writes the words it and the frame before set, not
+    /// the grid's.
+    full_words: Vec<u32>,
     /// The merged nodes whose level bytes the last frame set.
     merged: Vec<MergedNode>,
     /// The chosen blocks whose level bytes the last frame set.
@@ -265,6 +270,7 @@ impl ChoiceBuffers {
             merged_indices,
             written_rows: Vec::new(),
             full_bits: vec![0; patches.div_ceil(32)],
+            full_words: Vec::new(),
             merged: Vec::new(),
             chosen: Vec::new(),
         })
@@ -314,13 +320,25 @@ impl ChoiceBuffers {
         let (merged_levels, chosen_levels) = bytes.split_at_mut(patches.div_ceil(4));
         let merged_levels: &mut [u8] = bytemuck::cast_slice_mut(merged_levels);
         let chosen_levels: &mut [u8] = bytemuck::cast_slice_mut(chosen_levels);
-        self.full_bits.fill(0);
+        let cleared = self.full_words.len();
+        for &w in &self.full_words {
+            self.full_bits[w as usize] = 0;
+        }
         for block in plan.blocks.iter().filter(|b| b.full_resolution) {
             for p in block.patches(grid) {
-                self.full_bits[p / 32] |= 1 << (p % 32);
+                let word = &mut self.full_bits[p / 32];
+                if *word == 0 {
+                    self.full_words.push((p / 32) as u32);
+                }
+                *word |= 1 << (p % 32);
             }
         }
-        bits.copy_from_slice(&self.full_bits);
+        // The last frame's words (now clear, or set again) and this
+        // frame's; then this frame's alone are kept.
+        for &w in &self.full_words {
+            bits[w as usize] = self.full_bits[w as usize];
+        }
+        self.full_words.drain(..cleared);
         // The first patch in the low byte of each word: the bytes in
         // memory order on a little-endian host, as the shader reads them.
         let fill = |bytes: &mut [u8], rect, value: u8| {
