@@ -419,12 +419,12 @@ fn pixels_a_coarser_level_lost_are_not_taken_as_hidden() {
 /// Ground the view model does not read still counts towards the frame's
 /// share over tau. A merged node is drawn within tau by its bound, and its
 /// model is never read; counts say how many of the frame's pixels it
-/// shows (every other patch here shows 100). With those pixels counted the frame may put more pixels over
-/// tau elsewhere: it draws fewer triangles than with the same counts less
-/// the node's, and some blocks are coarser. (Not every block: the budget
-/// a greedy share's last step leaves is spent taking refinements back,
-/// and a smaller budget can leave more of it, so one block may end finer
-/// with the larger budget.)
+/// shows (every other patch here shows 100). With those pixels counted
+/// the frame may put more pixels over tau elsewhere: it draws fewer
+/// triangles than with the same counts less the node's, and some blocks
+/// are coarser. (Not every block: the budget a greedy share's last step
+/// leaves is spent taking refinements back, and a smaller budget can
+/// leave more of it, so one block may end finer with the larger budget.)
 #[test]
 fn pixels_of_ground_held_within_tau_count_towards_the_frames_share() {
     let terrain = dem_terrain(16, DVec2::ZERO);

@@ -37,9 +37,10 @@
 //! boxes, `Terrain::surface_distances`), both by the bound, each level
 //! from the nearest its drawn surface can come, and by the model, no part
 //! nearer than its ground; a level coarser than its own errors draw from
-//! inside its box is told to the control shader as chosen. Once earlier frames of the view have counted the
-//! pixels each patch shows (`lod::seen`), a block is read at the share of
-//! its pixels that showed, taken of those the level it was drawn at kept
+//! inside its box is told to the control shader as chosen. Once earlier
+//! frames of the view have counted the pixels each patch shows
+//! (`lod::seen`), a block is read at the share of its pixels that
+//! showed, taken of those the level it was drawn at kept
 //! (what that level put over tau may have been drawn away, not hidden),
 //! and the frame's pixels include those of ground whose model is not read,
 //! which the bound keeps within tau (`unread_pixels`).
