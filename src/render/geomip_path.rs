@@ -17,7 +17,6 @@ use crate::gpu::commands::Recorder;
 use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
-use crate::lod::factors::box_distance;
 use crate::lod::geomip::{self, PatchLevels};
 use crate::lod::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
@@ -554,8 +553,9 @@ impl GeomipGeometry {
                 (0.0, [0.0; 4])
             };
             if let Some(hierarchy) = predict {
-                let (lo, hi) = hierarchy.node(NodeId::patch(id)).aabb();
-                let holds_eye = box_distance(lo - view.eye_local, hi - view.eye_local) <= 0.0;
+                let node = hierarchy.node(NodeId::patch(id));
+                let (lo, hi) = node.aabb();
+                let holds_eye = node.distance(view.eye_local) <= 0.0;
                 let ground = match holds_eye && level > 0 {
                     true => terrain
                         .surface_distances(id, view.eye_local, &[0.0])
