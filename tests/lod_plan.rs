@@ -293,11 +293,11 @@ fn the_share_only_coarsens_the_bounds_choice() {
 }
 
 /// The pixels each patch showed (`lod::seen`) only ever coarsen a block
-/// that showed fewer than the view model gives it: counts above every
-/// block's modelled pixels leave the plan as it is; a block whose patches
-/// showed nothing takes its coarsest level, and with half the patches
-/// hidden, those blocks are drawn no finer than without counts, some
-/// coarser.
+/// that showed fewer than the view model gives it: against counts above
+/// every block's modelled pixels, a block whose patches showed nothing
+/// takes its coarsest level, and with half the patches hidden, those
+/// blocks are drawn no finer, some coarser. (Without counts, the plan
+/// finds hidden ground from its boxes instead: `lod::horizon`.)
 #[test]
 fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     let terrain = dem_terrain(16, DVec2::ZERO);
@@ -312,9 +312,7 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
     let level_of = |frame: &FramePlan, p: usize| {
         block_holding(frame, grid, p).map(|b| (b.patch_level, b.full_resolution))
     };
-    let unseen = with(None);
-    // Counted at the levels chosen without counts, at full resolution:
-    // no pixel lost to a coarser level.
+    // Counted at full resolution: no pixel lost to a coarser level.
     let full = vec![LEVEL_COUNT as u8; grid.patch_count()];
     let counts = |f: &dyn Fn(usize) -> u32| -> SeenPixels {
         SeenPixels::new(
@@ -324,8 +322,9 @@ fn counted_pixels_coarsen_only_the_blocks_that_showed_fewer() {
         )
         .unwrap()
     };
-    let everything = counts(&|_| 1 << 24);
-    assert_eq!(with(Some(&everything)).blocks, unseen.blocks);
+    let unseen = with(Some(&counts(&|_| 1 << 24)));
+    let places = |f: &FramePlan| f.blocks.iter().map(|b| b.node()).collect::<Vec<_>>();
+    assert_eq!(places(&with(None)), places(&unseen));
     let nothing = with(Some(&counts(&|_| 0)));
     assert_eq!(nothing.blocks.len(), unseen.blocks.len());
     let mut coarsened = 0;
@@ -891,4 +890,66 @@ fn the_patch_holding_the_eye_is_seen_from_its_ground() {
             }
         }
     }
+}
+
+/// 257 x 257 samples 10 m apart in 16-cell patches: a plain at 0 with
+/// bumps up to 2.5 m, and, where `wall`, a 200 m wall across its whole
+/// width over sample rows 60 to 84 (patch row 4 whole).
+fn walled_plain(wall: bool) -> Terrain {
+    let map = Heightmap::from_fn(257, 257, |r, c| {
+        let bumps = ((r * 7 + c * 13) % 11) as f32 * 0.25;
+        match wall && (60..=84).contains(&r) {
+            true => 200.0,
+            false => bumps,
+        }
+    })
+    .unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+    Terrain::new(info, 0.0).unwrap()
+}
+
+/// Without counts, ground that nearer ground certainly hides is not
+/// refined (`lod::horizon`): from 20 m over a bumpy plain, the bumps 1 to
+/// 2.4 km off need finer levels than the coarsest at 1 px, but behind a
+/// 200 m wall every block of them takes the coarsest level. The wall's
+/// own blocks, and the ground before it, are refined as before.
+#[test]
+fn ground_behind_a_wall_is_not_refined_without_counts() {
+    let coarsest_behind = |wall: bool| {
+        let terrain = walled_plain(wall);
+        let info = terrain.info();
+        let (x, z) = (info.local_x(128), info.local_z(20));
+        let view = view_of(
+            &terrain,
+            DVec3::new(x, 20.0, z),
+            DVec3::new(x, 0.0, info.local_z(256)),
+            1.0,
+        );
+        let table = terrain.error_table();
+        let frame = planned(&terrain, &table, terrain.sight_table(), &view);
+        let grid = terrain.grid();
+        // Blocks wholly in patch rows 8 on: 1.1 km and more from the eye.
+        let behind: Vec<_> = frame
+            .blocks
+            .iter()
+            .filter(|b| b.patches(grid).all(|p| grid.patch_id(p).row >= 8))
+            .collect();
+        assert!(behind.len() >= 10, "{} blocks behind", behind.len());
+        let before = frame
+            .blocks
+            .iter()
+            .filter(|b| b.patches(grid).all(|p| grid.patch_id(p).row == 2))
+            .map(|b| b.patch_level)
+            .max();
+        (behind.iter().all(|b| b.patch_level == 0), before)
+    };
+    let (open, open_before) = coarsest_behind(false);
+    let (walled, walled_before) = coarsest_behind(true);
+    assert!(
+        !open,
+        "the bumps need finer levels where nothing hides them"
+    );
+    assert!(walled, "hidden bumps are refined");
+    assert_eq!(open_before, walled_before);
+    assert!(open_before > Some(0));
 }

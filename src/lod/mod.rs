@@ -11,6 +11,8 @@
 //! - [`plan`]: the real-time error LOD: a frame plan walked down the
 //!   hierarchy, levels from the bound and the terrain's view model, in a
 //!   fraction of a millisecond whatever the terrain's size.
+//! - [`horizon`]: ground nearer ground certainly hides, from the plan's
+//!   boxes, for frames without counts.
 //! - [`seen`]: the pixels each patch showed in earlier frames of a view,
 //!   which the plan reads so as not to refine hidden ground.
 //! - [`order`]: front-to-back draw order of the chosen patches.
@@ -21,6 +23,7 @@
 pub mod factors;
 pub mod geomip;
 pub mod hierarchy;
+pub mod horizon;
 pub mod order;
 pub mod patch_merge;
 pub mod plan;

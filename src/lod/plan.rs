@@ -43,7 +43,10 @@
 //! showed, taken of those the level it was drawn at kept
 //! (what that level put over tau may have been drawn away, not hidden),
 //! and the frame's pixels include those of ground whose model is not read,
-//! which the bound keeps within tau (`unread_pixels`).
+//! which the bound keeps within tau (`unread_pixels`). A frame without
+//! counts (a moving camera's, a view's first, the geomip path's) reads
+//! each block at the share of its azimuth bins where the plan's nearer
+//! boxes do not prove it hidden (`lod::horizon`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
 //! own errors as before.
@@ -60,6 +63,7 @@ use glam::{Vec2, Vec3};
 
 use super::factors::{box_distance, error_tess_factor, within_tolerance};
 use super::hierarchy::{rect_bounds, rect_rows, square_range, Hierarchy, Node, NodeId};
+use super::horizon::Horizon;
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
 use super::seen::{SeenPixels, NOT_DRAWN};
 use super::view::LodView;
@@ -385,6 +389,10 @@ pub struct Planner {
     /// Per block of the plan, whether its model was read.
     read: Vec<bool>,
     share: GreedyShare,
+    /// The boxes of the plan's ground, where no counts tell what shows.
+    horizon: Horizon,
+    /// Each box's share shown (`Horizon::shown`).
+    shown: Vec<f32>,
 }
 
 impl Planner {
@@ -412,14 +420,26 @@ impl Planner {
         ) = (0, 0, 0.0, None);
         self.pending.clear();
         self.parts.clear();
+        self.horizon.clear();
+        // Without counts, what nearer ground hides is found from the
+        // plan's own boxes.
+        let horizon =
+            (inputs.seen.is_none() && inputs.sight.is_some()).then_some(&mut self.horizon);
+        let horizon_used = horizon.is_some();
         walk(
             terrain,
             hierarchy,
             view,
             inputs,
-            (plan, &mut self.stack),
+            (plan, &mut self.stack, horizon),
             (&mut self.pending, &mut self.parts),
         );
+        let shown = if horizon_used {
+            self.horizon.shown(&mut self.shown);
+            Some(self.shown.as_slice())
+        } else {
+            None
+        };
         let tau = view.tau.px();
         let mut frame_pixels = match inputs.sight {
             Some(sight) => read_model(
@@ -427,7 +447,7 @@ impl Planner {
                 (&self.pending, &self.parts),
                 (tau, inputs.reading.shares()),
                 view.viewport_pixels() as f32,
-                inputs.seen,
+                (inputs.seen, shown),
                 (&mut self.views, &mut self.candidates),
             ),
             None => {
@@ -487,7 +507,11 @@ fn walk(
     hierarchy: &Hierarchy,
     view: &LodView,
     inputs: &PlanInputs,
-    (plan, stack): (&mut FramePlan, &mut Vec<(NodeId, NodeBox)>),
+    (plan, stack, mut horizon): (
+        &mut FramePlan,
+        &mut Vec<(NodeId, NodeBox)>,
+        Option<&mut Horizon>,
+    ),
     (pending, parts): (&mut Vec<Pending>, &mut Vec<Part>),
 ) {
     let tau = view.tau.px();
@@ -548,6 +572,9 @@ fn walk(
                     let predicted_px = own[k] * scale;
                     plan.predicted_max_px = plan.predicted_max_px.max(predicted_px);
                     plan.patches_in_view += (span * span) as usize;
+                    if let Some(h) = horizon.as_deref_mut() {
+                        h.add_occluder(bounds.min - eye, bounds.max - eye);
+                    }
                     plan.merged.push(MergedNode {
                         col: pc[0] as u32,
                         row: pr[0] as u32,
@@ -609,7 +636,17 @@ fn walk(
         }
         plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
         plan.blocks.push(planned);
-        pending.extend(to_read);
+        let boxed = horizon.as_deref_mut().and_then(|h| {
+            let (lo, hi) = (bounds.min - eye, bounds.max - eye);
+            match to_read {
+                Some(_) => Some(h.add(lo, hi)),
+                None => {
+                    h.add_occluder(lo, hi);
+                    None
+                }
+            }
+        });
+        pending.extend(to_read.map(|p| Pending { boxed, ..p }));
     }
 }
 
@@ -717,6 +754,7 @@ fn plan_block(
         block,
         patches: (pc, pr),
         parts: parts.len() - before,
+        boxed: None,
         candidate: Candidate {
             slot,
             over: [0.0; LEVEL_COUNT + 1],
@@ -841,6 +879,8 @@ struct Pending {
     patches: ([usize; 2], [usize; 2]),
     /// How many of the parts, following those of the blocks before it.
     parts: usize,
+    /// Its box's index in the frame's horizon, where there is one.
+    boxed: Option<usize>,
     candidate: Candidate,
 }
 
@@ -855,7 +895,7 @@ fn read_model(
     (pending, parts): (&[Pending], &[Part]),
     (tau, shares): (f32, BlockShares),
     viewport: f32,
-    seen: Option<&SeenPixels>,
+    (seen, shown): (Option<&SeenPixels>, Option<&[f32]>),
     (views, candidates): (&mut Vec<Option<BlockView>>, &mut Vec<Candidate>),
 ) -> f64 {
     views.clear();
@@ -917,6 +957,12 @@ fn read_model(
                 over.iter_mut().for_each(|o| *o *= kept);
                 block_pixels = shown;
             }
+        } else if let (Some(shown), Some(at)) = (shown, p.boxed) {
+            // Without counts, the share of its bins nearer ground does not
+            // hide (`lod::horizon`).
+            let share = shown[at];
+            over.iter_mut().for_each(|o| *o *= share);
+            block_pixels *= f64::from(share);
         }
         frame_pixels += block_pixels;
         if modelled && c.bound > 0 {
