@@ -751,9 +751,13 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
                         occlusion_every_frame: true,
                         ..flat_settings(&large.terrain, DistanceMode::Smooth)
                     };
-                    let frame = (1..frames).fold(large.render(cam, &settings), |_, _| {
-                        large.render(cam, &settings)
-                    });
+                    // A still camera's last frame, after `frames - 1` before it.
+                    let still = |scene: &mut GpuScene| {
+                        (1..frames).fold(scene.render(cam, &settings), |_, _| {
+                            scene.render(cam, &settings)
+                        })
+                    };
+                    let frame = still(&mut large);
                     let holes = enclosed_background(&frame.readback.rgba, 384, 256, |p| p[0] < 128);
                     assert!(
                         holes.is_empty(),
@@ -768,10 +772,7 @@ fn error_bounded_tessellation_is_crack_free_and_follows_the_screen() {
                     last = tris;
                     // Half the pixels each way: the same error budget needs
                     // fewer triangles.
-                    let smaller = (1..frames)
-                        .fold(small.render(cam, &settings), |_, _| {
-                            small.render(cam, &settings)
-                        })
+                    let smaller = still(&mut small)
                         .measurements
                         .statistics
                         .unwrap()

@@ -217,6 +217,14 @@ pub fn box_distance(lo: Vec3, hi: Vec3) -> f32 {
     lo.max(-hi).max(Vec3::ZERO).length()
 }
 
+/// Horizontal distance from the eye (the origin) to the footprint (x, z)
+/// of the box `[lo, hi]`; 0 where the eye is over it.
+pub fn footprint_distance(lo: Vec3, hi: Vec3) -> f32 {
+    Vec2::new(lo.x.max(-hi.x), lo.z.max(-hi.z))
+        .max(Vec2::ZERO)
+        .length()
+}
+
 /// Distance from the eye (the origin) to the vertical strip standing on the
 /// segment `a`-`b` (eye-relative x, z) between heights `y_lo` and `y_hi`
 /// (eye-relative). A degenerate segment is its point.

@@ -61,7 +61,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::factors::{box_distance, error_tess_factor, within_tolerance};
+use super::factors::{box_distance, error_tess_factor, footprint_distance, within_tolerance};
 use super::hierarchy::{rect_bounds, rect_rows, square_range, Hierarchy, Node, NodeId};
 use super::horizon::Horizon;
 use super::patch_merge::{node_errors, MergedNode, MAX_MERGE_LEVEL};
@@ -841,9 +841,7 @@ fn model_parts(
             let d = box_distance(lo, hi).max(near);
             // The horizontal run to the part's nearest point, and the fall
             // over it to where the rays land.
-            let run = Vec2::new(lo.x.max(-hi.x), lo.z.max(-hi.z))
-                .max(Vec2::ZERO)
-                .length();
+            let run = footprint_distance(lo, hi);
             let fall = if run > 0.0 {
                 (eye.y - landing) / run
             } else {
