@@ -46,7 +46,8 @@
 //! which the bound keeps within tau (`unread_pixels`). A frame without
 //! counts (a moving camera's, a view's first, the geomip path's) reads
 //! each block at the share of its azimuth bins where the plan's nearer
-//! boxes do not prove it hidden (`lod::horizon`).
+//! boxes do not hide it, each block with a model taken as solid up to its
+//! mean height (`lod::horizon`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
 //! own errors as before.
@@ -638,8 +639,10 @@ fn walk(
         plan.blocks.push(planned);
         let boxed = horizon.as_deref_mut().and_then(|h| {
             let (lo, hi) = (bounds.min - eye, bounds.max - eye);
-            match to_read {
-                Some(_) => Some(h.add(lo, hi)),
+            match &to_read {
+                // Solid up to its mean height, where the model's rays
+                // land, where the model has one.
+                Some(p) => Some(h.add(lo, hi, p.mean.map_or(lo.y, |m| m - eye.y))),
                 None => {
                     h.add_occluder(lo, hi);
                     None
@@ -744,8 +747,9 @@ fn plan_block(
         row: id.row as usize,
     };
     let before = parts.len();
+    let mean = sight.mean_height(block);
     let landing = match inputs.reading {
-        SightReading::Tessellated => sight.mean_height(block),
+        SightReading::Tessellated => mean,
         SightReading::Template => None,
     };
     model_parts((bounds, (d, far)), view, inputs.cull, landing, parts);
@@ -754,6 +758,7 @@ fn plan_block(
         block,
         patches: (pc, pr),
         parts: parts.len() - before,
+        mean,
         boxed: None,
         candidate: Candidate {
             slot,
@@ -877,6 +882,8 @@ struct Pending {
     patches: ([usize; 2], [usize; 2]),
     /// How many of the parts, following those of the blocks before it.
     parts: usize,
+    /// Its mean height (`SightTable::mean_height`).
+    mean: Option<f32>,
     /// Its box's index in the frame's horizon, where there is one.
     boxed: Option<usize>,
     candidate: Candidate,
