@@ -908,7 +908,7 @@ fn walled_plain(wall: bool) -> Terrain {
     Terrain::new(info, 0.0).unwrap()
 }
 
-/// Without counts, ground that nearer ground certainly hides is not
+/// Without counts, ground that nearer ground hides is not
 /// refined (`lod::horizon`): from 20 m over a bumpy plain, the bumps 1 to
 /// 2.4 km off need finer levels than the coarsest at 1 px, but behind a
 /// 200 m wall every block of them takes the coarsest level. The wall's

@@ -289,9 +289,9 @@ fn shown_share(item: &Item, bins: &[f32]) -> f32 {
 mod tests {
     use super::*;
 
-    /// Adds a box solid up to its bottom.
-    fn solid_to_bottom(h: &mut Horizon, lo: Vec3, hi: Vec3) -> usize {
-        h.add(lo, hi, lo.y)
+    /// Adds the box from `lo` to `hi`, solid up to its bottom.
+    fn solid_to_bottom(h: &mut Horizon, lo: [f32; 3], hi: [f32; 3]) -> usize {
+        h.add(Vec3::from(lo), Vec3::from(hi), lo[1])
     }
 
     /// A box solid up to its mean hides what its bottom leaves in view:
@@ -331,26 +331,10 @@ mod tests {
         let mut h = Horizon::default();
         // The eye at the origin, 10 above a plain at -10; a wall 100 wide
         // along x, 20 to 30 away along z, rising to 5 above the eye.
-        let wall = solid_to_bottom(
-            &mut h,
-            Vec3::new(-50.0, 5.0, 20.0),
-            Vec3::new(50.0, 6.0, 30.0),
-        );
-        let behind = solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -10.0, 100.0),
-            Vec3::new(5.0, -9.0, 110.0),
-        );
-        let tall = solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -10.0, 100.0),
-            Vec3::new(5.0, 40.0, 110.0),
-        );
-        let beside = solid_to_bottom(
-            &mut h,
-            Vec3::new(200.0, -10.0, -5.0),
-            Vec3::new(210.0, -9.0, 5.0),
-        );
+        let wall = solid_to_bottom(&mut h, [-50.0, 5.0, 20.0], [50.0, 6.0, 30.0]);
+        let behind = solid_to_bottom(&mut h, [-5.0, -10.0, 100.0], [5.0, -9.0, 110.0]);
+        let tall = solid_to_bottom(&mut h, [-5.0, -10.0, 100.0], [5.0, 40.0, 110.0]);
+        let beside = solid_to_bottom(&mut h, [200.0, -10.0, -5.0], [210.0, -9.0, 5.0]);
         let mut shown = Vec::new();
         h.shown(&mut shown);
         assert_eq!(shown[wall], 1.0);
@@ -368,29 +352,13 @@ mod tests {
         // A ridge at -1 under an eye at 0, from 10 to 20 away: its top's
         // tangent straight ahead is -1/20, and lower towards its ends,
         // where lines of sight leave it through its sides.
-        solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -1.0, 10.0),
-            Vec3::new(5.0, 0.0, 20.0),
-        );
+        solid_to_bottom(&mut h, [-5.0, -1.0, 10.0], [5.0, 0.0, 20.0]);
         // Ground at -4 to -3, 100 away: its top at -3/100 is over -1/20.
-        let over = solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -4.0, 100.0),
-            Vec3::new(5.0, -3.0, 110.0),
-        );
+        let over = solid_to_bottom(&mut h, [-5.0, -4.0, 100.0], [5.0, -3.0, 110.0]);
         // Ground at -10 to -9, 100 to 110 away: -9/110 is under -1/20.
-        let under = solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -10.0, 100.0),
-            Vec3::new(5.0, -9.0, 110.0),
-        );
+        let under = solid_to_bottom(&mut h, [-5.0, -10.0, 100.0], [5.0, -9.0, 110.0]);
         // As low, but reaching past the ridge's end on one side.
-        let round = solid_to_bottom(
-            &mut h,
-            Vec3::new(-5.0, -10.0, 100.0),
-            Vec3::new(100.0, -9.0, 110.0),
-        );
+        let round = solid_to_bottom(&mut h, [-5.0, -10.0, 100.0], [100.0, -9.0, 110.0]);
         let mut shown = Vec::new();
         h.shown(&mut shown);
         assert_eq!(shown[over], 1.0);
@@ -403,19 +371,11 @@ mod tests {
     #[test]
     fn ground_under_the_eye_hides_all_round() {
         let mut h = Horizon::default();
-        let under = solid_to_bottom(
-            &mut h,
-            Vec3::new(-10.0, -2.0, -10.0),
-            Vec3::new(10.0, -1.0, 10.0),
-        );
+        let under = solid_to_bottom(&mut h, [-10.0, -2.0, -10.0], [10.0, -1.0, 10.0]);
         let deep: Vec<usize> = [(50.0, 0.0), (-50.0, 0.0), (0.0, 50.0), (0.0, -50.0)]
             .into_iter()
             .map(|(x, z)| {
-                solid_to_bottom(
-                    &mut h,
-                    Vec3::new(x - 1.0, -30.0, z - 1.0),
-                    Vec3::new(x + 1.0, -20.0, z + 1.0),
-                )
+                solid_to_bottom(&mut h, [x - 1.0, -30.0, z - 1.0], [x + 1.0, -20.0, z + 1.0])
             })
             .collect();
         let mut shown = Vec::new();

@@ -11,7 +11,7 @@
 //! - [`plan`]: the real-time error LOD: a frame plan walked down the
 //!   hierarchy, levels from the bound and the terrain's view model, in a
 //!   fraction of a millisecond whatever the terrain's size.
-//! - [`horizon`]: ground nearer ground certainly hides, from the plan's
+//! - [`horizon`]: ground nearer ground hides, estimated from the plan's
 //!   boxes, for frames without counts.
 //! - [`seen`]: the pixels each patch showed in earlier frames of a view,
 //!   which the plan reads so as not to refine hidden ground.
