@@ -87,7 +87,10 @@ const FRACTIONS: usize = FRACTION_EXPONENTS.len();
 /// Levels with an entry: those below the largest patch's cell count.
 pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// Changes whenever what the table holds, or how it is computed, changes:
-/// part of its on-disk cache key.
+/// part of its on-disk cache key. A number is never taken twice, not even
+/// by a change that was tried and dropped: the tables it cached stay on
+/// the machines that ran it and would be read back as the next change's.
+/// 10 and 11 were taken so (notes section 51); the next change takes 12.
 pub const MODEL_VERSION: u32 = 9;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
