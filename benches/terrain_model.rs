@@ -259,10 +259,11 @@ fn geomip_levels(c: &mut Criterion) {
             }
             rects.push(([c0, c1], [r0, r1]));
         }
+        let stitched = vec![[true; 4]; rects.len()];
         group.bench_function(format!("blocks/{}", view.name), |b| {
             b.iter_batched_ref(
                 || levels.clone(),
-                |l| geomip::refine_and_balance_blocks(l, grid, &drawn, &rects),
+                |l| geomip::refine_and_balance_blocks(l, grid, &drawn, &rects, &stitched),
                 BatchSize::SmallInput,
             )
         });

@@ -351,7 +351,8 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
         .iter()
         .map(|&(c0, r0, span, _)| ([c0, c0 + span], [r0, r0 + span]))
         .collect();
-    refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects);
+    let stitched = vec![[true; 4]; rects.len()];
+    refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects, &stitched);
     assert_eq!(by_blocks, every);
     // So does balancing only from the sides finer than the coarsest but one.
     refine_and_balance(&mut by_sides, &grid, &drawn, &edges);
@@ -378,7 +379,8 @@ fn refining_and_balancing_reach_no_further_than_balance_reach() {
             let p = r * cols + c;
             levels[p] = 0;
             drawn[p] = true;
-            refine_and_balance_blocks(&mut levels, &grid, &drawn, &[([c, c + 1], [r, r + 1])]);
+            let block = [([c, c + 1], [r, r + 1])];
+            refine_and_balance_blocks(&mut levels, &grid, &drawn, &block, &[[true; 4]]);
             let farthest = (0..grid.patch_count())
                 .filter(|&q| levels[q] < coarsest)
                 .map(|q| (q % cols).abs_diff(c) + (q / cols).abs_diff(r))
@@ -430,4 +432,73 @@ fn a_patch_holding_the_eye_is_predicted_from_its_ground() {
     let above = Vec3::new(10.0, 250.0, -20.0);
     let from_box = predicted_px(error, &patch(2, Some(1.0)), above, 1000.0);
     assert_eq!(from_box, 10.0 * 1000.0 / 50.0);
+}
+
+/// A stitched side's fans keep the level's vertices but not its
+/// triangles: each 2x2 block along the side is fanned from its centre, so
+/// half its cells are split along the other diagonal. On a plane that
+/// changes nothing; beside a spike one cell inside a full-resolution
+/// patch's right side, the cells that touch the spike are split away from
+/// it, and their centres stand half the spike's height off the reference.
+#[test]
+fn stitch_errors_find_a_spike_beside_a_side() {
+    let plane = |r: usize, c: usize| 0.5 * c as f32 + 0.2 * r as f32;
+    let spike = 60.0;
+    let map = vkterrain::terrain::Heightmap::from_fn(33, 33, |r, c| {
+        plane(r, c) + if (r, c) == (8, 15) { spike } else { 0.0 }
+    })
+    .unwrap();
+    let grid = vkterrain::terrain::PatchGrid::for_size(33, 33, 16);
+    let (_, errors) = vkterrain::terrain::ErrorTable::compute_pair(&map, &grid);
+    let stitch = StitchErrors::compute(&map, &grid, &errors);
+    let sides = [LEFT, TOP, RIGHT, BOTTOM];
+    for level in 0..level_count(16) {
+        // Patches (1, 0), (0, 1) and (1, 1) are planes, as is every side of
+        // patch (0, 0) but its right.
+        for p in 1..4 {
+            for side in sides {
+                let e = stitch.excess(p, level, side);
+                assert!(e < 1e-4, "patch {p}, level {level}, side {side}: {e}");
+            }
+        }
+        for side in [LEFT, TOP, BOTTOM] {
+            let e = stitch.excess(0, level, side);
+            assert!(e < 1e-4, "level {level}, side {side}: {e}");
+        }
+    }
+    // Full resolution is the reference itself: its fans stray by all they
+    // stray. At level 1 the spike is not a vertex: the level strays by all
+    // of it, and its fans by no more.
+    let right = stitch.excess(0, 0, RIGHT);
+    assert!((right - spike / 2.0).abs() < 1e-3, "{right}");
+    assert_eq!(stitch.excess(0, 1, RIGHT), 0.0);
+    // The plane alone strays nowhere.
+    let flat = vkterrain::terrain::Heightmap::from_fn(33, 33, plane).unwrap();
+    let (_, flat_errors) = vkterrain::terrain::ErrorTable::compute_pair(&flat, &grid);
+    let none = StitchErrors::compute(&flat, &grid, &flat_errors);
+    for p in 0..4 {
+        for level in 0..level_count(16) {
+            for side in sides {
+                assert!(none.excess(p, level, side) < 1e-4);
+            }
+        }
+    }
+}
+
+/// A drawn patch beyond a side that may not be stitched takes the
+/// block's own level, as a culled one does; beyond the others it may be
+/// one coarser, and balancing goes on from there.
+#[test]
+fn a_side_that_may_not_be_stitched_keeps_its_neighbour_at_its_level() {
+    let grid = vkterrain::terrain::PatchGrid::for_size(4 * 4 + 1, 4 + 1, 4);
+    let coarsest = (level_count(4) - 1) as u8;
+    let drawn = vec![true; 4];
+    let blocks: Vec<_> = (0..4).map(|c| ([c, c + 1], [0, 1])).collect();
+    for (left, expected) in [(true, [1, 0, 1, 2]), (false, [0, 0, 1, 2])] {
+        let mut levels = vec![coarsest, 0, coarsest, coarsest];
+        let mut sides = vec![[true; 4]; 4];
+        sides[1][0] = left;
+        refine_and_balance_blocks(&mut levels, &grid, &drawn, &blocks, &sides);
+        assert_eq!(levels, expected, "left side stitchable: {left}");
+    }
 }

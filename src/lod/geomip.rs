@@ -14,6 +14,11 @@
 //! `height_at`'s split (diagonal from the upper-right to the lower-left
 //! corner), so level 0 is exactly the brute mesh. One index list per level
 //! and coarser-side mask (16 per level), built once, serves every patch.
+//! A fan splits half its cells along the other diagonal, so a stitched side
+//! can stray from the reference further than its level does (a spike a
+//! cell inside it, by half its height: `StitchErrors`); the error LOD
+//! keeps a drawn neighbour at the patch's own level where that would show
+//! (`stitchable_sides`).
 //!
 //! **Geomorphing** (in the vertex shader) moves the vertices a level drops
 //! onto the next coarser surface (`morph_target`) as the patch's distance
@@ -25,12 +30,14 @@
 //! morph, because that patch stitches to its vertices where they are.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use super::hierarchy::Hierarchy;
 use super::plan::PlannedBlock;
 use super::view::LodView;
 use crate::terrain::error_table::ErrorTable;
-use crate::terrain::grid::{PatchGrid, PatchId};
+use crate::terrain::grid::{PatchGrid, PatchId, SampleRect};
+use crate::terrain::heightmap::Heightmap;
 use crate::terrain::Terrain;
 
 /// Sides of a patch, as bits of a mask.
@@ -259,6 +266,207 @@ pub fn block_glide(block: &PlannedBlock, k: usize, hierarchy: &Hierarchy, view: 
     }
 }
 
+/// Sides of a block as `refine_and_balance_blocks` visits them: the
+/// column before its first (least x), the column after its last (most
+/// x), the row before its first (most z: rows run towards -z) and the row
+/// after its last (least z).
+pub const BLOCK_SIDES: usize = 4;
+
+/// Which sides of the error plan's `block`, drawn at level index `k`
+/// (2^k segments a patch side), may border a drawn neighbour one level
+/// coarser (`BLOCK_SIDES`' order). Such a side is stitched: each 2x2 block
+/// of quads along it is drawn as a fan (`patch_indices`), whose triangles
+/// are not the level's own, and which can stray from the reference by
+/// more than the level does: a spike one cell inside a full-resolution
+/// patch's side has its near faces cut to half its height. A side may be
+/// stitched where every patch along it strays there by no more than its
+/// level's own error (`StitchErrors`), or, where one strays more, by no
+/// more than tau seen from the nearest point of the strip the fans
+/// cover. A side beside the eye thus keeps its neighbour at its own level
+/// wherever the fans would show. Without stitching errors (`stitch`
+/// None), or at the coarsest level, every side may be stitched.
+pub fn stitchable_sides(
+    (block, k): (&PlannedBlock, usize),
+    (hierarchy, grid): (&Hierarchy, &PatchGrid),
+    view: &LodView,
+    stitch: Option<&StitchErrors>,
+) -> [bool; BLOCK_SIDES] {
+    let Some(stitch) = stitch.filter(|_| k > 0) else {
+        return [true; BLOCK_SIDES];
+    };
+    let level = level_of_index(k, level_count(grid.cells_per_patch()));
+    let ([c0, c1], [r0, r1]) = block.patch_range(grid);
+    let at = |row: usize, col: usize| grid.patch_index(PatchId { row, col });
+    // The largest error of each side's patches' fans where it is past
+    // their level's own, 0 where none is.
+    let mut excess = [0.0f32; BLOCK_SIDES];
+    let mut stray = |side: usize, bit: u8, p: usize| {
+        excess[side] = excess[side].max(stitch.excess(p, level, bit));
+    };
+    for r in r0..r1 {
+        stray(0, LEFT, at(r, c0));
+        stray(1, RIGHT, at(r, c1 - 1));
+    }
+    for c in c0..c1 {
+        stray(2, TOP, at(r0, c));
+        stray(3, BOTTOM, at(r1 - 1, c));
+    }
+    if excess.iter().all(|&e| e == 0.0) {
+        return [true; BLOCK_SIDES];
+    }
+    let node = hierarchy.node(block.node());
+    let (lo, hi) = node.aabb();
+    let (lo, hi) = (lo - view.eye_local, hi - view.eye_local);
+    // The fans cover two quads of the level from the side inwards.
+    let quads = (block.span() << k) as f32;
+    let (wx, wz) = (
+        (2.0 * (hi.x - lo.x) / quads).min(hi.x - lo.x),
+        (2.0 * (hi.z - lo.z) / quads).min(hi.z - lo.z),
+    );
+    let strips = [
+        (lo, Vec3::new(lo.x + wx, hi.y, hi.z)),
+        (Vec3::new(hi.x - wx, lo.y, lo.z), hi),
+        (Vec3::new(lo.x, lo.y, hi.z - wz), hi),
+        (lo, Vec3::new(hi.x, hi.y, lo.z + wz)),
+    ];
+    std::array::from_fn(|side| {
+        let (a, b) = strips[side];
+        let scale = view.scale(super::factors::box_distance(a, b));
+        excess[side] == 0.0 || super::factors::within_tolerance(excess[side], scale, view.tau.px())
+    })
+}
+
+/// How far each side's stitched fans (`patch_indices`) stray from the
+/// reference, per patch, geomip level and side, where that is further
+/// than the level's own error (the geomip path's table): the largest
+/// difference, over the 2x2 blocks of quads along the side, between the
+/// fan drawn with every side the block touches stitched and the
+/// reference's own triangles (`Heightmap::height_at`'s split), or 0 where
+/// it is within the level's error. Both are planar over each triangle,
+/// and the fans' edges run along grid lines and cell diagonals, so the
+/// largest difference lies at a sample or at a cell's centre, where a
+/// fan's diagonal crosses the reference's. A remainder patch's template
+/// vertices past its last sample are clamped to it, as the vertex shader
+/// clamps them. Computed once per terrain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StitchErrors {
+    levels: usize,
+    /// [patch][level] excesses of the left, top, right and bottom sides.
+    excess: Vec<[f32; 4]>,
+}
+
+impl StitchErrors {
+    /// Every patch of `grid` over `map`, whose geomip path's error table
+    /// is `errors`.
+    pub fn compute(map: &Heightmap, grid: &PatchGrid, errors: &ErrorTable) -> StitchErrors {
+        let n = grid.cells_per_patch();
+        let levels = level_count(n);
+        let excess = (0..grid.patch_count())
+            .into_par_iter()
+            .flat_map_iter(|p| {
+                let rect = grid.sample_rect(grid.patch_id(p));
+                (0..levels).map(move |level| {
+                    let own = errors.error(p, table_index(level, levels));
+                    patch_stitch_errors(map, rect, n, level).map(|e| if e > own { e } else { 0.0 })
+                })
+            })
+            .collect();
+        StitchErrors { levels, excess }
+    }
+
+    /// Patch `patch`'s fans' error at geomip level `level` along side
+    /// `side` (one of `LEFT`, `TOP`, `RIGHT`, `BOTTOM`) where it is past
+    /// the level's own, else 0.
+    pub fn excess(&self, patch: usize, level: usize, side: u8) -> f32 {
+        // The bits 1, 2, 4, 8 as 0 to 3.
+        self.excess[patch * self.levels + level][side.trailing_zeros() as usize & 3]
+    }
+}
+
+/// `StitchErrors` of one patch (`rect`, of a grid of `n`-cell patches) at
+/// geomip `level`.
+fn patch_stitch_errors(map: &Heightmap, rect: SampleRect, n: usize, level: usize) -> [f32; 4] {
+    let s = 1usize << level;
+    let k = n / s;
+    let mut out = [0.0f32; 4];
+    if k < 2 {
+        // A single quad is never stitched.
+        return out;
+    }
+    let (rows, cols) = (rect.cells_z(), rect.cells_x());
+    let h =
+        |i: usize, j: usize| f64::from(map.get(rect.row0 + i.min(rows), rect.col0 + j.min(cols)));
+    let blocks = k / 2;
+    for bi in 0..blocks {
+        for bj in 0..blocks {
+            let sides = block_sides(bi, bj, blocks);
+            let (i0, j0) = (bi * 2 * s, bj * 2 * s);
+            if sides == 0 || i0 >= rows || j0 >= cols {
+                continue;
+            }
+            let clamp = |(di, dj): (usize, usize)| ((i0 + di).min(rows), (j0 + dj).min(cols));
+            let ring: Vec<(usize, usize)> = fan_ring(s, sides).map(clamp).collect();
+            let centre = clamp((s, s));
+            let worst = (0..ring.len())
+                .map(|t| fan_error(&h, [centre, ring[t], ring[(t + 1) % ring.len()]]))
+                .fold(0.0f64, f64::max) as f32;
+            for (bit, o) in [LEFT, TOP, RIGHT, BOTTOM].into_iter().zip(&mut out) {
+                if sides & bit != 0 {
+                    *o = o.max(worst);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The largest difference over the triangle `tri` (template (row, column)
+/// offsets) between the plane through its vertices' heights and the
+/// reference (`h` at the samples, the split's midpoint at cell centres):
+/// at its samples and at its cells' centres (`StitchErrors`).
+fn fan_error(h: &impl Fn(usize, usize) -> f64, tri: [(usize, usize); 3]) -> f64 {
+    let p = tri.map(|(i, j)| (i as f64, j as f64));
+    let (a, b) = (
+        (p[1].0 - p[0].0, p[1].1 - p[0].1),
+        (p[2].0 - p[0].0, p[2].1 - p[0].1),
+    );
+    let det = a.0 * b.1 - a.1 * b.0;
+    if det == 0.0 {
+        // Collapsed by clamping: it draws nothing.
+        return 0.0;
+    }
+    let heights = tri.map(|(i, j)| h(i, j));
+    let (i_lo, i_hi) = (tri.iter().map(|t| t.0).min(), tri.iter().map(|t| t.0).max());
+    let (j_lo, j_hi) = (tri.iter().map(|t| t.1).min(), tri.iter().map(|t| t.1).max());
+    let (Some(i_lo), Some(i_hi), Some(j_lo), Some(j_hi)) = (i_lo, i_hi, j_lo, j_hi) else {
+        return 0.0;
+    };
+    let plane = |r: f64, c: f64| {
+        let d = (r - p[0].0, c - p[0].1);
+        let w1 = (d.0 * b.1 - d.1 * b.0) / det;
+        let w2 = (a.0 * d.1 - a.1 * d.0) / det;
+        let w0 = 1.0 - w1 - w2;
+        let eps = -1e-9;
+        (w0 >= eps && w1 >= eps && w2 >= eps)
+            .then(|| w0 * heights[0] + w1 * heights[1] + w2 * heights[2])
+    };
+    let mut worst = 0.0f64;
+    for r in i_lo..=i_hi {
+        for c in j_lo..=j_hi {
+            if let Some(drawn) = plane(r as f64, c as f64) {
+                worst = worst.max((drawn - h(r, c)).abs());
+            }
+            if r < i_hi && c < j_hi {
+                if let Some(drawn) = plane(r as f64 + 0.5, c as f64 + 0.5) {
+                    let centre = 0.5 * (h(r, c + 1) + h(r + 1, c));
+                    worst = worst.max((drawn - centre).abs());
+                }
+            }
+        }
+    }
+    worst
+}
+
 /// Balances levels so neighbours differ by at most one, only ever lowering
 /// (refining) a level.
 pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
@@ -371,13 +579,18 @@ pub fn refine_and_balance(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool], e
 /// the coarsest: the same levels, in time that grows with the blocks'
 /// sides. Inside a block no side changes level, so only the patches just
 /// beyond a block's sides are looked at, once each: refining the culled
-/// ones and seeding the balancing in the same pass.
+/// ones and seeding the balancing in the same pass. Where a side of a
+/// block may not be stitched to a coarser neighbour (`stitched[i][s]`
+/// false for side `s` of block `i`, `stitchable_sides`), a drawn patch
+/// beyond it is refined to the block's level as a culled one is.
 pub fn refine_and_balance_blocks(
     levels: &mut [u8],
     grid: &PatchGrid,
     drawn: &[bool],
     blocks: &[([usize; 2], [usize; 2])],
+    stitched: &[[bool; BLOCK_SIDES]],
 ) {
+    assert_eq!(blocks.len(), stitched.len(), "one set of sides a block");
     let mut queue = Vec::new();
     // The blocks' own levels: balancing may lower a block's patches one by
     // one, and those it lowers go on the queue themselves.
@@ -386,13 +599,17 @@ pub fn refine_and_balance_blocks(
         .map(|&([c0, _], [r0, _])| levels[grid.patch_index(PatchId { row: r0, col: c0 })])
         .collect();
     // One look beyond each side: a culled patch takes the finest level of
-    // the blocks beside it, a drawn one at most one coarser than each.
-    // Both are minima over the blocks, so one pass in any order gives
-    // them; a culled patch at its blocks' finest is never more than one
-    // coarser than any of them.
-    for (block, &level) in blocks.iter().zip(&own) {
-        for_each_beyond(grid, block, |i, q| {
-            let limit = if drawn[i] { level + 1 } else { level };
+    // the blocks beside it, a drawn one at most one coarser than each
+    // (none beyond a side that may not be stitched). Both are minima over
+    // the blocks, so one pass in any order gives them; a patch at its
+    // blocks' finest is never more than one coarser than any of them.
+    for ((block, &level), sides) in blocks.iter().zip(&own).zip(stitched) {
+        for_each_beyond(grid, block, |side, i, q| {
+            let limit = if drawn[i] && sides[side] {
+                level + 1
+            } else {
+                level
+            };
             if levels[i] > limit {
                 levels[i] = limit;
                 queue.push(q);
@@ -402,27 +619,26 @@ pub fn refine_and_balance_blocks(
     balance_from(levels, grid, &queue);
 }
 
-/// Calls `f` with the index and place of each patch just beyond a side of
-/// the block of columns `c0..c1` and rows `r0..r1` of `grid`.
+/// Calls `f` with the side (`BLOCK_SIDES`' order), index and place of
+/// each patch just beyond a side of the block of columns `c0..c1` and rows
+/// `r0..r1` of `grid`.
 fn for_each_beyond(
     grid: &PatchGrid,
     &([c0, c1], [r0, r1]): &([usize; 2], [usize; 2]),
-    mut f: impl FnMut(usize, PatchId),
+    mut f: impl FnMut(usize, usize, PatchId),
 ) {
-    let mut visit = |id: PatchId| f(grid.patch_index(id), id);
-    let mut column = |col: usize| (r0..r1).for_each(|row| visit(PatchId { row, col }));
+    let mut visit = |side: usize, id: PatchId| f(side, grid.patch_index(id), id);
     if c0 > 0 {
-        column(c0 - 1);
+        (r0..r1).for_each(|row| visit(0, PatchId { row, col: c0 - 1 }));
     }
     if c1 < grid.patch_cols() {
-        column(c1);
+        (r0..r1).for_each(|row| visit(1, PatchId { row, col: c1 }));
     }
-    let mut row = |row: usize| (c0..c1).for_each(|col| visit(PatchId { row, col }));
     if r0 > 0 {
-        row(r0 - 1);
+        (c0..c1).for_each(|col| visit(2, PatchId { row: r0 - 1, col }));
     }
     if r1 < grid.patch_rows() {
-        row(r1);
+        (c0..c1).for_each(|col| visit(3, PatchId { row: r1, col }));
     }
 }
 

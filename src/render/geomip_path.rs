@@ -41,6 +41,9 @@ pub(super) struct GeomipGeometry {
     layout: PipelineLayout,
     /// Per-patch errors of each level, for choosing levels by projected error.
     errors: ErrorTable,
+    /// How far stitched sides stray, for the error LOD's balancing; None
+    /// where the terrain's samples are not held.
+    stitch: Option<geomip::StitchErrors>,
     /// Levels set from outside (`set_geomip_levels`) instead of chosen,
     /// balanced, with no morph.
     pub(super) given: Option<geomip::PatchLevels>,
@@ -59,6 +62,9 @@ pub(super) struct ChosenPatches {
     visible: Vec<u32>,
     /// The error LOD's blocks as columns and rows of patches.
     rects: Vec<Rect>,
+    /// Per block of `rects`, the sides a drawn neighbour may be one level
+    /// coarser beyond (`geomip::stitchable_sides`).
+    stitched: Vec<[bool; geomip::BLOCK_SIDES]>,
     /// The distance LOD's distances, one per drawn patch in grid order.
     distances: Vec<f32>,
     /// Where the last choice may have left entries unlike `reset`'s;
@@ -105,6 +111,7 @@ impl ChosenPatches {
         }
         self.visible.clear();
         self.rects.clear();
+        self.stitched.clear();
         self.distances.clear();
     }
 
@@ -254,6 +261,10 @@ impl GeomipGeometry {
             full_resolution,
             pipelines: build_pipelines(target, &layout, (RenderPath::Geomip, false), wireframe)?,
             layout,
+            stitch: terrain
+                .info()
+                .heightmap()
+                .map(|map| geomip::StitchErrors::compute(map, grid, &errors)),
             errors,
             given: None,
         })
@@ -371,11 +382,23 @@ impl GeomipGeometry {
                         chosen.drawn[row].fill(true);
                     }
                     chosen.rects.push(rect);
+                    chosen.stitched.push(geomip::stitchable_sides(
+                        (block, k),
+                        (hierarchy, grid),
+                        &lod_view,
+                        self.stitch.as_ref(),
+                    ));
                 }
                 over_share = frame_plan.predicted_over_share;
                 // A block's patches share its level: only its sides can
                 // lower a neighbour.
-                geomip::refine_and_balance_blocks(levels, grid, &chosen.drawn, &chosen.rects);
+                geomip::refine_and_balance_blocks(
+                    levels,
+                    grid,
+                    &chosen.drawn,
+                    &chosen.rects,
+                    &chosen.stitched,
+                );
                 let drawn = rect_bounds(chosen.rects.iter().copied());
                 chosen.list_drawn(cols, drawn.unwrap_or_default());
                 chosen.wrote(grid, coarsest, drawn);
