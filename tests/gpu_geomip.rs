@@ -8,7 +8,7 @@ use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec3};
 use vkterrain::bench::cameras::named_views;
-use vkterrain::bench::error::{enclosed_background, pixel_errors, DepthView};
+use vkterrain::bench::error::{enclosed_background, pixel_errors, DepthView, PixelError};
 use vkterrain::lod::geomip::{neighbour_masks, select_levels_by_distance};
 use vkterrain::render::{FrameView, LodMetric, RenderPath, RenderSettings, Shading};
 use vkterrain::scene::Scene;
@@ -282,27 +282,10 @@ fn sides_shared_with_culled_patches_are_not_stitched() {
         .camera;
     let (w, h) = (640, 360);
     let mut scene = GpuScene::new(terrain, w, h, false);
-    let reference = scene.render(
-        &grazing,
-        &RenderSettings {
-            path: RenderPath::Brute,
-            ..RenderSettings::default()
-        },
-    );
     // Half the bench's 1280x720, so half its pixel errors: tau 0.25 px
     // here is its 0.5 px.
     let tau = 0.25;
-    let frame = scene.render(
-        &grazing,
-        &RenderSettings {
-            path: RenderPath::Geomip,
-            lod_metric: LodMetric::Error(tau),
-            cull: true,
-            ..RenderSettings::default()
-        },
-    );
-    let k = f64::from(reference.view.pixels_per_radian);
-    let errors = pixel_errors(&DepthView::of(&frame), &DepthView::of(&reference), k);
+    let errors = error_mode_against_brute(&mut scene, &grazing, tau);
     let surface: Vec<_> = errors.iter().filter(|e| !e.mismatched).collect();
     let over = surface.iter().filter(|e| e.px > f64::from(tau)).count();
     // Over tau, by the column third it lies in.
@@ -352,26 +335,9 @@ fn a_side_beside_the_eye_is_not_stitched_across_a_spike() {
     let mut scene = GpuScene::new(Terrain::new(info, 0.0).unwrap(), w, h, false);
     for x in [0.0, 1e-4] {
         let cam = camera([x, 8.74, 256.0], [x - 474.65, 1.66, 180.82], 55.0);
-        let reference = scene.render(
-            &cam,
-            &RenderSettings {
-                path: RenderPath::Brute,
-                ..RenderSettings::default()
-            },
-        );
         // Half the bench's 1280x720, so tau 1 px here is its 2 px.
         let tau = 1.0;
-        let frame = scene.render(
-            &cam,
-            &RenderSettings {
-                path: RenderPath::Geomip,
-                lod_metric: LodMetric::Error(tau),
-                cull: true,
-                ..RenderSettings::default()
-            },
-        );
-        let k = f64::from(reference.view.pixels_per_radian);
-        let errors = pixel_errors(&DepthView::of(&frame), &DepthView::of(&reference), k);
+        let errors = error_mode_against_brute(&mut scene, &cam, tau);
         let over = errors.iter().filter(|e| e.px > f64::from(tau)).count();
         eprintln!("eye x {x}: {over} of {} pixels over {tau} px", errors.len());
         assert!(errors.len() > 100_000, "{} pixels", errors.len());
@@ -382,4 +348,27 @@ fn a_side_beside_the_eye_is_not_stitched_across_a_spike() {
         );
     }
     scene.finish();
+}
+
+/// Each pixel's error of the geomip error mode at `tau` pixels, culled,
+/// against brute, both drawn from `camera`.
+fn error_mode_against_brute(scene: &mut GpuScene, camera: &Camera, tau: f32) -> Vec<PixelError> {
+    let reference = scene.render(
+        camera,
+        &RenderSettings {
+            path: RenderPath::Brute,
+            ..RenderSettings::default()
+        },
+    );
+    let frame = scene.render(
+        camera,
+        &RenderSettings {
+            path: RenderPath::Geomip,
+            lod_metric: LodMetric::Error(tau),
+            cull: true,
+            ..RenderSettings::default()
+        },
+    );
+    let k = f64::from(reference.view.pixels_per_radian);
+    pixel_errors(&DepthView::of(&frame), &DepthView::of(&reference), k)
 }
