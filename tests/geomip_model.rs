@@ -472,6 +472,26 @@ fn stitch_errors_find_a_spike_beside_a_side() {
     let right = stitch.excess(0, 0, RIGHT);
     assert!((right - spike / 2.0).abs() < 1e-3, "{right}");
     assert_eq!(stitch.excess(0, 1, RIGHT), 0.0);
+    // A block reads its sides' patches at once: patch (0, 0) alone has
+    // the spike on its right side; the 2x2 block of all four has it inside.
+    let block = |level: u32| vkterrain::lod::plan::PlannedBlock {
+        col: 0,
+        row: 0,
+        level,
+        patch_level: 4,
+        full_resolution: true,
+        chosen: false,
+        predicted_px: 0.0,
+        coarser_over_px: 0.0,
+    };
+    let [left, right, top, bottom] = stitch.block_excess(&block(0), 0);
+    assert!(
+        [left, top, bottom].iter().all(|&e| e < 1e-4),
+        "{left} {top} {bottom}"
+    );
+    assert!((right - spike / 2.0).abs() < 1e-3, "{right}");
+    let whole = stitch.block_excess(&block(1), 0);
+    assert!(whole.iter().all(|&e| e < 1e-4), "{whole:?}");
     // The plane alone strays nowhere.
     let flat = vkterrain::terrain::Heightmap::from_fn(33, 33, plane).unwrap();
     let (_, flat_errors) = vkterrain::terrain::ErrorTable::compute_pair(&flat, &grid);

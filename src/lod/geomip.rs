@@ -295,22 +295,7 @@ pub fn stitchable_sides(
         return [true; BLOCK_SIDES];
     };
     let level = level_of_index(k, level_count(grid.cells_per_patch()));
-    let ([c0, c1], [r0, r1]) = block.patch_range(grid);
-    let at = |row: usize, col: usize| grid.patch_index(PatchId { row, col });
-    // The largest error of each side's patches' fans where it is past
-    // their level's own, 0 where none is.
-    let mut excess = [0.0f32; BLOCK_SIDES];
-    let mut stray = |side: usize, bit: u8, p: usize| {
-        excess[side] = excess[side].max(stitch.excess(p, level, bit));
-    };
-    for r in r0..r1 {
-        stray(0, LEFT, at(r, c0));
-        stray(1, RIGHT, at(r, c1 - 1));
-    }
-    for c in c0..c1 {
-        stray(2, TOP, at(r0, c));
-        stray(3, BOTTOM, at(r1 - 1, c));
-    }
+    let excess = stitch.block_excess(block, level);
     if excess.iter().all(|&e| e == 0.0) {
         return [true; BLOCK_SIDES];
     }
@@ -351,35 +336,90 @@ pub fn stitchable_sides(
 #[derive(Clone, Debug, PartialEq)]
 pub struct StitchErrors {
     levels: usize,
-    /// [patch][level] excesses of the left, top, right and bottom sides.
-    excess: Vec<[f32; 4]>,
+    /// Per block level m (0: the patches; m: blocks of 2^m x 2^m, as the
+    /// hierarchy's nodes), its columns of blocks and [block][level] the
+    /// largest excess of the patches along each of its sides, in
+    /// `BLOCK_SIDES`' order: a block's sides are read at once.
+    blocks: Vec<(usize, Vec<[f32; BLOCK_SIDES]>)>,
 }
 
 impl StitchErrors {
     /// Every patch of `grid` over `map`, whose geomip path's error table
-    /// is `errors`.
+    /// is `errors`, and every block of them.
     pub fn compute(map: &Heightmap, grid: &PatchGrid, errors: &ErrorTable) -> StitchErrors {
         let n = grid.cells_per_patch();
         let levels = level_count(n);
-        let excess = (0..grid.patch_count())
+        let patches: Vec<[f32; BLOCK_SIDES]> = (0..grid.patch_count())
             .into_par_iter()
             .flat_map_iter(|p| {
                 let rect = grid.sample_rect(grid.patch_id(p));
                 (0..levels).map(move |level| {
                     let own = errors.error(p, table_index(level, levels));
-                    patch_stitch_errors(map, rect, n, level).map(|e| if e > own { e } else { 0.0 })
+                    let [left, top, right, bottom] = patch_stitch_errors(map, rect, n, level)
+                        .map(|e| if e > own { e } else { 0.0 });
+                    [left, right, top, bottom]
                 })
             })
             .collect();
-        StitchErrors { levels, excess }
+        let (mut cols, mut rows) = (grid.patch_cols(), grid.patch_rows());
+        let mut blocks = vec![(cols, patches)];
+        while cols > 1 || rows > 1 {
+            let (below_cols, below_rows) = (cols, rows);
+            (cols, rows) = (cols.div_ceil(2), rows.div_ceil(2));
+            let below = &blocks.last().expect("the patches").1;
+            let mut next = vec![[0.0f32; BLOCK_SIDES]; cols * rows * levels];
+            for (b, out) in next.chunks_mut(levels).enumerate() {
+                let (c, r) = (b % cols, b / cols);
+                // The children along each side: the last column or row of
+                // a block at the far edges may be its first.
+                let (last_c, last_r) = (
+                    (2 * c + 1).min(below_cols - 1),
+                    (2 * r + 1).min(below_rows - 1),
+                );
+                let child =
+                    |cc: usize, rr: usize| &below[(rr * below_cols + cc) * levels..][..levels];
+                for (side, (cs, rs)) in [
+                    (2 * c..=2 * c, 2 * r..=last_r),
+                    (last_c..=last_c, 2 * r..=last_r),
+                    (2 * c..=last_c, 2 * r..=2 * r),
+                    (2 * c..=last_c, last_r..=last_r),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    for rr in rs {
+                        for cc in cs.clone() {
+                            for (o, e) in out.iter_mut().zip(child(cc, rr)) {
+                                o[side] = o[side].max(e[side]);
+                            }
+                        }
+                    }
+                }
+            }
+            blocks.push((cols, next));
+        }
+        StitchErrors { levels, blocks }
+    }
+
+    /// The largest excess of the patches along each side of the plan's
+    /// `block` at geomip level `level` (`BLOCK_SIDES`' order).
+    pub fn block_excess(&self, block: &PlannedBlock, level: usize) -> [f32; BLOCK_SIDES] {
+        let (cols, excess) = &self.blocks[block.level as usize];
+        let b = (block.row >> block.level) as usize * cols + (block.col >> block.level) as usize;
+        excess[b * self.levels + level]
     }
 
     /// Patch `patch`'s fans' error at geomip level `level` along side
     /// `side` (one of `LEFT`, `TOP`, `RIGHT`, `BOTTOM`) where it is past
     /// the level's own, else 0.
     pub fn excess(&self, patch: usize, level: usize, side: u8) -> f32 {
-        // The bits 1, 2, 4, 8 as 0 to 3.
-        self.excess[patch * self.levels + level][side.trailing_zeros() as usize & 3]
+        let at = match side {
+            LEFT => 0,
+            RIGHT => 1,
+            TOP => 2,
+            _ => 3,
+        };
+        self.blocks[0].1[patch * self.levels + level][at]
     }
 }
 
