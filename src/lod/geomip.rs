@@ -337,9 +337,10 @@ pub fn stitchable_sides(
 pub struct StitchErrors {
     levels: usize,
     /// Per block level m (0: the patches; m: blocks of 2^m x 2^m, as the
-    /// hierarchy's nodes), its columns of blocks and [block][level] the
+    /// hierarchy's nodes), its columns of blocks and [level][block] the
     /// largest excess of the patches along each of its sides, in
-    /// `BLOCK_SIDES`' order: a block's sides are read at once.
+    /// `BLOCK_SIDES`' order: a block's sides are read at once, and blocks
+    /// side by side at one level, as a frame reads them, share lines.
     blocks: Vec<(usize, Vec<[f32; BLOCK_SIDES]>)>,
 }
 
@@ -349,7 +350,8 @@ impl StitchErrors {
     pub fn compute(map: &Heightmap, grid: &PatchGrid, errors: &ErrorTable) -> StitchErrors {
         let n = grid.cells_per_patch();
         let levels = level_count(n);
-        let patches: Vec<[f32; BLOCK_SIDES]> = (0..grid.patch_count())
+        let count = grid.patch_count();
+        let by_patch: Vec<[f32; BLOCK_SIDES]> = (0..count)
             .into_par_iter()
             .flat_map_iter(|p| {
                 let rect = grid.sample_rect(grid.patch_id(p));
@@ -361,14 +363,18 @@ impl StitchErrors {
                 })
             })
             .collect();
+        let patches: Vec<[f32; BLOCK_SIDES]> = (0..levels * count)
+            .map(|i| by_patch[(i % count) * levels + i / count])
+            .collect();
         let (mut cols, mut rows) = (grid.patch_cols(), grid.patch_rows());
         let mut blocks = vec![(cols, patches)];
         while cols > 1 || rows > 1 {
             let (below_cols, below_rows) = (cols, rows);
             (cols, rows) = (cols.div_ceil(2), rows.div_ceil(2));
             let below = &blocks.last().expect("the patches").1;
-            let mut next = vec![[0.0f32; BLOCK_SIDES]; cols * rows * levels];
-            for (b, out) in next.chunks_mut(levels).enumerate() {
+            let (below_count, count) = (below_cols * below_rows, cols * rows);
+            let mut next = vec![[0.0f32; BLOCK_SIDES]; count * levels];
+            for b in 0..count {
                 let (c, r) = (b % cols, b / cols);
                 // The children along each side: the last column or row of
                 // a block at the far edges may be its first.
@@ -376,8 +382,6 @@ impl StitchErrors {
                     (2 * c + 1).min(below_cols - 1),
                     (2 * r + 1).min(below_rows - 1),
                 );
-                let child =
-                    |cc: usize, rr: usize| &below[(rr * below_cols + cc) * levels..][..levels];
                 for (side, (cs, rs)) in [
                     (2 * c..=2 * c, 2 * r..=last_r),
                     (last_c..=last_c, 2 * r..=last_r),
@@ -389,8 +393,10 @@ impl StitchErrors {
                 {
                     for rr in rs {
                         for cc in cs.clone() {
-                            for (o, e) in out.iter_mut().zip(child(cc, rr)) {
-                                o[side] = o[side].max(e[side]);
+                            for level in 0..levels {
+                                let e = below[level * below_count + rr * below_cols + cc][side];
+                                let o = &mut next[level * count + b][side];
+                                *o = o.max(e);
                             }
                         }
                     }
@@ -406,7 +412,7 @@ impl StitchErrors {
     pub fn block_excess(&self, block: &PlannedBlock, level: usize) -> [f32; BLOCK_SIDES] {
         let (cols, excess) = &self.blocks[block.level as usize];
         let b = (block.row >> block.level) as usize * cols + (block.col >> block.level) as usize;
-        excess[b * self.levels + level]
+        excess[level * (excess.len() / self.levels) + b]
     }
 
     /// Patch `patch`'s fans' error at geomip level `level` along side
@@ -419,7 +425,8 @@ impl StitchErrors {
             TOP => 2,
             _ => 3,
         };
-        self.blocks[0].1[patch * self.levels + level][at]
+        let patches = &self.blocks[0].1;
+        patches[level * (patches.len() / self.levels) + patch][at]
     }
 }
 
