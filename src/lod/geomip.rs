@@ -272,6 +272,9 @@ pub fn block_glide(block: &PlannedBlock, k: usize, hierarchy: &Hierarchy, view: 
 /// after its last (least z).
 pub const BLOCK_SIDES: usize = 4;
 
+/// The patch side (mask bit) of each of `BLOCK_SIDES`.
+pub const BLOCK_SIDE_BITS: [u8; BLOCK_SIDES] = [LEFT, RIGHT, TOP, BOTTOM];
+
 /// Which sides of the error plan's `block`, drawn at level index `k`
 /// (2^k segments a patch side), may border a drawn neighbour one level
 /// coarser (`BLOCK_SIDES`' order). Such a side is stitched: each 2x2 block
@@ -351,20 +354,14 @@ impl StitchErrors {
         let n = grid.cells_per_patch();
         let levels = level_count(n);
         let count = grid.patch_count();
-        let by_patch: Vec<[f32; BLOCK_SIDES]> = (0..count)
-            .into_par_iter()
-            .flat_map_iter(|p| {
-                let rect = grid.sample_rect(grid.patch_id(p));
-                (0..levels).map(move |level| {
-                    let own = errors.error(p, table_index(level, levels));
-                    let [left, top, right, bottom] = patch_stitch_errors(map, rect, n, level)
-                        .map(|e| if e > own { e } else { 0.0 });
-                    [left, right, top, bottom]
-                })
-            })
-            .collect();
         let patches: Vec<[f32; BLOCK_SIDES]> = (0..levels * count)
-            .map(|i| by_patch[(i % count) * levels + i / count])
+            .into_par_iter()
+            .map(|i| {
+                let (level, p) = (i / count, i % count);
+                let own = errors.error(p, table_index(level, levels));
+                let rect = grid.sample_rect(grid.patch_id(p));
+                patch_stitch_errors(map, rect, n, level).map(|e| if e > own { e } else { 0.0 })
+            })
             .collect();
         let (mut cols, mut rows) = (grid.patch_cols(), grid.patch_rows());
         let mut blocks = vec![(cols, patches)];
@@ -419,23 +416,27 @@ impl StitchErrors {
     /// `side` (one of `LEFT`, `TOP`, `RIGHT`, `BOTTOM`) where it is past
     /// the level's own, else 0.
     pub fn excess(&self, patch: usize, level: usize, side: u8) -> f32 {
-        let at = match side {
-            LEFT => 0,
-            RIGHT => 1,
-            TOP => 2,
-            _ => 3,
-        };
+        let at = BLOCK_SIDE_BITS
+            .iter()
+            .position(|&bit| bit == side)
+            .expect("a side's bit");
         let patches = &self.blocks[0].1;
         patches[level * (patches.len() / self.levels) + patch][at]
     }
 }
 
 /// `StitchErrors` of one patch (`rect`, of a grid of `n`-cell patches) at
-/// geomip `level`.
-fn patch_stitch_errors(map: &Heightmap, rect: SampleRect, n: usize, level: usize) -> [f32; 4] {
+/// geomip `level`, in `BLOCK_SIDES`' order, however far past the level's
+/// own error.
+fn patch_stitch_errors(
+    map: &Heightmap,
+    rect: SampleRect,
+    n: usize,
+    level: usize,
+) -> [f32; BLOCK_SIDES] {
     let s = 1usize << level;
     let k = n / s;
-    let mut out = [0.0f32; 4];
+    let mut out = [0.0f32; BLOCK_SIDES];
     if k < 2 {
         // A single quad is never stitched.
         return out;
@@ -457,7 +458,7 @@ fn patch_stitch_errors(map: &Heightmap, rect: SampleRect, n: usize, level: usize
             let worst = (0..ring.len())
                 .map(|t| fan_error(&h, [centre, ring[t], ring[(t + 1) % ring.len()]]))
                 .fold(0.0f64, f64::max) as f32;
-            for (bit, o) in [LEFT, TOP, RIGHT, BOTTOM].into_iter().zip(&mut out) {
+            for (bit, o) in BLOCK_SIDE_BITS.into_iter().zip(&mut out) {
                 if sides & bit != 0 {
                     *o = o.max(worst);
                 }
@@ -483,11 +484,9 @@ fn fan_error(h: &impl Fn(usize, usize) -> f64, tri: [(usize, usize); 3]) -> f64 
         return 0.0;
     }
     let heights = tri.map(|(i, j)| h(i, j));
-    let (i_lo, i_hi) = (tri.iter().map(|t| t.0).min(), tri.iter().map(|t| t.0).max());
-    let (j_lo, j_hi) = (tri.iter().map(|t| t.1).min(), tri.iter().map(|t| t.1).max());
-    let (Some(i_lo), Some(i_hi), Some(j_lo), Some(j_hi)) = (i_lo, i_hi, j_lo, j_hi) else {
-        return 0.0;
-    };
+    let [(i0, j0), (i1, j1), (i2, j2)] = tri;
+    let (i_lo, i_hi) = (i0.min(i1).min(i2), i0.max(i1).max(i2));
+    let (j_lo, j_hi) = (j0.min(j1).min(j2), j0.max(j1).max(j2));
     let plane = |r: f64, c: f64| {
         let d = (r - p[0].0, c - p[0].1);
         let w1 = (d.0 * b.1 - d.1 * b.0) / det;
