@@ -164,6 +164,7 @@ fn levels_by_projected_error() {
         1000.0,
         1.0,
         &all,
+        None,
     );
     assert!(chosen.levels.iter().all(|&l| l == 5), "{:?}", chosen.levels);
     assert!(chosen.morph.iter().all(|&m| m == 0.0));
@@ -180,9 +181,9 @@ fn levels_by_projected_error() {
     let table = terrain.error_table();
     let eye = Vec3::new(-200.0, 60.0, -200.0);
     let all = vec![true; terrain.grid().patch_count()];
-    let strict = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &all);
-    let loose = select_levels_by_error(&terrain, &table, eye, 200.0, 8.0, &all);
-    let small = select_levels_by_error(&terrain, &table, eye, 50.0, 1.0, &all);
+    let strict = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &all, None);
+    let loose = select_levels_by_error(&terrain, &table, eye, 200.0, 8.0, &all, None);
+    let small = select_levels_by_error(&terrain, &table, eye, 50.0, 1.0, &all, None);
     let sum = |l: &PatchLevels| l.levels.iter().map(|&v| u32::from(v)).sum::<u32>();
     assert!(sum(&loose) > sum(&strict) && sum(&small) > sum(&strict));
     assert!(strict.levels.iter().zip(&loose.levels).all(|(s, l)| s <= l));
@@ -199,7 +200,7 @@ fn levels_by_projected_error() {
     // is stitched to it.
     let mut drawn = all.clone();
     drawn[7 * 8] = false;
-    let culled = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &drawn);
+    let culled = select_levels_by_error(&terrain, &table, eye, 200.0, 1.0, &drawn, None);
     let grid = terrain.grid();
     let beside: Vec<usize> = grid.neighbours(7 * 8).into_iter().flatten().collect();
     let finest = beside.iter().map(|&q| culled.levels[q]).min().unwrap();
@@ -521,4 +522,38 @@ fn a_side_that_may_not_be_stitched_keeps_its_neighbour_at_its_level() {
         refine_and_balance_blocks(&mut levels, &grid, &drawn, &blocks, &sides);
         assert_eq!(levels, expected, "left side stitchable: {left}");
     }
+}
+
+#[test]
+fn levels_by_error_keep_a_neighbour_where_stitching_would_cut_a_spike() {
+    // Patch (0, 0) holds a spike one cell inside its right side, patch
+    // (0, 1) beyond it is a plane. Seen from just beside the side, the
+    // spike's patch is drawn at full resolution and the plane, balanced,
+    // one level coarser: the side between them is stitched, and its fans
+    // cut the spike's near faces to half its height.
+    let spike = 60.0;
+    let map = vkterrain::terrain::Heightmap::from_fn(33, 33, |r, c| {
+        0.5 * c as f32 + 0.2 * r as f32 + if (r, c) == (8, 15) { spike } else { 0.0 }
+    })
+    .unwrap();
+    let terrain = Terrain::new(
+        TerrainInfo::new(map.clone(), DVec2::ONE, 16, DVec2::ZERO).unwrap(),
+        0.0,
+    )
+    .unwrap();
+    let grid = terrain.grid();
+    let (_, table) = terrain.error_tables();
+    let stitch = StitchErrors::compute(&map, grid, table);
+    let all = vec![true; grid.patch_count()];
+    // Local x = column - 16, z = 16 - row: the spike stands at (-1, 8).
+    let eye = Vec3::new(0.5, 20.0, 8.0);
+    let unguarded = select_levels_by_error(&terrain, table, eye, 600.0, 1.0, &all, None);
+    assert_eq!(unguarded.levels[..2], [0, 1], "{:?}", unguarded.levels);
+    let guarded = select_levels_by_error(&terrain, table, eye, 600.0, 1.0, &all, Some(&stitch));
+    assert_eq!(guarded.levels[..2], [0, 0], "{:?}", guarded.levels);
+    // Far off, the fans' 30 m is within tau and the side stays stitched.
+    let far = Vec3::new(0.5, 20.0, 30_000.0);
+    let coarse = select_levels_by_error(&terrain, table, far, 600.0, 1.0, &all, Some(&stitch));
+    let plain = select_levels_by_error(&terrain, table, far, 600.0, 1.0, &all, None);
+    assert_eq!(coarse.levels, plain.levels);
 }

@@ -455,3 +455,33 @@ fn the_far_remainders_are_measured_as_their_path_lays_them() {
         assert!(view.predicted_p99_px < 1e-3, "{}", view.predicted_p99_px);
     }
 }
+
+#[test]
+fn a_spike_just_off_the_side_of_the_view_is_measured_by_the_faces_it_shows() {
+    // Flat ground with one spike, 30 high, beside the eye: the sample
+    // itself lies just right of the view, but the faces falling from it
+    // to its neighbours reach into it.
+    let (row, col) = (34, 31);
+    let map = Heightmap::from_fn(65, 65, |r, c| if (r, c) == (row, col) { 30.0 } else { 0.0 })
+        .expect("valid size");
+    let t = terrain(map);
+    let (eye, target) = ([0.0, 3.0, 0.0], [-50.0, 1.0, -8.0]);
+    let frame = FrameView::new(&t, &camera(eye, target, 55.0), 1280, 720);
+    let sample = local(row, col, 30.0) - frame.eye_local;
+    assert!(
+        frame.frustum.planes[..2]
+            .iter()
+            .any(|p| p.truncate().dot(sample) + p.w < 0.0),
+        "the spike's sample lies beside the view"
+    );
+    let view = view_table(&t, eye, target, 1.0);
+    let grid = t.grid();
+    let spike = grid.patch_index(vkterrain::terrain::PatchId {
+        row: row / 16,
+        col: col / 16,
+    });
+    // Drawn at its coarsest level the spike is gone: its faces, a large
+    // part of the view this near, are off by up to its height.
+    let coarsest = view.table.patch(spike)[0];
+    assert!(coarsest > 1.0, "{:?}", view.table.patch(spike));
+}

@@ -304,24 +304,86 @@ pub fn stitchable_sides(
     }
     let node = hierarchy.node(block.node());
     let (lo, hi) = node.aabb();
-    let (lo, hi) = (lo - view.eye_local, hi - view.eye_local);
-    // The fans cover two quads of the level from the side inwards.
-    let quads = (block.span() << k) as f32;
-    let (wx, wz) = (
-        (2.0 * (hi.x - lo.x) / quads).min(hi.x - lo.x),
-        (2.0 * (hi.z - lo.z) / quads).min(hi.z - lo.z),
-    );
-    let strips = [
-        (lo, Vec3::new(lo.x + wx, hi.y, hi.z)),
-        (Vec3::new(hi.x - wx, lo.y, lo.z), hi),
-        (Vec3::new(lo.x, lo.y, hi.z - wz), hi),
-        (lo, Vec3::new(hi.x, hi.y, lo.z + wz)),
-    ];
+    let strips = fan_strips(lo - view.eye_local, hi - view.eye_local, block.span() << k);
     std::array::from_fn(|side| {
         let (a, b) = strips[side];
         let scale = view.scale(super::factors::box_distance(a, b));
         excess[side] == 0.0 || super::factors::within_tolerance(excess[side], scale, view.tau.px())
     })
+}
+
+/// The strips stitched fans cover along each side (`BLOCK_SIDES`' order)
+/// of the box `lo`..`hi`, drawn as `quads` quads a side: two quads from
+/// the side inwards.
+fn fan_strips(lo: Vec3, hi: Vec3, quads: u32) -> [(Vec3, Vec3); BLOCK_SIDES] {
+    let quads = quads as f32;
+    let (wx, wz) = (
+        (2.0 * (hi.x - lo.x) / quads).min(hi.x - lo.x),
+        (2.0 * (hi.z - lo.z) / quads).min(hi.z - lo.z),
+    );
+    [
+        (lo, Vec3::new(lo.x + wx, hi.y, hi.z)),
+        (Vec3::new(hi.x - wx, lo.y, lo.z), hi),
+        (Vec3::new(lo.x, lo.y, hi.z - wz), hi),
+        (lo, Vec3::new(hi.x, hi.y, lo.z + wz)),
+    ]
+}
+
+/// `stitchable_sides` for single patches at balanced `levels`: wherever a
+/// drawn patch's side is stitched (its neighbour one level coarser) and
+/// the fans there stray past tau (`StitchErrors`, `pixel_error` pixels at
+/// `pixels_per_radian`), seen from `eye_local` at the nearest point of the
+/// strip they cover, the neighbour is refined to the patch's level, and
+/// the levels balanced again. One pass, as `refine_and_balance_blocks`
+/// keeps a block's neighbour: a neighbour refined has its own sides
+/// stitched as balancing leaves them.
+fn refine_unstitchable(
+    levels: &mut [u8],
+    terrain: &Terrain,
+    drawn: &[bool],
+    stitch: &StitchErrors,
+    (eye_local, pixels_per_radian, pixel_error): (Vec3, f32, f32),
+) {
+    let grid = terrain.grid();
+    let quads = |level: u8| (grid.cells_per_patch() >> level).max(1) as u32;
+    let mut lowered = Vec::new();
+    for p in (0..grid.patch_count()).filter(|&p| drawn[p]) {
+        let id = grid.patch_id(p);
+        let level = levels[p];
+        let mut strips = None;
+        for (side, q) in [LEFT, TOP, RIGHT, BOTTOM]
+            .into_iter()
+            .zip(grid.neighbours_of(id))
+        {
+            let Some(q) = q.map(|q| grid.patch_index(q)) else {
+                continue;
+            };
+            let excess = stitch.excess(p, usize::from(level), side);
+            if levels[q] <= level || excess == 0.0 {
+                continue;
+            }
+            let strips = strips.get_or_insert_with(|| {
+                let (centre, half) = terrain.patch_aabb(id);
+                let centre = centre - eye_local;
+                fan_strips(centre - half, centre + half, quads(level))
+            });
+            let at = BLOCK_SIDE_BITS
+                .iter()
+                .position(|&b| b == side)
+                .expect("a side");
+            let (a, b) = strips[at];
+            let scale = pixels_per_radian / super::factors::box_distance(a, b);
+            if !super::factors::within_tolerance(excess, scale, pixel_error) {
+                lowered.push((grid.patch_id(q), level));
+            }
+        }
+    }
+    for &(q, level) in &lowered {
+        let at = &mut levels[grid.patch_index(q)];
+        *at = (*at).min(level);
+    }
+    let lowered: Vec<PatchId> = lowered.into_iter().map(|(q, _)| q).collect();
+    balance_from(levels, grid, &lowered);
 }
 
 /// How far each side's stitched fans (`patch_indices`) stray from the
@@ -759,7 +821,9 @@ pub fn select_levels_by_distance(terrain: &Terrain, eye_local: Vec3, d0: f32) ->
 /// height over 2 tan(fov / 2): an error e at distance d covers
 /// e * pixels_per_radian / d pixels. Level l is good enough from the
 /// distance t_l = e_l * pixels_per_radian / pixel_error on; the morph
-/// factor is the fraction of the way from t_l to t_(l+1).
+/// factor is the fraction of the way from t_l to t_(l+1). With stitching
+/// errors (`stitch`), a stitched side whose fans would stray past the
+/// tolerance keeps its neighbour at its own level (`refine_unstitchable`).
 pub fn select_levels_by_error(
     terrain: &Terrain,
     table: &ErrorTable,
@@ -767,6 +831,7 @@ pub fn select_levels_by_error(
     pixels_per_radian: f32,
     pixel_error: f32,
     drawn: &[bool],
+    stitch: Option<&StitchErrors>,
 ) -> PatchLevels {
     let grid = terrain.grid();
     let n = grid.cells_per_patch();
@@ -793,6 +858,10 @@ pub fn select_levels_by_error(
         .collect();
     refine_beside_drawn(&mut levels, grid, drawn);
     balance(&mut levels, grid);
+    if let Some(stitch) = stitch {
+        let view = (eye_local, pixels_per_radian, pixel_error);
+        refine_unstitchable(&mut levels, terrain, drawn, stitch, view);
+    }
     let morph = distances
         .iter()
         .enumerate()

@@ -52,8 +52,10 @@
 //! (wholly or in part) by nearer terrain adds only what shows, and the
 //! steps add up to the ground the eye sees. A pixel `a` off the view axis
 //! covers `cos^3(a) / K^2` steradians. Samples outside the frustum or
-//! hidden cover no pixels. So a level's error is a distribution over the
-//! patch's pixels, not one worst value.
+//! hidden cover no pixels, but for one beside the view whose triangles
+//! reach into it: it shows its errors on the share of them in view, which
+//! the frame's share over tau is not taken of. So a level's error is a
+//! distribution over the patch's pixels, not one worst value.
 //!
 //! **Silhouettes.** A seen sample with hidden ground right behind it
 //! (`Viewshed::crest`) is on a silhouette: a vertical error there moves the
@@ -88,6 +90,11 @@
 //! neighbour's missing midpoints (`geomip::patch_indices`), measured as
 //! drawn (`PatchSamples::stitched`). For them the greedy share is raised,
 //! or lowered, to the largest whose refined and stitched levels still fit.
+//! The samples do not see where a fan's diagonal crosses the reference's,
+//! between them (a spike one cell inside a side has its near faces cut to
+//! half its height): the geomip path's choice from this table keeps a
+//! neighbour at a patch's level wherever those fans would stray past tau
+//! (`geomip::select_levels_by_error`, `geomip::StitchErrors`).
 //!
 //! **Geomorphing.** A geomip patch glides towards its next coarser level;
 //! its morph factor is capped where the blend would put more of its pixels
@@ -1009,6 +1016,11 @@ struct Seen {
     /// The pixels of the ground the sample stands for (see the module
     /// documentation); 0 where hidden, out of view or facing away.
     pixels: f64,
+    /// Whether the sample lies beside the view, its pixels only those of
+    /// the triangles meeting at it that reach into it: they show its
+    /// errors, but are not counted among the frame's pixels, whose share
+    /// sets how many may be over tau (`PatchSamples::pixels`).
+    beside: bool,
     /// On a silhouette (`Viewshed::crest`): the pixels across the sample's
     /// cell, along which a vertical error moves the silhouette; else 0.
     crest_width: f64,
@@ -1027,6 +1039,58 @@ struct Seen {
     beyond: f64,
     /// Horizontal distance from the eye.
     reach: f64,
+}
+
+/// The share of the box `lo`..`hi` in front of `plane` (its normal's side),
+/// measured along the normal: 1 for a box wholly in front, 0 for one
+/// wholly behind.
+fn share_in_front(plane: glam::DVec4, lo: DVec3, hi: DVec3) -> f64 {
+    let n = plane.truncate();
+    let ahead = n.dot(DVec3::select(n.cmpge(DVec3::ZERO), hi, lo)) + plane.w;
+    let behind = n.dot(DVec3::select(n.cmpge(DVec3::ZERO), lo, hi)) + plane.w;
+    if behind >= 0.0 {
+        1.0
+    } else if ahead <= 0.0 {
+        0.0
+    } else {
+        ahead / (ahead - behind)
+    }
+}
+
+/// The eye-relative box of the triangles meeting at sample (`r`, `c`),
+/// whose eye-relative position is `rel`: a cell either way (within the
+/// map), from the lowest of the sample and its eight neighbours to the
+/// highest.
+fn neighbourhood_box(
+    map: &Heightmap,
+    r: usize,
+    c: usize,
+    rel: DVec3,
+    spacing: DVec2,
+) -> (DVec3, DVec3) {
+    let (w, d) = (map.width(), map.depth());
+    let (r0, r1) = (r.saturating_sub(1), (r + 1).min(d - 1));
+    let (c0, c1) = (c.saturating_sub(1), (c + 1).min(w - 1));
+    let here = f64::from(map.get(r, c));
+    let (mut y0, mut y1) = (here, here);
+    for rr in r0..=r1 {
+        for cc in c0..=c1 {
+            let y = f64::from(map.get(rr, cc));
+            (y0, y1) = (y0.min(y), y1.max(y));
+        }
+    }
+    // Local x grows with columns; local z falls as rows grow.
+    let lo = DVec3::new(
+        rel.x - (c - c0) as f64 * spacing.x,
+        rel.y + (y0 - here),
+        rel.z - (r1 - r) as f64 * spacing.y,
+    );
+    let hi = DVec3::new(
+        rel.x + (c1 - c) as f64 * spacing.x,
+        rel.y + (y1 - here),
+        rel.z + (r - r0) as f64 * spacing.y,
+    );
+    (lo, hi)
 }
 
 impl<'a> PatchSamples<'a> {
@@ -1068,21 +1132,37 @@ impl<'a> PatchSamples<'a> {
                 // Its exposure is already cut to the frustum's height, and
                 // the ground it stands for may show while the sample itself
                 // lies above or below the view: only the side planes and
-                // the near plane are tested where it has one.
-                let within = |planes: &[usize]| {
-                    planes.iter().all(|&i| {
-                        let p = view.frustum.planes[i].as_dvec4();
-                        p.truncate().dot(rel) + p.w >= 0.0
-                    })
-                };
+                // the near plane are tested where it has one. Beside the
+                // view, its error still shows on the triangles that meet at
+                // it, which reach a cell either way and fall to its
+                // neighbours' heights: a spike just off the side of the
+                // view can fill a fifth of it. So a sample beside a side
+                // plane shows the share of that box in front of the plane,
+                // along its normal; those pixels carry its errors but are
+                // not the frame's own (`Seen::beside`).
+                let (lo, hi) = neighbourhood_box(map, r, c, rel, spacing);
                 let exposure = viewshed.exposure(r, c);
-                let in_view = if exposure.is_some() {
-                    within(&[0, 1, 4])
+                let planes: &[usize] = if exposure.is_some() {
+                    &[0, 1, 4]
                 } else {
-                    within(&[0, 1, 2, 3, 4])
+                    &[0, 1, 2, 3, 4]
                 };
-                let shown = in_view && !viewshed.hidden(r, c);
-                let shown = if shown { 1.0 } else { 0.0 };
+                let mut beside = false;
+                let in_view: f64 = planes
+                    .iter()
+                    .map(|&i| {
+                        let p = view.frustum.planes[i].as_dvec4();
+                        if p.truncate().dot(rel) + p.w >= 0.0 {
+                            1.0
+                        } else if i >= 2 {
+                            0.0
+                        } else {
+                            beside = true;
+                            share_in_front(p, lo, hi)
+                        }
+                    })
+                    .product();
+                let shown = if viewshed.hidden(r, c) { 0.0 } else { in_view };
                 let horizontal = DVec2::new(rel.x, rel.z);
                 let reach = horizontal.length();
                 let distance = rel.length().max(f64::MIN_POSITIVE);
@@ -1101,6 +1181,7 @@ impl<'a> PatchSamples<'a> {
                         ground_rise: 0.0,
                         beyond: 0.0,
                         reach: 0.0,
+                        beside,
                     });
                     continue;
                 }
@@ -1133,6 +1214,7 @@ impl<'a> PatchSamples<'a> {
                         .map_or(0.0, |crest| crest.rise * k * (1.0 + fall * fall).sqrt()),
                     ground_rise: rise,
                     reach,
+                    beside,
                     beyond: {
                         let (x, z) = (rel.x + eye.x, rel.z + eye.z);
                         let across = |p: f64, d: f64, lo: f64, hi: f64| {
@@ -1176,9 +1258,13 @@ impl<'a> PatchSamples<'a> {
         self.layout.full(self.cells)
     }
 
-    /// The patch's seen pixels.
+    /// The patch's seen pixels, those of samples beside the view apart.
     fn pixels(&self) -> f64 {
-        self.seen.iter().map(|s| s.pixels).sum()
+        self.seen
+            .iter()
+            .filter(|s| !s.beside)
+            .map(|s| s.pixels)
+            .sum()
     }
 
     /// Measures level `k` (2^k segments a side, `Layout::vertices`) into
@@ -1790,6 +1876,7 @@ mod tests {
             ground_rise: 0.0,
             beyond,
             reach: 20.0,
+            beside: false,
         }
     }
 

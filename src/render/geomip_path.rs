@@ -464,6 +464,7 @@ impl GeomipGeometry {
             view.pixels_per_radian,
             pixels,
             &drawn,
+            self.stitch.as_ref(),
         );
         if let Some(v) = &seen {
             geomip::limit_morph(&mut chosen, &v.morph_limits, &drawn, terrain.grid());
