@@ -420,6 +420,7 @@ fn a_patch_holding_the_eye_is_predicted_from_its_ground() {
         level,
         morph: 0.0,
         coarser: 0,
+        fans: [0.0; 4],
         ground,
     };
     let eye = Vec3::new(10.0, 60.0, -20.0);
@@ -433,6 +434,35 @@ fn a_patch_holding_the_eye_is_predicted_from_its_ground() {
     let above = Vec3::new(10.0, 250.0, -20.0);
     let from_box = predicted_px(error, &patch(2, Some(1.0)), above, 1000.0);
     assert_eq!(from_box, 10.0 * 1000.0 / 50.0);
+}
+
+/// A side stitched to a coarser neighbour is predicted at that level's
+/// error, or at its fans' where they stray further, from the side's
+/// nearest point, at full resolution too.
+#[test]
+fn a_stitched_side_is_predicted_at_its_fans_error() {
+    let error = |level: usize| [0.0, 2.0, 10.0, 40.0][level];
+    let patch = |level, fans| DrawnPatch {
+        lo: Vec3::new(0.0, 0.0, 0.0),
+        hi: Vec3::new(100.0, 10.0, 100.0),
+        level,
+        morph: 0.0,
+        coarser: RIGHT,
+        fans,
+        ground: None,
+    };
+    // The eye 20 beyond the right side (x = 100), 100 from the patch's
+    // near side, level with the box's top.
+    let eye = Vec3::new(120.0, 10.0, 50.0);
+    let px = |level, fans| predicted_px(error, &patch(level, fans), eye, 1000.0);
+    // Full resolution: the coarser neighbour's level, then the fans'.
+    assert_eq!(px(0, [0.0; 4]), 2.0 * 1000.0 / 20.0);
+    assert_eq!(px(0, [0.0, 0.0, 30.0, 0.0]), 30.0 * 1000.0 / 20.0);
+    // Fans beside a side that is not stitched count for nothing.
+    assert_eq!(px(0, [30.0, 0.0, 0.0, 0.0]), 2.0 * 1000.0 / 20.0);
+    // Level 1: its own error from the box, the side's from the side.
+    assert_eq!(px(1, [0.0; 4]), 10.0 * 1000.0 / 20.0);
+    assert_eq!(px(1, [0.0, 0.0, 30.0, 0.0]), 30.0 * 1000.0 / 20.0);
 }
 
 /// A stitched side's fans keep the level's vertices but not its

@@ -947,6 +947,10 @@ pub struct DrawnPatch {
     pub morph: f32,
     /// Its sides stitched to a coarser neighbour (`neighbour_masks`).
     pub coarser: u8,
+    /// How far each side's fans, where it is stitched, stray from the
+    /// reference past the level's own error (`StitchErrors::excess`), by
+    /// the masks' bits (left, top, right, bottom); 0 where not known.
+    pub fans: [f32; 4],
     /// Where its box holds the eye, the nearest its surface comes
     /// (`Terrain::surface_distances`); None elsewhere, or where the
     /// terrain's samples are not held.
@@ -957,12 +961,13 @@ pub struct DrawnPatch {
 /// level's error (`error`, by geomip level) from its box's nearest point,
 /// or while it glides towards the next coarser level, the blend of the
 /// two by its largest morph factor; a side stitched to a coarser
-/// neighbour adds that level's error from the nearest point of that
-/// side. Level 0 is the reference itself (error 0). A patch whose box
-/// holds the eye is seen from the nearest its drawn surface can come,
-/// its ground's distance less its error (infinite where that is none);
-/// without its ground, it is taken to be drawn at level 0, as the choice
-/// keeps it there.
+/// neighbour adds that level's error, or its fans' where they stray
+/// further (`DrawnPatch::fans`), from the nearest point of that side.
+/// Level 0 is the reference itself (error 0) but for its stitched
+/// sides. A patch whose box holds the eye is seen from the nearest its
+/// drawn surface can come, its ground's distance less its error
+/// (infinite where that is none); without its ground, it is taken to be
+/// drawn at level 0, as the choice keeps it there.
 pub fn predicted_px(
     error: impl Fn(usize) -> f32,
     patch: &DrawnPatch,
@@ -971,21 +976,21 @@ pub fn predicted_px(
 ) -> f32 {
     let (lo, hi) = (patch.lo - eye_local, patch.hi - eye_local);
     let level = patch.level;
-    if level == 0 {
-        return 0.0;
+    let mut px = 0.0f32;
+    if level > 0 {
+        let m = patch.morph;
+        let e = match m > 0.0 {
+            true => (1.0 - m) * error(level) + m * error(level + 1),
+            false => error(level),
+        };
+        let d = match (super::factors::box_distance(lo, hi), patch.ground) {
+            (d, _) if d > 0.0 => d,
+            (_, Some(ground)) if ground > e => ground - e,
+            (_, Some(_)) => return f32::INFINITY,
+            (_, None) => return 0.0,
+        };
+        px = e * pixels_per_radian / d;
     }
-    let m = patch.morph;
-    let e = match m > 0.0 {
-        true => (1.0 - m) * error(level) + m * error(level + 1),
-        false => error(level),
-    };
-    let d = match (super::factors::box_distance(lo, hi), patch.ground) {
-        (d, _) if d > 0.0 => d,
-        (_, Some(ground)) if ground > e => ground - e,
-        (_, Some(_)) => return f32::INFINITY,
-        (_, None) => return 0.0,
-    };
-    let mut px = e * pixels_per_radian / d;
     if patch.coarser != 0 {
         // The corners in control point order (upper-left has the
         // smallest x and largest z); only their x and z are read.
@@ -996,7 +1001,8 @@ pub fn predicted_px(
         for (bit, (a, b)) in super::factors::patch_edges(corners).into_iter().enumerate() {
             if patch.coarser & (1 << bit) != 0 {
                 let d = super::factors::edge_distance(xz(a), xz(b), lo.y, hi.y);
-                px = px.max(error(level + 1) * pixels_per_radian / d.max(f32::MIN_POSITIVE));
+                let e = error(level + 1).max(patch.fans[bit]);
+                px = px.max(e * pixels_per_radian / d.max(f32::MIN_POSITIVE));
             }
         }
     }

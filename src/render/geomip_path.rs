@@ -593,6 +593,10 @@ impl GeomipGeometry {
                     level,
                     morph: sides.iter().fold(interior, |a, &b| a.max(b)),
                     coarser,
+                    fans: std::array::from_fn(|bit| match &self.stitch {
+                        Some(s) if coarser & (1 << bit) != 0 => s.excess(p, level, 1 << bit),
+                        _ => 0.0,
+                    }),
                 };
                 // Level 0 is the reference.
                 let error = |l: usize| match l {
