@@ -1140,7 +1140,6 @@ impl<'a> PatchSamples<'a> {
                 // plane shows the share of that box in front of the plane,
                 // along its normal; those pixels carry its errors but are
                 // not the frame's own (`Seen::beside`).
-                let (lo, hi) = neighbourhood_box(map, r, c, rel, spacing);
                 let exposure = viewshed.exposure(r, c);
                 let planes: &[usize] = if exposure.is_some() {
                     &[0, 1, 4]
@@ -1158,6 +1157,7 @@ impl<'a> PatchSamples<'a> {
                             0.0
                         } else {
                             beside = true;
+                            let (lo, hi) = neighbourhood_box(map, r, c, rel, spacing);
                             share_in_front(p, lo, hi)
                         }
                     })
