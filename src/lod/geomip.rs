@@ -275,6 +275,14 @@ pub const BLOCK_SIDES: usize = 4;
 /// The patch side (mask bit) of each of `BLOCK_SIDES`.
 pub const BLOCK_SIDE_BITS: [u8; BLOCK_SIDES] = [LEFT, RIGHT, TOP, BOTTOM];
 
+/// The index in `BLOCK_SIDES`' order of a patch side's mask bit.
+fn block_side(bit: u8) -> usize {
+    BLOCK_SIDE_BITS
+        .iter()
+        .position(|&b| b == bit)
+        .expect("a side's bit")
+}
+
 /// Which sides of the error plan's `block`, drawn at level index `k`
 /// (2^k segments a patch side), may border a drawn neighbour one level
 /// coarser (`BLOCK_SIDES`' order). Such a side is stitched: each 2x2 block
@@ -367,11 +375,7 @@ fn refine_unstitchable(
                 let centre = centre - eye_local;
                 fan_strips(centre - half, centre + half, quads(level))
             });
-            let at = BLOCK_SIDE_BITS
-                .iter()
-                .position(|&b| b == side)
-                .expect("a side");
-            let (a, b) = strips[at];
+            let (a, b) = strips[block_side(side)];
             let scale = pixels_per_radian / super::factors::box_distance(a, b);
             if !super::factors::within_tolerance(excess, scale, pixel_error) {
                 lowered.push((grid.patch_id(q), level));
@@ -478,12 +482,8 @@ impl StitchErrors {
     /// `side` (one of `LEFT`, `TOP`, `RIGHT`, `BOTTOM`) where it is past
     /// the level's own, else 0.
     pub fn excess(&self, patch: usize, level: usize, side: u8) -> f32 {
-        let at = BLOCK_SIDE_BITS
-            .iter()
-            .position(|&bit| bit == side)
-            .expect("a side's bit");
         let patches = &self.blocks[0].1;
-        patches[level * (patches.len() / self.levels) + patch][at]
+        patches[level * (patches.len() / self.levels) + patch][block_side(side)]
     }
 }
 
