@@ -1,9 +1,10 @@
 //! The pixels each patch shows, counted by the terrain's fragment shader
 //! for the error LOD's next frames of a still view (`render::seen`,
-//! `lod::seen`): the counts agree with the patches under the frame's own
-//! depth, a moving camera counts nothing, and the plan that reads them
-//! draws fewer triangles where ground is hidden, within tau. Validation
-//! (synchronization included) on; any message fails.
+//! `lod::seen`), on the tess path and the geomip path: the counts agree
+//! with the patches under the frame's own depth, a moving camera counts
+//! nothing, and the plan that reads them draws fewer triangles where
+//! ground is hidden, within tau. Validation (synchronization included)
+//! on; any message fails.
 
 mod common;
 
@@ -16,9 +17,12 @@ use vkterrain::render::{HeadlessFrame, LodMetric, RenderPath, RenderSettings};
 use vkterrain::terrain::camera::Camera;
 use vkterrain::terrain::Terrain;
 
-fn error_lod(pixels: f32) -> RenderSettings {
+/// The paths whose error LOD counts.
+const PATHS: [RenderPath; 2] = [RenderPath::Tess, RenderPath::Geomip];
+
+fn error_lod(path: RenderPath, pixels: f32) -> RenderSettings {
     RenderSettings {
-        path: RenderPath::Tess,
+        path,
         lod_metric: LodMetric::Error(pixels),
         ..RenderSettings::default()
     }
@@ -57,26 +61,38 @@ fn a_still_view_counts_the_pixels_each_patch_shows_and_a_moving_one_does_not() {
     let terrain = dem_terrain(32, DVec2::ZERO);
     let camera = view(&terrain, "grazing");
     let mut scene = GpuScene::new(terrain.clone(), 320, 180, false);
-    let settings = error_lod(1.0);
-    scene.render(&camera, &settings);
+    for path in PATHS {
+        counts_of_a_still_view_and_none_of_a_moving_one(&mut scene, &terrain, &camera, path);
+    }
+    scene.finish();
+}
+
+fn counts_of_a_still_view_and_none_of_a_moving_one(
+    scene: &mut GpuScene,
+    terrain: &Terrain,
+    camera: &Camera,
+    path: RenderPath,
+) {
+    let settings = error_lod(path, 1.0);
+    scene.render(camera, &settings);
     assert!(
         scene.renderer().seen_pixels().is_none(),
-        "a first frame has nothing counted"
+        "{path:?}: a first frame has nothing counted"
     );
     // The second frame of the view counts; the third reads its counts.
-    let counted = scene.render(&camera, &settings);
-    scene.render(&camera, &settings);
+    let counted = scene.render(camera, &settings);
+    scene.render(camera, &settings);
     let seen = scene
         .renderer()
         .seen_pixels()
         .expect("a still view's second frame is counted")
         .clone();
-    let under = patches_under(&terrain, &counted, &camera);
+    let under = patches_under(terrain, &counted, camera);
     let covered = counted.covered_pixels() as u64;
     assert!(covered > 10_000, "the view shows terrain: {covered} pixels");
     assert!(
         seen.total() >= covered && seen.total() <= covered + covered / 10,
-        "{} pixels counted, {covered} covered",
+        "{path:?}: {} pixels counted, {covered} covered",
         seen.total()
     );
     let mut shown = 0;
@@ -86,36 +102,35 @@ fn a_still_view_counts_the_pixels_each_patch_shows_and_a_moving_one_does_not() {
         let slack = 2 + cpu / 20;
         assert!(
             seen.patch(p) + slack >= cpu,
-            "patch {p}: {} counted, {cpu} under the depth",
+            "{path:?}: patch {p}: {} counted, {cpu} under the depth",
             seen.patch(p)
         );
         shown += usize::from(cpu > 0);
     }
-    assert!(shown >= 10, "{shown} patches show");
+    assert!(shown >= 10, "{path:?}: {shown} patches show");
     assert!(
         under
             .iter()
             .zip(0..)
             .any(|(&cpu, p)| cpu == 0 && seen.patch(p) == 0),
-        "some patch is hidden or out of view"
+        "{path:?}: some patch is hidden or out of view"
     );
 
     // Moving every frame: nothing counted, nothing read.
-    let mut moving = camera;
+    let mut moving = *camera;
     for _ in 0..4 {
         moving.eye.x += 1.0;
         moving.target.x += 1.0;
         scene.render(&moving, &settings);
-        assert!(scene.renderer().seen_pixels().is_none());
+        assert!(scene.renderer().seen_pixels().is_none(), "{path:?}");
     }
-    scene.finish();
 }
 
 /// On the DEM's grazing view, where the hill under the eye hides most of
 /// the ground behind it, the frames that read the counts draw fewer
-/// triangles than the view's first frame, and stay within tau at the
-/// 99th percentile against the full-resolution reference. The choice
-/// settles: the last frames draw the same triangles.
+/// triangles than the view's first frame, on either path, and stay within
+/// tau at the 99th percentile against the full-resolution reference. The
+/// choice settles: the last frames draw the same triangles.
 #[test]
 fn counted_pixels_spare_hidden_ground_within_tau() {
     if skip_gpu() {
@@ -130,8 +145,11 @@ fn counted_pixels_spare_hidden_ground_within_tau() {
     };
     let reference = scene.render(&camera, &brute);
     let reference = DepthView::of(&reference);
-    for tau in [0.5f32, 1.0, 2.0] {
-        let settings = error_lod(tau);
+    for (path, tau) in PATHS
+        .into_iter()
+        .flat_map(|p| [0.5f32, 1.0, 2.0].map(|t| (p, t)))
+    {
+        let settings = error_lod(path, tau);
         // Another camera first, so that this view starts anew.
         scene.render(&view(&terrain, "overview"), &settings);
         let first = scene.render(&camera, &settings);
@@ -147,14 +165,14 @@ fn counted_pixels_spare_hidden_ground_within_tau() {
         assert!(scene.renderer().seen_pixels().is_some());
         assert!(
             triangles(last) * 10 < triangles(&first) * 8,
-            "tau {tau}: {} triangles after counting, {} before",
+            "{path:?} at tau {tau}: {} triangles after counting, {} before",
             triangles(last),
             triangles(&first)
         );
         assert_eq!(
             triangles(&frames[frames.len() - 2]),
             triangles(last),
-            "tau {tau}: the choice settles"
+            "{path:?} at tau {tau}: the choice settles"
         );
         for frame in [&frames[0], &frames[1], last] {
             let k = f64::from(frame.view.pixels_per_radian);
@@ -164,7 +182,7 @@ fn counted_pixels_spare_hidden_ground_within_tau() {
                 .collect();
             errors.sort_by(f64::total_cmp);
             let p99 = errors[errors.len() * 99 / 100];
-            assert!(p99 <= f64::from(tau), "tau {tau}: p99 {p99} px");
+            assert!(p99 <= f64::from(tau), "{path:?} at tau {tau}: p99 {p99} px");
         }
     }
     scene.finish();

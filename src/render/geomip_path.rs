@@ -21,6 +21,7 @@ use crate::lod::geomip::{self, PatchLevels};
 use crate::lod::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
+use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
 use crate::render::error::Result;
@@ -279,7 +280,7 @@ impl GeomipGeometry {
     pub(super) fn choose(
         &mut self,
         terrain: &Terrain,
-        hierarchy: &Hierarchy,
+        (hierarchy, seen): (&Hierarchy, Option<&SeenPixels>),
         view: &FrameView,
         settings: &RenderSettings,
         (draws, planner, chosen): (&mut Vec<GeomipDraw>, &mut Planner, &mut ChosenPatches),
@@ -362,7 +363,7 @@ impl GeomipGeometry {
                         merge: false,
                         cull: settings.cull,
                         reading: SightReading::Template,
-                        seen: None,
+                        seen,
                     },
                 );
                 // A block's patches take its level (`geomip::level_of_index`),

@@ -279,9 +279,11 @@ impl TerrainRenderer {
             &appearance,
             (
                 terrain.grid().patch_count(),
-                // Only the tess path's error LOD reads the counts, and not
+                // The error LOD of either path reads the counts, but not
                 // on a streamed terrain.
-                (options.stream.is_none() && device.caps.tessellation_shader)
+                options
+                    .stream
+                    .is_none()
                     .then(|| terrain.grid().patch_count()),
             ),
         )?;

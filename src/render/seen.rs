@@ -9,9 +9,11 @@
 //! read when the slot next comes round, its frame complete, so the choice
 //! never waits on the GPU.
 //!
-//! Counts hold for one view and one tolerance: a frame whose camera,
-//! projection or viewport differs in any way from its tolerance's last
-//! frame reads none, and counts none. A still camera counts from its
+//! Counts hold for one view, one path and one tolerance: a frame whose
+//! camera, projection or viewport differs in any way from the last frame
+//! of its path at its tolerance reads none, and counts none. Both paths'
+//! error LODs count and read: the geomip path draws through the same
+//! fragment shader. A still camera counts from its
 //! second frame at a tolerance on, `COUNTS_PER_VIEW` times, each count
 //! merged into each patch's largest, and the choice settles: a hidden
 //! patch drawn coarser that then shows through keeps what it showed. A
@@ -29,6 +31,7 @@ use crate::gpu::memory::{Buffer, BufferDesc};
 use crate::gpu::Device;
 use crate::lod::seen::{SeenPixels, NOT_DRAWN};
 use crate::render::error::{RenderError, Result};
+use crate::render::settings::RenderPath;
 use crate::shader_constants::BINDING_SEEN_PIXELS;
 use crate::terrain::PatchGrid;
 
@@ -43,9 +46,9 @@ pub(super) struct SeenBuffer {
     buffer: Buffer,
     /// Patches it has a word for: the grid's, or 0 where it never counts.
     patches: usize,
-    /// The view and tolerance the slot's last frame counted, if it
+    /// The view, path and tolerance the slot's last frame counted, if it
     /// counted.
-    counted: Option<(FrameView, f32)>,
+    counted: Option<(FrameView, CountKey)>,
     /// The level each patch was drawn at in the frame that counts
     /// (`FramePlan::patch_levels`), set once its levels are chosen.
     levels: Vec<u8>,
@@ -99,13 +102,13 @@ impl SeenBuffer {
         self.counting().then_some(&mut self.levels)
     }
 
-    /// Hands `read` the counts of the slot's last frame, the view and
-    /// tolerance it counted, and the levels its patches were drawn at,
+    /// Hands `read` the counts of the slot's last frame, the view, path
+    /// and tolerance it counted, and the levels its patches were drawn at,
     /// where it counted (the frame must have completed). The counts are
     /// read where the frame wrote them, not copied out first.
     fn take(
         &mut self,
-        read: impl FnOnce((FrameView, f32), &[u32], &[u8]) -> Result<()>,
+        read: impl FnOnce((FrameView, CountKey), &[u32], &[u8]) -> Result<()>,
     ) -> Result<()> {
         let Some(counted) = self.counted.take() else {
             return Ok(());
@@ -118,9 +121,9 @@ impl SeenBuffer {
         read(counted, &counts_of(bytes), &self.levels)
     }
 
-    /// Sets the slot's next frame to count `view` at a tolerance (zeroing
-    /// the counts), or not to count.
-    fn arm(&mut self, view: Option<(FrameView, f32)>) -> Result<()> {
+    /// Sets the slot's next frame to count `view` for a path and tolerance
+    /// (zeroing the counts), or not to count.
+    fn arm(&mut self, view: Option<(FrameView, CountKey)>) -> Result<()> {
         let bytes = self
             .buffer
             .mapped_mut()
@@ -149,25 +152,35 @@ fn counts_of(bytes: &[u8]) -> Cow<'_, [u32]> {
     }
 }
 
-/// Tolerances whose counts are kept at once (the bench draws a view at
-/// three; the window at one at a time).
+/// Paths and tolerances whose counts are kept at once (the bench draws a
+/// view at three tolerances; the window at one at a time).
 const TOLERANCES_KEPT: usize = 8;
 
-/// What the renderer knows of the pixels each patch showed, for each
-/// tolerance its frames drew at: each is a choice of its own, so counts
-/// are taken and read per tolerance, and a view is still for a tolerance
-/// when that tolerance's last frame was of the same view.
+/// Whose counts a frame takes and reads: its path's error LOD at its
+/// tolerance. Each is a choice of its own, and draws its patches at levels
+/// of its own.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct CountKey {
+    pub path: RenderPath,
+    pub tau: f32,
+}
+
+/// What the renderer knows of the pixels each patch showed, for each path
+/// and tolerance its frames drew at: counts are taken and read per path
+/// and tolerance, and a view is still for them when their last frame was
+/// of the same view.
 #[derive(Default)]
 pub(super) struct SeenState {
-    /// The most recently drawn tolerances last.
+    /// The most recently drawn last.
     entries: Vec<SeenEntry>,
-    /// The tolerance of the frame last prepared, if it reads counts.
-    current: Option<f32>,
+    /// The path and tolerance of the frame last prepared, if it reads
+    /// counts.
+    current: Option<CountKey>,
 }
 
 struct SeenEntry {
-    tau: f32,
-    /// The view of this tolerance's last frame.
+    key: CountKey,
+    /// The view of the last frame of this path and tolerance.
     last_view: FrameView,
     /// The merged counts and the view they are of.
     pixels: Option<(FrameView, SeenPixels)>,
@@ -178,8 +191,8 @@ struct SeenEntry {
 impl SeenState {
     /// The counts that hold for the frame last prepared.
     pub(super) fn pixels(&self) -> Option<&SeenPixels> {
-        let tau = self.current?;
-        let entry = self.entries.iter().find(|e| e.tau == tau)?;
+        let key = self.current?;
+        let entry = self.entries.iter().find(|e| e.key == key)?;
         entry
             .pixels
             .as_ref()
@@ -190,17 +203,18 @@ impl SeenState {
     /// Before a frame of `view` is prepared in the slot that owns
     /// `buffer` (its last frame complete): takes in what that frame
     /// counted, and arms the slot to count if the view is still for the
-    /// frame's tolerance and wants more counts (`count`: the tolerance
-    /// where the frame's path reads the counts, None where it does not).
+    /// frame's path and tolerance and wants more counts (`count`: the path
+    /// and tolerance where the frame reads the counts, None where it does
+    /// not).
     pub(super) fn prepare(
         &mut self,
         grid: &PatchGrid,
         buffer: &mut SeenBuffer,
         view: &FrameView,
-        count: Option<f32>,
+        count: Option<CountKey>,
     ) -> Result<()> {
-        buffer.take(|(counted, tau), counts, levels| {
-            if let Some(entry) = self.entries.iter_mut().find(|e| e.tau == tau) {
+        buffer.take(|(counted, key), counts, levels| {
+            if let Some(entry) = self.entries.iter_mut().find(|e| e.key == key) {
                 match &mut entry.pixels {
                     Some((held, pixels)) if *held == counted => pixels.merge(counts, levels),
                     _ => SeenPixels::new(grid, counts, levels).map(|p| {
@@ -212,16 +226,17 @@ impl SeenState {
             Ok(())
         })?;
         self.current = count;
-        let Some(tau) = count else {
+        let Some(key) = count else {
             return buffer.arm(None);
         };
-        let Some(at) = self.entries.iter().position(|e| e.tau == tau) else {
-            // A tolerance's first frame: the next of the same view counts.
+        let Some(at) = self.entries.iter().position(|e| e.key == key) else {
+            // A path and tolerance's first frame: the next of the same
+            // view counts.
             if self.entries.len() == TOLERANCES_KEPT {
                 self.entries.remove(0);
             }
             self.entries.push(SeenEntry {
-                tau,
+                key,
                 last_view: *view,
                 pixels: None,
                 counts: 0,
@@ -237,7 +252,7 @@ impl SeenState {
             buffer.arm(None)?;
         } else if entry.counts < COUNTS_PER_VIEW {
             entry.counts += 1;
-            buffer.arm(Some((*view, tau)))?;
+            buffer.arm(Some((*view, key)))?;
         } else {
             buffer.arm(None)?;
         }

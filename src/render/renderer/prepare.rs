@@ -12,14 +12,16 @@ use crate::lod::plan::patches_in_view;
 use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::render::error::{RenderError, Result};
+use crate::render::frame::FrameSlot;
 use crate::render::geomip_path::GeomipChoice;
 use crate::render::occlusion::LastFrame;
 use crate::render::pipelines::{create_culled_pipeline, CulledPipelines};
+use crate::render::seen::CountKey;
 use crate::render::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
 use crate::render::tess_path::run_batches;
 use crate::render::uniforms::FrameUniforms;
 use crate::render::view::FrameView;
-use crate::terrain::Terrain;
+use crate::terrain::{PatchGrid, Terrain};
 
 impl TerrainRenderer {
     /// Sets frame slot `slot` up for a frame of `settings` (its previous
@@ -61,16 +63,19 @@ impl TerrainRenderer {
         // timed with it.
         let seen_start = Instant::now();
         let counts = match (settings.path, settings.lod_metric) {
-            (RenderPath::Tess, LodMetric::Error(pixels))
+            (RenderPath::Tess | RenderPath::Geomip, LodMetric::Error(tau))
                 if settings.error_measure == ErrorMeasure::Sight =>
             {
-                Some(pixels)
+                Some(CountKey {
+                    path: settings.path,
+                    tau,
+                })
             }
             _ => None,
         };
         self.seen
             .prepare(terrain.grid(), &mut self.frames[slot].seen, view, counts)?;
-        let seen_ms = seen_start.elapsed().as_secs_f64() * 1e3;
+        let seen_s = seen_start.elapsed().as_secs_f64();
         if let Some(streamer) = self.streamer.as_mut() {
             streamer.prepare(slot, view)?;
         }
@@ -104,7 +109,7 @@ impl TerrainRenderer {
                     let prepared = &mut frame.prepared;
                     let choice = geomip.choose(
                         terrain,
-                        hierarchy,
+                        (hierarchy, self.seen.pixels()),
                         view,
                         settings,
                         (
@@ -113,7 +118,14 @@ impl TerrainRenderer {
                             &mut frame.geomip_choice,
                         ),
                     );
-                    prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
+                    prepared.lod_ms = Some((start.elapsed().as_secs_f64() + seen_s) * 1e3);
+                    let planned = matches!(
+                        choice,
+                        GeomipChoice::Levels {
+                            error_lod: true,
+                            ..
+                        }
+                    );
                     if let GeomipChoice::Levels { over_share, .. } = choice {
                         prepared.predicted_over_share = over_share;
                     }
@@ -128,12 +140,17 @@ impl TerrainRenderer {
                     prepared.predicted_max_px = predicted.map(|p| p.0);
                     prepared.predicted_p99_px = predicted.and_then(|p| p.1);
                     prepared.patches_in_view = prepared.geomip.len();
+                    // Its plan's levels, where its error LOD planned them
+                    // (balancing only refines them).
+                    if planned {
+                        keep_counted_levels(frame, terrain.grid());
+                    }
                 }
             }
             (RenderPath::Tess, LodMetric::Error(pixels)) => {
                 self.prepare_tess_error(slot, terrain, view, settings, pixels)?;
                 let prepared = &mut self.frames[slot].prepared;
-                prepared.lod_ms = prepared.lod_ms.map(|ms| ms + seen_ms);
+                prepared.lod_ms = prepared.lod_ms.map(|ms| ms + seen_s * 1e3);
             }
             (RenderPath::Tess, _) => {
                 let hierarchy = self
@@ -201,13 +218,7 @@ impl TerrainRenderer {
         )?;
         frame.tess_batches = planned.tess_batches;
         frame.merged_batches = planned.merged_batches;
-        // A frame that counts its pixels keeps the levels it drew them at.
-        if let Some(levels) = frame.seen.levels_mut() {
-            frame
-                .planner
-                .last_plan()
-                .patch_levels(terrain.grid(), levels);
-        }
+        keep_counted_levels(frame, terrain.grid());
         let prepared = &mut frame.prepared;
         prepared.lod_ms = Some(planned.lod_ms);
         prepared.predicted_max_px = Some(planned.predicted_max_px);
@@ -312,5 +323,14 @@ impl TerrainRenderer {
             }
         };
         Ok(())
+    }
+}
+
+/// A frame that counts its pixels keeps the levels its plan drew its
+/// patches at (`FramePlan::patch_levels`), which the counts are read
+/// against (`lod::seen`).
+fn keep_counted_levels(frame: &mut FrameSlot, grid: &PatchGrid) {
+    if let Some(levels) = frame.seen.levels_mut() {
+        frame.planner.last_plan().patch_levels(grid, levels);
     }
 }
