@@ -90,7 +90,8 @@ pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// part of its on-disk cache key. A number is never taken twice, not even
 /// by a change that was tried and dropped: the tables it cached stay on
 /// the machines that ran it and would be read back as the next change's.
-/// 10 and 11 were taken so (notes section 51); the next change takes 12.
+/// 10, 11 and 12 were taken so (notes sections 51 and 55); the next
+/// change takes 13.
 pub const MODEL_VERSION: u32 = 9;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
