@@ -52,7 +52,8 @@ fn view(terrain: &Terrain, name: &str) -> Camera {
 /// the pixels its ground covers in that frame (less a pixel's worth of
 /// rounding on its borders) and the counts together are the covered
 /// pixels give or take overdraw; the frame after reads them. A camera
-/// that moves every frame has none.
+/// that moves every frame has none. Both paths count, and so does the
+/// geomip path on a device without tessellation.
 #[test]
 fn a_still_view_counts_the_pixels_each_patch_shows_and_a_moving_one_does_not() {
     if skip_gpu() {
@@ -65,6 +66,23 @@ fn a_still_view_counts_the_pixels_each_patch_shows_and_a_moving_one_does_not() {
         counts_of_a_still_view_and_none_of_a_moving_one(&mut scene, &terrain, &camera, path);
     }
     scene.finish();
+    // The geomip fallback counts on a device without tessellation too.
+    let mut fallback = GpuScene::without(
+        vkterrain::gpu::DisabledFeatures {
+            tessellation_shader: true,
+            ..Default::default()
+        },
+        terrain.clone(),
+        (320, 180),
+    );
+    assert!(!fallback.gpu().device.caps.tessellation_shader);
+    counts_of_a_still_view_and_none_of_a_moving_one(
+        &mut fallback,
+        &terrain,
+        &camera,
+        RenderPath::Geomip,
+    );
+    fallback.finish();
 }
 
 fn counts_of_a_still_view_and_none_of_a_moving_one(

@@ -174,8 +174,13 @@ impl GpuScene {
         target: (u32, u32, bool, u32),
     ) -> Self {
         let (width, height, wireframe, samples) = target;
+        // Every path the device can draw.
+        let paths = match gpu.device.caps.tessellation_shader {
+            true => vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
+            false => vec![RenderPath::Geomip, RenderPath::Brute],
+        };
         let options = RendererOptions {
-            paths: vec![RenderPath::Tess, RenderPath::Geomip, RenderPath::Brute],
+            paths,
             wireframe,
             samples,
             stream: None,
