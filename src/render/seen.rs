@@ -13,11 +13,11 @@
 //! camera, projection or viewport differs in any way from the last frame
 //! of its path at its tolerance reads none, and counts none. Both paths'
 //! error LODs count and read: the geomip path draws through the same
-//! fragment shader. A still camera counts from its
-//! second frame at a tolerance on, `COUNTS_PER_VIEW` times, each count
-//! merged into each patch's largest, and the choice settles: a hidden
-//! patch drawn coarser that then shows through keeps what it showed. A
-//! moving camera never counts, and pays nothing.
+//! fragment shader. A still camera counts from its second frame at a
+//! path and tolerance on, `COUNTS_PER_VIEW` times, each count merged into
+//! each patch's largest, and the choice settles: a hidden patch drawn
+//! coarser that then shows through keeps what it showed. A moving camera
+//! never counts, and pays nothing.
 
 use std::borrow::Cow;
 use std::mem::size_of;
