@@ -89,6 +89,13 @@ fn key(distance: f32, index: usize) -> u64 {
 }
 
 impl Horizon {
+    /// Room for `boxes` boxes without growing (`plan::touched`).
+    pub fn reserve(&mut self, boxes: usize) {
+        super::plan::touched(&mut self.items, boxes);
+        super::plan::touched(&mut self.by_near, boxes);
+        super::plan::touched(&mut self.by_far, boxes);
+    }
+
     /// Forgets the last frame's boxes.
     pub fn clear(&mut self) {
         self.items.clear();

@@ -20,7 +20,7 @@ use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip::{self, PatchLevels};
 use crate::lod::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
-use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
+use crate::lod::plan::{patches_in_view, touched, PlanInputs, Planner, SightReading};
 use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
@@ -86,6 +86,21 @@ struct Written {
 }
 
 impl ChosenPatches {
+    /// Room for the levels, morph factors and flags of `patches` patches,
+    /// the list of those drawn, and `blocks` blocks, their memory written
+    /// once (`plan::touched`): the first choice's `reset` sizes them to
+    /// the grid, and finds its pages already the process's.
+    pub(super) fn with_capacity(patches: usize, blocks: usize) -> Self {
+        let mut chosen = ChosenPatches::default();
+        touched(&mut chosen.levels.levels, patches);
+        touched(&mut chosen.levels.morph, patches);
+        touched(&mut chosen.drawn, patches);
+        touched(&mut chosen.visible, patches);
+        touched(&mut chosen.rects, blocks);
+        touched(&mut chosen.stitched, blocks);
+        chosen
+    }
+
     /// Every patch of `grid` at level `coarsest`, with no morph and not
     /// drawn. Where the last choice was on the same grid, only the patches
     /// it wrote are reset (`Written`), so a frame's choice costs what is

@@ -33,7 +33,7 @@ use ash::vk;
 
 use super::appearance::GpuAppearance;
 use super::frame::{build_frames, DescriptorPlan, FrameSlot};
-use super::geomip_path::GeomipGeometry;
+use super::geomip_path::{ChosenPatches, GeomipGeometry};
 use super::occlusion::Occlusion;
 use super::pipelines::{
     build_pipelines, create_sky_pipeline, CulledPipelines, PathPipelines, PipelineTarget,
@@ -51,6 +51,7 @@ use crate::gpu::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::gpu::queries::PipelineStatistics;
 use crate::gpu::{sample_count_flag, Device, Gpu, VkError};
 use crate::lod::hierarchy::Hierarchy;
+use crate::lod::plan::{Planner, PLANNED_BLOCKS};
 use crate::render::error::{RenderError, Result};
 use crate::terrain::tiled::TiledHeightmap;
 use crate::terrain::{ErrorTable, Terrain, TerrainInfo};
@@ -454,6 +455,15 @@ impl TerrainRenderer {
                     table.clone(),
                     wireframe,
                 )?);
+                // The error LOD of either path (the tess path builds this
+                // one too) chooses into its frame slots' buffers: sized
+                // and written now, not by a first frame.
+                let patches = terrain.grid().patch_count();
+                let blocks = patches.min(PLANNED_BLOCKS);
+                for frame in &mut self.frames {
+                    frame.planner = Planner::with_capacity(blocks);
+                    frame.geomip_choice = ChosenPatches::with_capacity(patches, blocks);
+                }
             }
             RenderPath::Brute => {
                 self.brute = Some(BruteGeometry {
