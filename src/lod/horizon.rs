@@ -40,6 +40,7 @@
 
 use glam::{Vec2, Vec3};
 
+use super::buffers::touched;
 use super::factors::footprint_distance;
 
 /// Azimuth bins around the eye (`quarter_turns`): 1.4 to 2.8 degrees
@@ -89,11 +90,11 @@ fn key(distance: f32, index: usize) -> u64 {
 }
 
 impl Horizon {
-    /// Room for `boxes` boxes without growing (`plan::touched`).
+    /// Room for `boxes` boxes without growing (`buffers::touched`).
     pub fn reserve(&mut self, boxes: usize) {
-        super::plan::touched(&mut self.items, boxes);
-        super::plan::touched(&mut self.by_near, boxes);
-        super::plan::touched(&mut self.by_far, boxes);
+        touched(&mut self.items, boxes);
+        touched(&mut self.by_near, boxes);
+        touched(&mut self.by_far, boxes);
     }
 
     /// Forgets the last frame's boxes.

@@ -16,10 +16,12 @@
 //! - [`seen`]: the pixels each patch showed in earlier frames of a view,
 //!   which the plan reads so as not to refine hidden ground.
 //! - [`order`]: front-to-back draw order of the chosen patches.
+//! - [`buffers`]: a choice's buffers, made ready before its first frame.
 //! - [`patch_merge`]: merged nodes, blocks of flat patches drawn as one.
 //! - [`view_measure`] and [`viewshed`]: the error a view sees, measured
 //!   sample by sample (`--error-measure view`, for offline stills).
 
+pub mod buffers;
 pub mod factors;
 pub mod geomip;
 pub mod hierarchy;

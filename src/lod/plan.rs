@@ -63,6 +63,7 @@
 
 use glam::{Vec2, Vec3};
 
+use super::buffers::touched;
 use super::factors::{box_distance, error_tess_factor, footprint_distance, within_tolerance};
 use super::hierarchy::{rect_bounds, rect_rows, square_range, Hierarchy, Node, NodeId};
 use super::horizon::Horizon;
@@ -936,15 +937,6 @@ fn place_parts(
     }
 }
 
-/// Reserves room for `n` more in `v` and writes its spare memory once, so
-/// that its pages are the process's before a frame fills them.
-pub(crate) fn touched<T>(v: &mut Vec<T>, n: usize) {
-    v.reserve(n);
-    v.spare_capacity_mut()
-        .iter_mut()
-        .for_each(|slot| *slot = std::mem::MaybeUninit::zeroed());
-}
-
 /// One part of a block as its view model is read (`model_parts`).
 #[derive(Clone, Copy, Debug)]
 struct Part {
@@ -1435,15 +1427,10 @@ mod tests {
         assert_eq!(seen[0].scale, all[0].scale);
     }
 
-    /// Touching reserves room without changing what a buffer holds; a
-    /// planner made with room for n blocks holds n in each buffer a block
-    /// fills.
+    /// A planner made with room for n blocks holds n in each buffer a
+    /// block fills.
     #[test]
-    fn touched_buffers_have_room_and_keep_their_contents() {
-        let mut v = vec![3u32, 1, 4];
-        touched(&mut v, 1000);
-        assert_eq!(v, [3, 1, 4]);
-        assert!(v.capacity() >= 1003);
+    fn a_planner_with_capacity_has_room_for_its_blocks() {
         let planner = Planner::with_capacity(500);
         for capacity in [
             planner.plan.blocks.capacity(),

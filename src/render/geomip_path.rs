@@ -17,10 +17,11 @@ use crate::gpu::commands::Recorder;
 use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
+use crate::lod::buffers::touched;
 use crate::lod::geomip::{self, PatchLevels};
 use crate::lod::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
-use crate::lod::plan::{patches_in_view, touched, PlanInputs, Planner, SightReading};
+use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::lod::view_measure::Diagonal;
@@ -88,7 +89,7 @@ struct Written {
 impl ChosenPatches {
     /// Room for the levels, morph factors and flags of `patches` patches,
     /// the list of those drawn, and `blocks` blocks, their memory written
-    /// once (`plan::touched`): the first choice's `reset` sizes them to
+    /// once (`buffers::touched`): the first choice's `reset` sizes them to
     /// the grid, and finds its pages already the process's.
     pub(super) fn with_capacity(patches: usize, blocks: usize) -> Self {
         let mut chosen = ChosenPatches::default();
