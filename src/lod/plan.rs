@@ -408,8 +408,8 @@ impl Planner {
     /// A planner whose buffers hold a plan of up to `blocks` blocks
     /// without growing, their memory written once: a frame's plan then
     /// neither copies a buffer that outgrew its memory nor waits on the
-    /// pages of new memory, which cost a view's first frame up to 0.2 ms
-    /// more than its later ones on the 4097^2 terrain.
+    /// pages of new memory, which cost the first plan a planner made up
+    /// to 0.2 ms more than its later ones on the 4097^2 terrain.
     pub fn with_capacity(blocks: usize) -> Planner {
         let mut planner = Planner::default();
         let plan = &mut planner.plan;
