@@ -1322,24 +1322,27 @@ mod tests {
     use crate::lod::view::Tau;
     use crate::terrain::camera::Frustum;
 
+    /// A candidate of `patches` patches whose bound is its second level,
+    /// with `over` pixels over tau at its first two.
+    fn candidate(over: [f32; 2], patches: f32) -> Candidate {
+        let mut levels = [0.0; LEVEL_COUNT + 1];
+        levels[..2].copy_from_slice(&over);
+        Candidate {
+            slot: 0,
+            over: levels,
+            bound: 1,
+            full: 5,
+            patches,
+            full_triangles: 2048.0,
+            scale: 1.0,
+            errors: [0.0; LEVEL_COUNT],
+        }
+    }
+
     /// The greedy share's last step can overshoot the budget; what is
     /// left of it takes back the refinements it can afford.
     #[test]
     fn budget_left_after_the_last_step_takes_refinements_back() {
-        let candidate = |over: [f32; 2], patches: f32| {
-            let mut levels = [0.0; LEVEL_COUNT + 1];
-            levels[..2].copy_from_slice(&over);
-            Candidate {
-                slot: 0,
-                over: levels,
-                bound: 1,
-                full: 5,
-                patches,
-                full_triangles: 2048.0,
-                scale: 1.0,
-                errors: [0.0; LEVEL_COUNT],
-            }
-        };
         // The first relieves 30 pixels for 6 triangles, the second 100 for
         // 60: the first is refined first, leaving 100 over a budget of 80,
         // and the second's step then leaves none, 80 under the budget.
@@ -1462,13 +1465,7 @@ mod tests {
             boxed: Some(boxed),
             candidate: Candidate {
                 slot: boxed,
-                over: [0.0; LEVEL_COUNT + 1],
-                bound: 1,
-                full: 5,
-                patches: 1.0,
-                full_triangles: 2048.0,
-                scale: 1.0,
-                errors: [0.0; LEVEL_COUNT],
+                ..candidate([0.0; 2], 1.0)
             },
         }
     }

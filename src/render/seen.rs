@@ -152,9 +152,9 @@ fn counts_of(bytes: &[u8]) -> Cow<'_, [u32]> {
     }
 }
 
-/// Paths and tolerances whose counts are kept at once (the bench draws a
-/// view at three tolerances; the window at one at a time).
-const TOLERANCES_KEPT: usize = 8;
+/// Paths and tolerances (`CountKey`s) whose counts are kept at once (the
+/// bench draws a view at three tolerances; the window at one at a time).
+const KEYS_KEPT: usize = 8;
 
 /// Whose counts a frame takes and reads: its path's error LOD at its
 /// tolerance. Each is a choice of its own, and draws its patches at levels
@@ -232,7 +232,7 @@ impl SeenState {
         let Some(at) = self.entries.iter().position(|e| e.key == key) else {
             // A path and tolerance's first frame: the next of the same
             // view counts.
-            if self.entries.len() == TOLERANCES_KEPT {
+            if self.entries.len() == KEYS_KEPT {
                 self.entries.remove(0);
             }
             self.entries.push(SeenEntry {
