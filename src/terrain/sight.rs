@@ -93,6 +93,9 @@ pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// 10, 11 and 12 were taken so (notes sections 51 and 55); the next
 /// change takes 13.
 pub const MODEL_VERSION: u32 = 9;
+/// How far above the largest of four errors their weighted sum can round
+/// (`LatticePoint`'s weights add up to 1 within a few roundings).
+const WEIGHTS_ROUNDING: f32 = 1e-5;
 /// Steps of the stored error's log scale per octave.
 pub const CODES_PER_OCTAVE: f32 = 16.0;
 /// The code of an error of zero.
@@ -149,9 +152,58 @@ struct EntryLevel {
     codes: Vec<u8>,
     /// The same, each share its patches' largest; empty for the patches.
     largest: Vec<u8>,
+    /// [block][level][slope] the code of the largest error, over the
+    /// lattice's azimuths at that slope, at which a reading of `codes`
+    /// leaves some of the block's pixels within (`keeps_some_within`):
+    /// the error all of a patch's pixels exceed; of a block's pooled
+    /// shares, read stepped (a share between two stored ones taken at the
+    /// larger), the error half of them exceed. Derived from the codes when
+    /// the table is built or read back.
+    within: Vec<u8>,
+    /// The same of `largest` (read as a patch's codes); empty for the
+    /// patches.
+    largest_within: Vec<u8>,
 }
 
 impl EntryLevel {
+    /// A level of `cols` columns of blocks from its stored figures, with
+    /// what is derived from them.
+    fn new(
+        cols: usize,
+        present: Vec<bool>,
+        (mean, area): (Vec<f32>, Vec<f32>),
+        codes: Vec<u8>,
+        largest: Vec<u8>,
+    ) -> Self {
+        let blocks = present.len();
+        // A patch's codes are read as spread between the stored shares, a
+        // block's pooled ones stepped.
+        let pooled_share = if largest.is_empty() {
+            FRACTIONS - 1
+        } else {
+            FRACTIONS - 2
+        };
+        EntryLevel {
+            within: least_over_azimuths(&codes, blocks, pooled_share),
+            largest_within: least_over_azimuths(&largest, blocks, FRACTIONS - 1),
+            cols,
+            blocks,
+            present,
+            mean,
+            area,
+            codes,
+            largest,
+        }
+    }
+
+    /// `within` or `largest_within`, as `shares` reads this level.
+    fn within_of(&self, shares: BlockShares) -> &[u8] {
+        match shares == BlockShares::Largest && !self.largest.is_empty() {
+            true => &self.largest_within,
+            false => &self.within,
+        }
+    }
+
     /// `cols` x `entries.len() / cols` blocks' entries, packed; blocks of
     /// patches (`of_blocks`) keep their largest shares too.
     fn pack(cols: usize, entries: &[Option<Entry>], of_blocks: bool) -> Self {
@@ -171,19 +223,40 @@ impl EntryLevel {
                 }
             }
         }
-        EntryLevel {
+        let mean = entries
+            .iter()
+            .map(|e| e.as_ref().map_or(0.0, |e| e.mean))
+            .collect();
+        EntryLevel::new(
             cols,
-            blocks,
-            present: entries.iter().map(Option::is_some).collect(),
-            mean: entries
-                .iter()
-                .map(|e| e.as_ref().map_or(0.0, |e| e.mean))
-                .collect(),
-            area,
+            entries.iter().map(Option::is_some).collect(),
+            (mean, area),
             codes,
             largest,
+        )
+    }
+}
+
+/// [block][level][slope] the smallest of share `share`'s codes (the
+/// largest error) over the lattice's azimuths, of a level's
+/// [direction][block][level][fraction] `codes` (none for none).
+fn least_over_azimuths(codes: &[u8], blocks: usize, share: usize) -> Vec<u8> {
+    let per = LEVELS * FRACTIONS;
+    if codes.is_empty() {
+        return Vec::new();
+    }
+    let mut least = vec![ZERO; blocks * LEVELS * SLOPES.len()];
+    for d in 0..DIRECTIONS {
+        let slope = d % SLOPES.len();
+        let rows = &codes[d * blocks * per..][..blocks * per];
+        for (b, block) in rows.chunks_exact(per).enumerate() {
+            for (k, row) in block.chunks_exact(FRACTIONS).enumerate() {
+                let at = &mut least[(b * LEVELS + k) * SLOPES.len() + slope];
+                *at = (*at).min(row[share]);
+            }
         }
     }
+    least
 }
 
 /// Every full-size patch's view model, and every block's of whole
@@ -409,15 +482,7 @@ impl SightTable {
                     0 => Vec::new(),
                     _ => take(DIRECTIONS * blocks * LEVELS * FRACTIONS).to_vec(),
                 };
-                EntryLevel {
-                    cols,
-                    blocks,
-                    present,
-                    mean,
-                    area,
-                    codes,
-                    largest,
-                }
+                EntryLevel::new(cols, present, (mean, area), codes, largest)
             })
             .collect();
         Some(SightTable::with_levels(scale, levels))
@@ -478,6 +543,50 @@ impl SightTable {
             error,
             level: block.level as u8,
             largest,
+        })
+    }
+
+    /// Whether drawing `block`'s patches at level index `k` leaves some of
+    /// its pixels within `error`, as `ViewCodes::over_fraction` reads
+    /// `shares` from any azimuth at a fall between the lattice's `slopes`:
+    /// a share over below 1 (for a block's pooled shares, at most a half).
+    /// A block counted with no pixel shown at that level then showed none
+    /// over `error` either: nearer ground hid it. False without an entry.
+    ///
+    /// One memory line a block, where a reading fetches four directions'
+    /// codes and searches each level's shares.
+    pub fn keeps_some_within(
+        &self,
+        block: Block,
+        k: usize,
+        slopes: [u8; 2],
+        error: f32,
+        shares: BlockShares,
+    ) -> bool {
+        let Some((level, b)) = self.entry(block) else {
+            return false;
+        };
+        if k >= LEVELS {
+            // Full resolution: no error.
+            return true;
+        }
+        let row = &level.within_of(shares)[(b * LEVELS + k) * SLOPES.len()..][..SLOPES.len()];
+        let code = slopes
+            .iter()
+            .map(|&s| row[usize::from(s).min(SLOPES.len() - 1)])
+            .min()
+            .unwrap_or(ZERO);
+        // The reading weighs four directions' errors with weights that add
+        // up to 1 within a few roundings.
+        self.decoded[usize::from(code)] * (1.0 + WEIGHTS_ROUNDING) < error
+    }
+
+    /// A byte of the memory line `keeps_some_within` reads first for
+    /// `block` (0 without an entry), so that the lines of many blocks can
+    /// be fetched at once.
+    pub fn touch_within(&self, block: Block, shares: BlockShares) -> u8 {
+        self.entry(block).map_or(0, |(level, b)| {
+            level.within_of(shares)[b * LEVELS * SLOPES.len()]
         })
     }
 
@@ -1146,13 +1255,9 @@ mod tests {
         }
     }
 
-    /// Every stored row's errors fall as the share grows (its codes rise),
-    /// patches' and blocks' rows, pooled and largest alike: what
-    /// `first_within` relies on to read the last error second and the rest
-    /// from the last down. On rough ground with a cliff, in 16-cell
-    /// patches whose last row and column are narrower.
-    #[test]
-    fn every_stored_row_falls_as_the_share_grows() {
+    /// Rough ground with a cliff, 2 m by 3 m samples, in 16-cell patches
+    /// whose last row and column are narrower.
+    fn rough_cliff_table() -> SightTable {
         let map = Heightmap::from_fn(91, 75, |r, c| {
             let (x, z) = (c as f32, r as f32);
             let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
@@ -1162,7 +1267,77 @@ mod tests {
         })
         .expect("a heightmap");
         let grid = PatchGrid::for_size(91, 75, 16);
-        let table = SightTable::compute(&map, &grid, (2.0, 3.0));
+        SightTable::compute(&map, &grid, (2.0, 3.0))
+    }
+
+    /// Where `keeps_some_within` says a level leaves some of a block's
+    /// pixels within an error, reading the block from any direction at a
+    /// fall between those slopes puts less than all of them over it (at
+    /// most half, for a block's pooled shares, which are read stepped):
+    /// patches and blocks, both shares, every level, falls from rising to
+    /// steeper than the lattice, errors from a millimetre to a cliff's.
+    /// Where it does not, the reading puts every pixel over from some of
+    /// those directions, though not from all.
+    #[test]
+    fn a_level_that_keeps_some_pixels_within_reads_fewer_than_all_over() {
+        let table = rough_cliff_table();
+        let falls = [-0.3, -0.05, 0.0, 0.02, 0.05, 0.1, 0.25, 0.5, 1.0, 3.0];
+        let errors = [0.001, 0.05, 0.3, 1.0, 4.0, 40.0];
+        let (mut kept, mut refused_all_over) = (0, 0);
+        for (m, level) in table.levels.iter().enumerate() {
+            for b in (0..level.blocks).filter(|&b| level.present[b]) {
+                let block = Block {
+                    level: m as u32,
+                    col: b % level.cols,
+                    row: b / level.cols,
+                };
+                for shares in [BlockShares::Pooled, BlockShares::Largest] {
+                    let stepped = m > 0 && shares == BlockShares::Pooled;
+                    for k in 0..LEVELS {
+                        for &t in &falls {
+                            for &error in &errors {
+                                let (mut keeps, mut all_over) = (None, false);
+                                for a in 0..2 * AZIMUTHS {
+                                    let phi = std::f32::consts::PI * a as f32 / AZIMUTHS as f32;
+                                    let at = LatticePoint::new(phi.cos(), phi.sin(), t);
+                                    let said =
+                                        table.keeps_some_within(block, k, at.slopes, error, shares);
+                                    // The same slopes from every azimuth.
+                                    assert!(keeps.is_none_or(|k| k == said));
+                                    keeps = Some(said);
+                                    let view = table.view(block, &at, error, shares).unwrap();
+                                    let over = table.codes(&view).over_fraction(k);
+                                    if said {
+                                        assert!(
+                                            if stepped { over <= 0.5 } else { over < 1.0 },
+                                            "{block:?} {shares:?} level {k} fall {t} \
+                                             error {error}: {over}"
+                                        );
+                                    }
+                                    all_over |= over == 1.0;
+                                }
+                                match keeps {
+                                    Some(true) => kept += 1,
+                                    _ => refused_all_over += usize::from(all_over),
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(kept > 1_000, "{kept} levels keep some pixels within");
+        assert!(refused_all_over > 1_000, "{refused_all_over}");
+    }
+
+    /// Every stored row's errors fall as the share grows (its codes rise),
+    /// patches' and blocks' rows, pooled and largest alike: what
+    /// `first_within` relies on to read the last error second and the rest
+    /// from the last down. On rough ground with a cliff, in 16-cell
+    /// patches whose last row and column are narrower.
+    #[test]
+    fn every_stored_row_falls_as_the_share_grows() {
+        let table = rough_cliff_table();
         let mut rows = 0;
         for level in &table.levels {
             for codes in [&level.codes, &level.largest] {
