@@ -196,9 +196,15 @@ impl EntryLevel {
         }
     }
 
+    /// Whether `shares` reads this level's largest shares: a block's, not
+    /// a patch's, which has one set.
+    fn reads_largest(&self, shares: BlockShares) -> bool {
+        shares == BlockShares::Largest && !self.largest.is_empty()
+    }
+
     /// `within` or `largest_within`, as `shares` reads this level.
     fn within_of(&self, shares: BlockShares) -> &[u8] {
-        match shares == BlockShares::Largest && !self.largest.is_empty() {
+        match self.reads_largest(shares) {
             true => &self.largest_within,
             false => &self.within,
         }
@@ -529,7 +535,7 @@ impl SightTable {
         shares: BlockShares,
     ) -> Option<BlockView> {
         let (level, b) = self.entry(block)?;
-        let largest = shares == BlockShares::Largest && !level.largest.is_empty();
+        let largest = level.reads_largest(shares);
         let corners = at.corners();
         let at_direction = |d: usize| d * level.blocks + b;
         let area = corners
@@ -571,11 +577,7 @@ impl SightTable {
             return true;
         }
         let row = &level.within_of(shares)[(b * LEVELS + k) * SLOPES.len()..][..SLOPES.len()];
-        let code = slopes
-            .iter()
-            .map(|&s| row[usize::from(s).min(SLOPES.len() - 1)])
-            .min()
-            .unwrap_or(ZERO);
+        let code = row[usize::from(slopes[0])].min(row[usize::from(slopes[1])]);
         // The reading weighs four directions' errors with weights that add
         // up to 1 within a few roundings.
         self.decoded[usize::from(code)] * (1.0 + WEIGHTS_ROUNDING) < error
