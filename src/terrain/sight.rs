@@ -546,9 +546,9 @@ impl SightTable {
     /// Whether drawing `block`'s patches at level index `k` leaves some of
     /// its pixels within `error`, as `ViewCodes::over_fraction` reads
     /// `shares` from any azimuth at a fall between the lattice's `slopes`:
-    /// a share over below 1.
-    /// A block counted with no pixel shown at that level then showed none
-    /// over `error` either: nearer ground hid it. False without an entry.
+    /// a share over below 1. A block counted with no pixel shown at that
+    /// level then showed none over `error` either: nearer ground hid it.
+    /// False without an entry.
     ///
     /// One memory line a block, where a reading fetches four directions'
     /// codes and searches each level's shares.
@@ -560,18 +560,31 @@ impl SightTable {
         error: f32,
         shares: BlockShares,
     ) -> bool {
-        let Some((level, b)) = self.entry(block) else {
-            return false;
-        };
         if k >= LEVELS {
-            // Full resolution: no error.
-            return true;
+            // Full resolution: no error, where there is an entry.
+            return self.entry(block).is_some();
         }
-        let row = &level.within_of(shares)[(b * LEVELS + k) * SLOPES.len()..][..SLOPES.len()];
-        let code = row[usize::from(slopes[0])].min(row[usize::from(slopes[1])]);
         // The reading weighs four directions' errors with weights that add
         // up to 1 within a few roundings.
-        self.decoded[usize::from(code)] * (1.0 + WEIGHTS_ROUNDING) < error
+        self.all_over_below(block, k, slopes, shares)
+            .is_some_and(|largest| largest * (1.0 + WEIGHTS_ROUNDING) < error)
+    }
+
+    /// The largest error, over the lattice's azimuths at a fall between
+    /// `slopes`, that every pixel of `block` drawn at level index `k` (below
+    /// `LEVELS`) exceeds as `shares` is read: the figure
+    /// `keeps_some_within` compares with. None without an entry.
+    fn all_over_below(
+        &self,
+        block: Block,
+        k: usize,
+        slopes: [u8; 2],
+        shares: BlockShares,
+    ) -> Option<f32> {
+        let (level, b) = self.entry(block)?;
+        let row = &level.within_of(shares)[(b * LEVELS + k) * SLOPES.len()..][..SLOPES.len()];
+        let code = row[usize::from(slopes[0])].min(row[usize::from(slopes[1])]);
+        Some(self.decoded[usize::from(code)])
     }
 
     /// A byte of the memory line `keeps_some_within` reads first for
@@ -1277,9 +1290,9 @@ mod tests {
                             // Just either side of the figure itself, and a
                             // span of errors.
                             let slopes = LatticePoint::new(1.0, 0.0, t).slopes;
-                            let row = &level.within_of(shares)[(b * LEVELS + k) * SLOPES.len()..];
-                            let code = row[usize::from(slopes[0])].min(row[usize::from(slopes[1])]);
-                            let figure = table.decoded[usize::from(code)];
+                            let figure = table
+                                .all_over_below(block, k, slopes, shares)
+                                .expect("an entry");
                             let around = [0.98 * figure, 1.02 * figure];
                             for &error in errors.iter().chain(&around) {
                                 let (mut keeps, mut all_over) = (None, false);
