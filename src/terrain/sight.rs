@@ -20,9 +20,13 @@
 //! the ray and the reference there: `(r + t) cos(angle of depression)`
 //! pixels per unit area times `K^2 / d^2`, with `r` the quarter's rise
 //! along the ray (from the sample's one-sided slopes); none where it faces
-//! away. Each quarter carries the largest error at its corners (the
+//! away. Each quarter's errors run from those at its corners (the
 //! sample, the points half-way to its neighbours and the cell's centre,
-//! the error running linearly between samples). A peak one sample wide
+//! the error running linearly between samples) over its two triangles,
+//! sample, side and centre, each counted in equal parts at the largest
+//! error of each (`quarter_errors`); a quarter rising faster than the ray
+//! falls, where a coarser level moves a silhouette, counts all its pixels
+//! at the largest error at its corners (`upright`). A peak one sample wide
 //! thus shows the ray its near faces, as steep as it is high and as far
 //! off as half its height where they meet its neighbours, though its
 //! central differences are flat and its own error is one sample's. A
@@ -90,9 +94,9 @@ pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// part of its on-disk cache key. A number is never taken twice, not even
 /// by a change that was tried and dropped: the tables it cached stay on
 /// the machines that ran it and would be read back as the next change's.
-/// 10 to 13 were taken so (notes sections 51, 55 and 58); the next
-/// change takes 14.
-pub const MODEL_VERSION: u32 = 9;
+/// 10 to 14 were taken so (notes sections 51, 55, 58 and 59); the next
+/// change takes 16.
+pub const MODEL_VERSION: u32 = 15;
 /// How far above the largest of four errors their weighted sum can round
 /// (`LatticePoint`'s weights add up to 1 within a few roundings).
 const WEIGHTS_ROUNDING: f32 = 1e-5;
@@ -955,8 +959,9 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     let mut errors = vec![0.0f32; LEVELS * DIRECTIONS * FRACTIONS];
     let mut delta = vec![0.0f32; heights.len()];
     let mut drawn = vec![[0.0f32; 2]; heights.len()];
-    let mut quarters = vec![[0.0f32; 4]; heights.len()];
-    let mut along: Vec<([f32; 4], f32, [f32; 4])> = Vec::with_capacity(heights.len());
+    let mut quarters = vec![[[0.0f32; QUARTER_ERRORS]; 4]; heights.len()];
+    let mut along: Vec<([f32; 4], f32, [[f32; QUARTER_ERRORS]; 4])> =
+        Vec::with_capacity(heights.len());
     for k in 0..LEVELS {
         let segments = 1usize << k;
         if segments >= nx.min(nz) {
@@ -998,11 +1003,12 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 ];
             }
         }
-        // Each quarter of cells around a sample (`Slopes`): the largest
-        // error at its corners, the sample, the points half-way to its two
-        // neighbours and the cell's centre (on either diagonal), where
-        // the error runs linearly between samples. A neighbour outside
-        // the patch counts as the sample.
+        // Each quarter of cells around a sample (`Slopes`): its errors
+        // from those at its corners, the sample, the points half-way to
+        // its two neighbours and the cell's centre (the larger of its two
+        // diagonals' midpoints), where the error runs linearly between
+        // samples (`quarter_errors`). A neighbour outside the patch counts
+        // as the sample.
         for i in 0..=nz {
             for j in 0..=nx {
                 let here = delta[i * stride + j];
@@ -1016,7 +1022,8 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 };
                 let quarter = |di: isize, dj: isize| {
                     let (x, z, xz) = (at(0, dj), at(di, 0), at(di, dj));
-                    here.max(0.5 * (here + x.max(z).max(xz))).max(0.5 * (x + z))
+                    let centre = (0.5 * (here + xz)).max(0.5 * (x + z));
+                    quarter_errors(here, [0.5 * (here + x), 0.5 * (here + z)], centre)
                 };
                 // As `Slopes::rises` orders them; north is the row above.
                 quarters[i * stride + j] = [
@@ -1052,27 +1059,43 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 // gap and the largest face-on error.
                 let top = (t.abs() * diagonal).max(largest);
                 let mut histogram = Histogram::new(top);
+                // The gap over the diagonal's whole run.
+                let run = t.abs() * diagonal;
                 for &(rises, drawn_rise, errors) in &along {
                     let meet = drawn_rise + t;
-                    for (rise, e) in rises.into_iter().zip(errors) {
+                    let per_error = t.abs() / meet;
+                    for (rise, quarter) in rises.into_iter().zip(errors) {
                         let seen = 0.25 * (rise + t).max(0.0);
                         histogram.total += seen;
-                        if seen <= 0.0 || e <= 0.0 {
+                        if seen <= 0.0 {
                             continue;
                         }
-                        let gap = if meet > 0.0 {
-                            // The drawn plane carried on along the ray; no
-                            // further than where the gap reaches the
-                            // face-on error, or the diagonal's run where
-                            // that is more.
-                            (t.abs() * e / meet).min(e.max(t.abs() * diagonal))
-                        } else {
-                            // The drawn surface falls away as fast as the
-                            // ray: the ray meets it in front, within the
-                            // diagonal.
-                            t.abs() * diagonal
+                        // The drawn plane carried on along the ray; no
+                        // further than where the gap reaches the face-on
+                        // error, or the diagonal's run where that is more.
+                        // Where the drawn surface falls away as fast as
+                        // the ray, the ray meets it in front, within the
+                        // diagonal.
+                        let gap = |e: f32| {
+                            if meet > 0.0 {
+                                (per_error * e).min(e.max(run))
+                            } else {
+                                run
+                            }
                         };
-                        histogram.add(gap, seen);
+                        if upright(rise, t) {
+                            let e = quarter_largest(&quarter);
+                            if e > 0.0 {
+                                histogram.add(gap(e), seen);
+                            }
+                            continue;
+                        }
+                        let weight = seen / QUARTER_ERRORS as f32;
+                        for e in quarter {
+                            if e > 0.0 {
+                                histogram.add(gap(e), weight);
+                            }
+                        }
                     }
                 }
                 histogram.quantiles(out);
@@ -1115,6 +1138,82 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
         codes,
         largest: None,
     }
+}
+
+/// Errors standing for equal shares of a quarter of cells: its two
+/// triangles' `TRIANGLE_ERRORS` each.
+const QUARTER_ERRORS: usize = 2 * TRIANGLE_ERRORS;
+/// Errors standing for equal shares of a triangle over which the error
+/// runs linearly.
+const TRIANGLE_ERRORS: usize = 4;
+
+/// Whether a quarter rising `rise` along a ray falling `t` stands up into
+/// the line of sight: it rises faster than the ray falls, so the ground
+/// beyond it is seen over its top, if at all. Its pixels are where a
+/// coarser level moves a silhouette (a spike or a wall drawn lower shows
+/// the sky or farther ground over it, each pixel off by how far the
+/// outline moved, not by the vertical gap the model reads), so it counts
+/// every pixel at the largest error at its corners (`quarter_largest`).
+/// A quarter lying back from the ray counts its errors as they run
+/// across it (`quarter_errors`). Spread across every quarter, the errors
+/// let `scripts/hard-cases`' needles and terraces over tau on 8 rows
+/// (notes section 59).
+fn upright(rise: f32, t: f32) -> bool {
+    rise > t
+}
+
+/// The largest of a quarter's errors (`quarter_errors`): the larger of
+/// its two triangles' last parts, each at its triangle's largest corner.
+fn quarter_largest(quarter: &[f32; QUARTER_ERRORS]) -> f32 {
+    quarter[TRIANGLE_ERRORS - 1].max(quarter[QUARTER_ERRORS - 1])
+}
+
+/// Errors standing for equal shares of a quarter of cells whose corners'
+/// errors are `sample` (the sample's own), `sides` (half-way to its two
+/// neighbours) and `centre` (the cell's centre).
+///
+/// The quarter is taken as two triangles, sample, side and centre, over
+/// each of which the error runs linearly: the reference's own diagonal,
+/// where it crosses the quarter, runs from the sample to the centre, and
+/// so does a drawn quad's whose corners are samples; elsewhere both
+/// surfaces are planes over the quarter. The gap between two planes is
+/// then linear, and its size at most the linear run of the sizes at the
+/// corners. Each triangle's share is split into `TRIANGLE_ERRORS` equal
+/// parts by how far the error runs, each part at its largest error, so no
+/// error is counted below what it is, and at most a part of a triangle
+/// counts over an error that it is under. (A quarter lying back from
+/// the ray used to count wholly at the largest of its corners, as an
+/// upright one still does: on a level that drops every other sample, a
+/// quarter is half at its dropped sample's error and half below it, and a
+/// tolerance a little under that error counted the whole quarter over.)
+fn quarter_errors(sample: f32, sides: [f32; 2], centre: f32) -> [f32; QUARTER_ERRORS] {
+    let mut out = [0.0; QUARTER_ERRORS];
+    for (side, part) in sides.into_iter().zip(out.chunks_exact_mut(TRIANGLE_ERRORS)) {
+        let mut v = [sample, side, centre];
+        v.sort_unstable_by(f32::total_cmp);
+        for (i, e) in part.iter_mut().enumerate() {
+            *e = triangle_quantile(v, (i + 1) as f32 / TRIANGLE_ERRORS as f32);
+        }
+    }
+    out
+}
+
+/// The error below which share `p` of a triangle lies, the error running
+/// linearly between its corners' `a <= b <= c`: the region below an error
+/// between `a` and `b` is a triangle at the `a` corner, of share
+/// `(e - a)^2 / ((b - a) (c - a))`, and the region above one between `b`
+/// and `c` one at the `c` corner, of share `(c - e)^2 / ((c - a) (c - b))`.
+fn triangle_quantile([a, b, c]: [f32; 3], p: f32) -> f32 {
+    if p >= 1.0 || c <= a {
+        return c;
+    }
+    let below_b = (b - a) / (c - a);
+    let e = if p <= below_b {
+        a + (p * (b - a) * (c - a)).sqrt()
+    } else {
+        c - ((1.0 - p) * (c - a) * (c - b)).sqrt()
+    };
+    e.clamp(a, c)
 }
 
 /// Whether the tessellator splits quad (`row`, `col`) of a patch cut into
@@ -1160,7 +1259,8 @@ impl Slopes {
 /// largest possible error, the largest error in each bin, and the total
 /// weight the fractions are of.
 struct Histogram {
-    top: f32,
+    /// One over the largest possible error.
+    inverse_top: f32,
     largest: f32,
     total: f32,
     bins: [f32; BINS],
@@ -1182,7 +1282,7 @@ const _: () = assert!(BINS_PER_OCTAVE == 8.0);
 impl Histogram {
     fn new(top: f32) -> Self {
         Histogram {
-            top,
+            inverse_top: 1.0 / top,
             largest: 0.0,
             total: 0.0,
             bins: [0.0; BINS],
@@ -1191,16 +1291,27 @@ impl Histogram {
     }
 
     /// Adds `weight` at `error` (at most `top`), in the bin whose upper
-    /// edge is the first at or above it: floor(8 log2(top / error)),
-    /// from the float's exponent and seven comparisons.
+    /// edge is the first at or above it: floor(8 log2(top / error)). With
+    /// `error / top` as 2^e m (m in [1, 2)), that is -8 e where m is 1,
+    /// else -8 (e + 1) and the eighth-octave steps m is within: from the
+    /// float's exponent and seven comparisons, without a division.
     fn add(&mut self, error: f32, weight: f32) {
         self.largest = self.largest.max(error);
-        let x = (self.top / error).max(1.0);
-        let bits = x.to_bits();
-        let octave = ((bits >> 23) & 0xff) as i32 - 127;
-        let mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
-        let step = EIGHTHS.iter().filter(|&&q| mantissa >= q).count() as i32;
-        let bin = (8 * octave + step).clamp(0, BINS as i32 - 1) as usize;
+        let ratio = error * self.inverse_top;
+        let bin = if ratio >= 1.0 {
+            0
+        } else {
+            let bits = ratio.to_bits();
+            let octave = ((bits >> 23) & 0xff) as i32 - 127;
+            let mantissa = f32::from_bits((bits & 0x007f_ffff) | 0x3f80_0000);
+            if mantissa == 1.0 {
+                -8 * octave
+            } else {
+                let step = EIGHTHS.iter().filter(|&&q| mantissa <= q).count() as i32;
+                -8 * (octave + 1) + step
+            }
+        };
+        let bin = bin.clamp(0, BINS as i32 - 1) as usize;
         self.bins[bin] += weight;
         self.bin_largest[bin] = self.bin_largest[bin].max(error);
     }
@@ -1370,6 +1481,44 @@ mod tests {
             }
         }
 
+        /// A quarter's errors count, over any error, at least the share
+        /// of it whose error runs over (its two triangles sampled on a
+        /// grid of 100 x 100 steps, the error linear across each), and at
+        /// most one part of each triangle more.
+        #[test]
+        fn a_quarters_errors_bound_its_share_over_within_a_part(
+            sample in 0.0f32..10.0,
+            sides in prop::array::uniform2(0.0f32..10.0),
+            centre in 0.0f32..10.0,
+            error in 0.0f32..10.0,
+        ) {
+            let errors = quarter_errors(sample, sides, centre);
+            let counted = errors.iter().filter(|&&e| e > error).count() as f32
+                / QUARTER_ERRORS as f32;
+            let steps = 100;
+            let (mut over, mut points) = (0.0f32, 0.0f32);
+            for side in sides {
+                for i in 0..=steps {
+                    for j in 0..=steps - i {
+                        let (u, v) = (i as f32 / steps as f32, j as f32 / steps as f32);
+                        let e = sample + u * (side - sample) + v * (centre - sample);
+                        points += 1.0;
+                        if e > error {
+                            over += 1.0;
+                        }
+                    }
+                }
+            }
+            let exact = over / points;
+            // The grid's edges count twice as much as a triangle's area
+            // gives them: a few hundredths either way.
+            prop_assert!(counted >= exact - 0.03, "{counted} counted, {exact} over");
+            prop_assert!(
+                counted <= exact + 1.0 / TRIANGLE_ERRORS as f32 + 0.03,
+                "{counted} counted, {exact} over"
+            );
+        }
+
         /// Each stored error is the largest error in the bin where its
         /// share is crossed: never below the exact weighted quantile (the
         /// error at which the weight of the errors at or above it first
@@ -1483,8 +1632,13 @@ mod tests {
     /// they and the neighbours' quarters leading up to them (30 m off at
     /// their midpoints) are about 15 % of the patch's pixels, though the
     /// peak is one sample in 1,089. The share 2^-4 of the pixels exceeds
-    /// is therefore at least 30 m. Read by the sample alone, with its
-    /// central differences, it was none.
+    /// is therefore at least 30 m. Seen along the grid's axes its faces
+    /// rise faster than the ray falls, so each keeps the largest error at
+    /// its corners (`upright`), and that share's error is at least 45 m
+    /// (62.1 m; 35.4 m with those quarters' errors spread across them, as
+    /// a quarter lying back from the ray's are; 31.0 to 47.9 m on the
+    /// diagonals, where a quarter's two slopes partly cancel). Read by the
+    /// sample alone, with its central differences, it was none.
     #[test]
     fn a_one_sample_peak_shows_its_near_faces() {
         let map = Heightmap::from_fn(33, 33, |r, c| if (r, c) == (16, 16) { 60.0 } else { 0.0 })
@@ -1510,9 +1664,72 @@ mod tests {
             let dir = a * SLOPES.len() + t;
             let coarsest = decoded[usize::from(entry.codes[dir * LEVELS * FRACTIONS + share])];
             assert!(coarsest >= 30.0, "azimuth {a}: {coarsest} m at 2^-4");
+            if a % 2 == 0 {
+                assert!(coarsest >= 45.0, "azimuth {a}: {coarsest} m at 2^-4");
+            }
             // Full resolution (the patch's 32 cells) has no error.
             let full = entry.codes[(dir * LEVELS + 5) * FRACTIONS];
             assert_eq!(full, ZERO, "azimuth {a}");
+        }
+    }
+
+    /// A level that drops every other sample, on ground flat but for a
+    /// bump of 1 m at each quad's centre (spread 100 m apart, so every
+    /// quarter faces a steep ray about equally): a quarter around a bump
+    /// runs from 1 m at the bump to 0.5 m at its sides and centre, a
+    /// quarter elsewhere stays within 0.5 m. A quarter of the pixels are
+    /// over 0.5 m, and (1 - e)^2 / 0.25 of those over e between: the
+    /// stored errors at a share of 2^-2 and 2^-4 are never below those
+    /// quantiles (0.5 and 0.75 m), and within a part of a triangle above
+    /// them. Counted at each quarter's largest corner, both were 1 m.
+    #[test]
+    fn a_quarter_counts_its_pixels_at_the_errors_across_it() {
+        let map = Heightmap::from_fn(
+            33,
+            33,
+            |r, c| {
+                if r % 2 == 1 && c % 2 == 1 {
+                    1.0
+                } else {
+                    0.0
+                }
+            },
+        )
+        .expect("a heightmap");
+        let grid = PatchGrid::for_size(33, 33, 32);
+        let scale = 4.0;
+        let entry = patch_entry(
+            &map,
+            grid.sample_rect(grid.patch_id(0)),
+            (100.0, 100.0),
+            scale,
+        );
+        let decoded = decoded_codes(scale);
+        let t = SLOPES.iter().position(|&t| t == 2.0).expect("a slope of 2");
+        // 16 segments over 32 cells: every other sample dropped.
+        let level = 4;
+        for a in 0..AZIMUTHS {
+            let at = ((a * SLOPES.len() + t) * LEVELS + level) * FRACTIONS;
+            let stored = |exponent: i32| {
+                let j = FRACTION_EXPONENTS
+                    .iter()
+                    .position(|&e| e == exponent)
+                    .expect("a stored share");
+                decoded[usize::from(entry.codes[at + j])]
+            };
+            let (quarter, sixteenth) = (stored(-2), stored(-4));
+            assert!(
+                (0.5..0.62).contains(&quarter),
+                "azimuth {a}: {quarter} m at 2^-2"
+            );
+            assert!(
+                (0.75..0.85).contains(&sixteenth),
+                "azimuth {a}: {sixteenth} m at 2^-4"
+            );
+            assert!(
+                (0.99..1.1).contains(&stored(i32::MIN)),
+                "azimuth {a}: the largest error"
+            );
         }
     }
 
