@@ -54,7 +54,9 @@
 //!
 //! Hidden ground and silhouettes are not modelled: a patch behind a ridge
 //! counts its pixels as if seen, and a moved silhouette's pixels are not
-//! counted at all.
+//! counted as such. Only the quarters they stand on are read cautiously:
+//! an upright quarter, where a silhouette lies, counts wholly at its
+//! largest error (`upright`).
 //!
 //! **Blocks.** The level choice may decide a whole aligned block of 2^m x
 //! 2^m full-size patches at once (m up to `BLOCK_LEVELS`), every patch at
