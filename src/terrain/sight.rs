@@ -962,8 +962,7 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
     let mut delta = vec![0.0f32; heights.len()];
     let mut drawn = vec![[0.0f32; 2]; heights.len()];
     let mut quarters = vec![[[0.0f32; QUARTER_ERRORS]; 4]; heights.len()];
-    let mut along: Vec<([f32; 4], f32, [[f32; QUARTER_ERRORS]; 4])> =
-        Vec::with_capacity(heights.len());
+    let mut along: Vec<([f32; 4], f32)> = Vec::with_capacity(heights.len());
     for k in 0..LEVELS {
         let segments = 1usize << k;
         if segments >= nx.min(nz) {
@@ -1045,9 +1044,8 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
             along.extend(
                 reference
                     .iter()
-                    .zip(&quarters)
                     .zip(&drawn)
-                    .map(|((g, &e), s)| (g.rises(ux, uz), s[0] * ux + s[1] * uz, e)),
+                    .map(|(g, s)| (g.rises(ux, uz), s[0] * ux + s[1] * uz)),
             );
             for (ti, &t) in SLOPES.iter().enumerate() {
                 let dir = a * SLOPES.len() + ti;
@@ -1063,7 +1061,7 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                 let mut histogram = Histogram::new(top);
                 // The gap over the diagonal's whole run.
                 let run = t.abs() * diagonal;
-                for &(rises, drawn_rise, errors) in &along {
+                for (&(rises, drawn_rise), errors) in along.iter().zip(&quarters) {
                     let meet = drawn_rise + t;
                     let per_error = t.abs() / meet;
                     for (rise, quarter) in rises.into_iter().zip(errors) {
@@ -1086,14 +1084,14 @@ fn patch_entry(map: &Heightmap, rect: SampleRect, (dx, dz): (f64, f64), scale: f
                             }
                         };
                         if upright(rise, t) {
-                            let e = quarter_largest(&quarter);
+                            let e = quarter_largest(quarter);
                             if e > 0.0 {
                                 histogram.add(gap(e), seen);
                             }
                             continue;
                         }
                         let weight = seen / QUARTER_ERRORS as f32;
-                        for e in quarter {
+                        for &e in quarter {
                             if e > 0.0 {
                                 histogram.add(gap(e), weight);
                             }
