@@ -1626,6 +1626,21 @@ mod tests {
         }
     }
 
+    /// The entry of a map of `size` x `size` samples `spacing` apart,
+    /// heights `height(row, column)`, laid out as one patch, its errors
+    /// coded below `scale`.
+    fn one_patch_entry(
+        size: usize,
+        height: impl Fn(usize, usize) -> f32 + Sync,
+        spacing: f64,
+        scale: f32,
+    ) -> Entry {
+        let map = Heightmap::from_fn(size, size, height).expect("a heightmap");
+        let grid = PatchGrid::for_size(size, size, size as u32 - 1);
+        let rect = grid.sample_rect(grid.patch_id(0));
+        patch_entry(&map, rect, (spacing, spacing), scale)
+    }
+
     /// A peak one sample wide, 60 m on flat ground with samples 10 m
     /// apart, dropped by the coarsest level and seen from a low eye (a
     /// ray falling 0.03 per unit): its near faces rise 6 per unit, so
@@ -1641,14 +1656,11 @@ mod tests {
     /// sample alone, with its central differences, it was none.
     #[test]
     fn a_one_sample_peak_shows_its_near_faces() {
-        let map = Heightmap::from_fn(33, 33, |r, c| if (r, c) == (16, 16) { 60.0 } else { 0.0 })
-            .expect("a heightmap");
-        let grid = PatchGrid::for_size(33, 33, 32);
         let scale = 200.0;
-        let entry = patch_entry(
-            &map,
-            grid.sample_rect(grid.patch_id(0)),
-            (10.0, 10.0),
+        let entry = one_patch_entry(
+            33,
+            |r, c| if (r, c) == (16, 16) { 60.0 } else { 0.0 },
+            10.0,
             scale,
         );
         let decoded = decoded_codes(scale);
@@ -1684,26 +1696,9 @@ mod tests {
     /// them. Counted at each quarter's largest corner, both were 1 m.
     #[test]
     fn a_quarter_counts_its_pixels_at_the_errors_across_it() {
-        let map = Heightmap::from_fn(
-            33,
-            33,
-            |r, c| {
-                if r % 2 == 1 && c % 2 == 1 {
-                    1.0
-                } else {
-                    0.0
-                }
-            },
-        )
-        .expect("a heightmap");
-        let grid = PatchGrid::for_size(33, 33, 32);
         let scale = 4.0;
-        let entry = patch_entry(
-            &map,
-            grid.sample_rect(grid.patch_id(0)),
-            (100.0, 100.0),
-            scale,
-        );
+        let bumps = |r: usize, c: usize| if r % 2 == 1 && c % 2 == 1 { 1.0 } else { 0.0 };
+        let entry = one_patch_entry(33, bumps, 100.0, scale);
         let decoded = decoded_codes(scale);
         let t = SLOPES.iter().position(|&t| t == 2.0).expect("a slope of 2");
         // 16 segments over 32 cells: every other sample dropped.
@@ -1740,10 +1735,8 @@ mod tests {
     fn a_planes_area_is_its_slopes() {
         let (gx, gz) = (0.3f32, 0.1f32);
         // Local z falls as rows rise: a row further down is further -z.
-        let map = Heightmap::from_fn(17, 17, |r, c| gx * 4.0 * c as f32 - gz * 4.0 * r as f32)
-            .expect("a heightmap");
-        let grid = PatchGrid::for_size(17, 17, 16);
-        let entry = patch_entry(&map, grid.sample_rect(grid.patch_id(0)), (4.0, 4.0), 100.0);
+        let plane = |r: usize, c: usize| gx * 4.0 * c as f32 - gz * 4.0 * r as f32;
+        let entry = one_patch_entry(17, plane, 4.0, 100.0);
         for a in 0..AZIMUTHS {
             let [ux, uz] = azimuth(a);
             for (ti, &t) in SLOPES.iter().enumerate() {
