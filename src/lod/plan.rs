@@ -14,6 +14,9 @@
 //! its far side as at its near one (`BLOCK_DEPTH_RATIO`) is decided at
 //! once: every patch in it takes the same level, from the block's entry
 //! seen from its nearest point. Nearer ground is refined down to patches.
+//! Where the plan has room (`BLOCK_BUDGET` blocks), the blocks largest on
+//! screen are then split into their quarters, down to
+//! `BLOCK_EXTENT_MIN_PX` across, each decided from its own nearest point.
 //! So the choice visits a few thousand nodes however large the terrain,
 //! while each decision still sees its ground from where it lies.
 //!
@@ -65,6 +68,8 @@
 //! adds no pixel over tau to what the share counted. Edges take the larger
 //! errors of the two patches sharing them, so both sides still agree.
 
+use std::collections::BinaryHeap;
+
 use glam::{Vec2, Vec3};
 
 use super::buffers::touched;
@@ -92,6 +97,20 @@ pub const EXCEED_SHARE: f64 = 0.005;
 /// fewer and larger the blocks, the cheaper the plan, and the more
 /// triangles its uniform levels draw (notes section 37).
 pub const BLOCK_EXTENT_PX: f32 = 128.0;
+
+/// The smallest block split further while the plan has room
+/// (`BLOCK_BUDGET`), in pixels across as `BLOCK_EXTENT_PX`.
+pub const BLOCK_EXTENT_MIN_PX: f32 = 32.0;
+
+/// The most blocks (patches included) a plan splits its blocks up to:
+/// blocks found at `BLOCK_EXTENT_PX` are split, largest on screen first,
+/// while their parts fit. A block decides its patches at one level, read
+/// from its nearest point; its quarters decide theirs each from their
+/// own, and the share spends its pixels on them more closely. The plan's
+/// cost grows with its blocks, the model's entries read for each: the
+/// 4097^2 terrain's views find 272 to 783 blocks at `BLOCK_EXTENT_PX`,
+/// and their largest choices took 0.3 to 0.47 ms.
+pub const BLOCK_BUDGET: usize = 512;
 
 /// The most a block's far side may be further than its near side, for
 /// the block to be decided at once: its entry is read at its nearest
@@ -359,6 +378,18 @@ impl NodeBox {
         hierarchy.for_each_child(id, |c, node| stack.push((c, NodeBox::of(node))));
     }
 
+    /// Its extent on screen in pixels, its diagonal seen face-on from its
+    /// nearest point, `near` away (`BLOCK_EXTENT_PX`).
+    fn extent(&self, view: &LodView, near: f32) -> f32 {
+        (self.max - self.min).length() * view.scale(near)
+    }
+
+    /// Whether it lies outside the view's frustum.
+    fn outside(&self, view: &LodView) -> bool {
+        let (centre, half) = (0.5 * (self.min + self.max), 0.5 * (self.max - self.min));
+        view.frustum.aabb_outside(centre - view.eye_local, half)
+    }
+
     /// Its nearest and farthest points' distances from the eye (the
     /// origin, `eye` subtracted).
     fn distances(&self, eye: Vec3) -> (f32, f32) {
@@ -390,8 +421,8 @@ pub fn plan(
 pub struct Planner {
     /// The last frame's plan.
     plan: FramePlan,
-    /// The walk's nodes still to visit.
-    stack: Vec<(NodeId, NodeBox)>,
+    /// The walk's buffers.
+    walker: Walker,
     /// The blocks whose view model is read, in the order of their parts.
     pending: Vec<Pending>,
     /// The parts of every pending block, in order (`model_parts`).
@@ -419,7 +450,7 @@ impl Planner {
         let plan = &mut planner.plan;
         touched(&mut plan.blocks, blocks);
         touched(&mut plan.merged, blocks);
-        touched(&mut planner.stack, blocks);
+        planner.walker.reserve(blocks);
         touched(&mut planner.pending, blocks);
         // Most blocks are read in one part.
         touched(&mut planner.parts, 2 * blocks);
@@ -469,7 +500,7 @@ impl Planner {
             hierarchy,
             view,
             inputs,
-            (plan, &mut self.stack, horizon),
+            (plan, &mut self.walker, horizon),
             &mut self.pending,
         );
         let shown = if horizon_used {
@@ -549,21 +580,87 @@ impl Planner {
     }
 }
 
+/// A block the walk found small enough to decide at once, which may yet
+/// be decided in parts (`BLOCK_BUDGET`).
+#[derive(Clone, Copy, Debug)]
+struct Splittable {
+    /// Its box's extent on screen, in pixels (`BLOCK_EXTENT_PX`).
+    extent: f32,
+    id: NodeId,
+    bounds: NodeBox,
+}
+
+impl PartialEq for Splittable {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == std::cmp::Ordering::Equal
+    }
+}
+
+impl Eq for Splittable {}
+
+impl PartialOrd for Splittable {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// The larger on screen first.
+impl Ord for Splittable {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.extent.total_cmp(&other.extent)
+    }
+}
+
+/// The walk's buffers, kept from frame to frame, and its budget.
+#[derive(Debug)]
+struct Walker {
+    /// Nodes still to visit.
+    stack: Vec<(NodeId, NodeBox)>,
+    /// Blocks the model reads, to decide whole or in parts, in the walk's
+    /// order.
+    splittable: Vec<Splittable>,
+    /// The most blocks splitting may lead to (`BLOCK_BUDGET`).
+    budget: usize,
+}
+
+impl Default for Walker {
+    fn default() -> Self {
+        Walker {
+            stack: Vec::new(),
+            splittable: Vec::new(),
+            budget: BLOCK_BUDGET,
+        }
+    }
+}
+
+impl Walker {
+    fn reserve(&mut self, blocks: usize) {
+        touched(&mut self.stack, blocks);
+        touched(&mut self.splittable, blocks);
+    }
+}
+
 /// Walks the hierarchy from its top node down, adding to `plan` its
 /// merged nodes and its blocks at the bound's levels, and to `pending`
-/// the blocks whose view model is to be read.
+/// the blocks whose view model is to be read. The blocks the model reads
+/// are found at most `BLOCK_EXTENT_PX` across, then split, largest on
+/// screen first, down to `BLOCK_EXTENT_MIN_PX` while their parts fit in
+/// `BLOCK_BUDGET`. Parts are not merged.
 fn walk(
     terrain: &Terrain,
     hierarchy: &Hierarchy,
     view: &LodView,
     inputs: &PlanInputs,
-    (plan, stack, mut horizon): (
-        &mut FramePlan,
-        &mut Vec<(NodeId, NodeBox)>,
-        Option<&mut Horizon>,
-    ),
+    (plan, walker, mut horizon): (&mut FramePlan, &mut Walker, Option<&mut Horizon>),
     pending: &mut Vec<Pending>,
 ) {
+    let Walker {
+        stack,
+        splittable,
+        budget,
+    } = walker;
+    let budget = *budget;
+    splittable.clear();
     let tau = view.tau.px();
     let grid = terrain.grid();
     let n = grid.cells_per_patch() as u32;
@@ -580,14 +677,8 @@ fn walk(
     while let Some((id, bounds)) = stack.pop() {
         plan.nodes_visited += 1;
         let node = hierarchy.node(id);
-        if inputs.cull {
-            let (centre, half) = (
-                0.5 * (bounds.min + bounds.max),
-                0.5 * (bounds.max - bounds.min),
-            );
-            if view.frustum.aabb_outside(centre - eye, half) {
-                continue;
-            }
+        if inputs.cull && bounds.outside(view) {
+            continue;
         }
         let (pc, pr) = hierarchy.patch_range(id);
         if inputs.merge && id.level >= 1 && id.level <= MAX_MERGE_LEVEL && node.whole {
@@ -656,10 +747,9 @@ fn walk(
         // and a full-resolution flag would spread from one patch to all.
         let (near, far) = bounds.distances(eye);
         let compact = || {
-            let across = (bounds.max - bounds.min).length();
             near > 0.0
                 && far <= BLOCK_DEPTH_RATIO * near
-                && across * view.scale(near) <= BLOCK_EXTENT_PX
+                && bounds.extent(view, near) <= BLOCK_EXTENT_PX
         };
         let decided = id.level == 0
             || match modelled {
@@ -670,35 +760,123 @@ fn walk(
             NodeBox::push_children(hierarchy, id, stack);
             continue;
         }
-        let slot = plan.blocks.len();
-        let (planned, to_read) = plan_block(
-            terrain,
-            hierarchy,
-            (id, &bounds, (near, far)),
-            view,
-            (inputs, modelled),
-            slot,
-        );
-        if id.level > 0 && modelled.is_none() && planned.full_resolution {
-            NodeBox::push_children(hierarchy, id, stack);
+        if modelled.is_some() && id.level > 0 {
+            let extent = bounds.extent(view, near);
+            splittable.push(Splittable { extent, id, bounds });
             continue;
         }
-        plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
-        plan.blocks.push(planned);
-        let boxed = horizon.as_deref_mut().and_then(|h| {
-            let (lo, hi) = (bounds.min - eye, bounds.max - eye);
-            match &to_read {
-                // Solid up to its mean height, where the model's rays
-                // land, where the model has one.
-                Some(p) => Some(h.add(lo, hi, p.mean.map_or(lo.y, |m| m - eye.y))),
-                None => {
-                    h.add_occluder(lo, hi);
-                    None
+        let decided = (id, &bounds, (near, far), modelled);
+        if !decide(
+            terrain,
+            hierarchy,
+            view,
+            inputs,
+            decided,
+            (plan, &mut horizon),
+            pending,
+        ) {
+            NodeBox::push_children(hierarchy, id, stack);
+        }
+    }
+    // Split the largest on screen first while the parts fit: each split
+    // adds up to three blocks.
+    if plan.blocks.len() + splittable.len() + 3 <= budget {
+        let mut heap = BinaryHeap::from(std::mem::take(splittable));
+        while let Some(&top) = heap.peek() {
+            if top.extent <= BLOCK_EXTENT_MIN_PX || plan.blocks.len() + heap.len() + 3 > budget {
+                break;
+            }
+            heap.pop();
+            NodeBox::push_children(hierarchy, top.id, stack);
+            while let Some((id, bounds)) = stack.pop() {
+                plan.nodes_visited += 1;
+                if inputs.cull && bounds.outside(view) {
+                    continue;
+                }
+                let (near, far) = bounds.distances(eye);
+                if id.level == 0 {
+                    let decided = (id, &bounds, (near, far), inputs.sight);
+                    decide(
+                        terrain,
+                        hierarchy,
+                        view,
+                        inputs,
+                        decided,
+                        (plan, &mut horizon),
+                        pending,
+                    );
+                } else if near > 0.0 && far <= BLOCK_DEPTH_RATIO * near {
+                    let extent = bounds.extent(view, near);
+                    heap.push(Splittable { extent, id, bounds });
+                } else {
+                    NodeBox::push_children(hierarchy, id, stack);
                 }
             }
-        });
-        pending.extend(to_read.map(|p| Pending { boxed, ..p }));
+        }
+        // Decided in the order of the model's entries (by level, then
+        // row-major), which the heap's order scatters over memory.
+        *splittable = heap.into_vec();
+        splittable.sort_unstable_by_key(|b| (b.id.level, b.id.row, b.id.col));
     }
+    for block in splittable.iter() {
+        let (near, far) = block.bounds.distances(eye);
+        let decided = (block.id, &block.bounds, (near, far), inputs.sight);
+        decide(
+            terrain,
+            hierarchy,
+            view,
+            inputs,
+            decided,
+            (plan, &mut horizon),
+            pending,
+        );
+    }
+}
+
+/// Adds node `id` to the plan, decided at once; false, adding nothing,
+/// for a block without the model (`sight`) whose bound needs a patch at
+/// full resolution: the tessellator still sets each edge's factor itself,
+/// and a full-resolution flag would spread from one patch to all.
+#[inline]
+fn decide(
+    terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    view: &LodView,
+    inputs: &PlanInputs,
+    (id, bounds, (near, far), sight): (NodeId, &NodeBox, (f32, f32), Option<&SightTable>),
+    (plan, horizon): (&mut FramePlan, &mut Option<&mut Horizon>),
+    pending: &mut Vec<Pending>,
+) -> bool {
+    let eye = view.eye_local;
+    let slot = plan.blocks.len();
+    let (planned, to_read) = plan_block(
+        terrain,
+        hierarchy,
+        (id, bounds, (near, far)),
+        view,
+        (inputs, sight),
+        slot,
+    );
+    if id.level > 0 && sight.is_none() && planned.full_resolution {
+        return false;
+    }
+    let (pc, pr) = hierarchy.patch_range(id);
+    plan.patches_in_view += (pc[1] - pc[0]) * (pr[1] - pr[0]);
+    plan.blocks.push(planned);
+    let boxed = horizon.as_deref_mut().and_then(|h| {
+        let (lo, hi) = (bounds.min - eye, bounds.max - eye);
+        match &to_read {
+            // Solid up to its mean height, where the model's rays
+            // land, where the model has one.
+            Some(p) => Some(h.add(lo, hi, p.mean.map_or(lo.y, |m| m - eye.y))),
+            None => {
+                h.add_occluder(lo, hi);
+                None
+            }
+        }
+    });
+    pending.extend(to_read.map(|p| Pending { boxed, ..p }));
+    true
 }
 
 /// Block `id`'s entry in the plan at the bound's level, and, where the
@@ -1564,6 +1742,127 @@ mod tests {
         assert!(pending.iter().all(|p| !p.hidden));
     }
 
+    /// Blocks are split largest on screen first while the plan has room:
+    /// with no room the walk's blocks stand; with room for a few more,
+    /// every block split was at least as large on screen as every block
+    /// left whole, and the plan stays within its budget; with room for
+    /// all, no block larger than `BLOCK_EXTENT_MIN_PX` is left whole. The
+    /// blocks cover the same patches however many are split, but for those
+    /// outside the frustum that whole blocks took along. Rough
+    /// ground, 16-cell patches, seen from low and from high by both
+    /// readings.
+    #[test]
+    fn blocks_largest_on_screen_are_split_while_the_plan_has_room() {
+        let map = crate::terrain::Heightmap::from_fn(513, 513, |r, c| {
+            let (x, z) = (c as f32, r as f32);
+            let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
+            40.0 * (x / 23.0).sin() * (z / 17.0).cos() + 6.0 * rough + 0.2 * x
+        })
+        .expect("a heightmap");
+        let info =
+            crate::terrain::TerrainInfo::new(map, glam::DVec2::splat(4.0), 16, glam::DVec2::ZERO)
+                .expect("a terrain");
+        let terrain = Terrain::new(info, 0.0).expect("a margin");
+        let table = terrain.error_table();
+        let hierarchy = Hierarchy::new(&terrain, &table);
+        let grid = terrain.grid();
+        let sight = SightTable::compute(
+            terrain.info().heightmap().expect("samples"),
+            grid,
+            (4.0, 4.0),
+        );
+        let mut some_left_whole = false;
+        for (eye, forward) in [
+            (Vec3::new(-300.0, 120.0, -300.0), Vec3::new(1.0, -0.15, 1.0)),
+            (
+                Vec3::new(-1500.0, 1600.0, 1000.0),
+                Vec3::new(1.0, -0.9, 0.0),
+            ),
+        ] {
+            let v = view(eye, forward.normalize());
+            for reading in [SightReading::Tessellated, SightReading::Template] {
+                let inputs = PlanInputs {
+                    table: &table,
+                    sight: Some(&sight),
+                    merge: true,
+                    cull: true,
+                    reading,
+                    seen: None,
+                };
+                let walked = |budget: usize| {
+                    let mut planner = Planner::default();
+                    planner.walker.budget = budget;
+                    let pending = &mut planner.pending;
+                    let walked = (&mut planner.plan, &mut planner.walker, None);
+                    walk(&terrain, &hierarchy, &v, &inputs, walked, pending);
+                    planner.plan
+                };
+                let extent = |b: &PlannedBlock| {
+                    let id = NodeId {
+                        level: b.level,
+                        col: b.col >> b.level,
+                        row: b.row >> b.level,
+                    };
+                    let bounds = NodeBox::of(hierarchy.node(id));
+                    bounds.extent(&v, bounds.distances(v.eye_local).0)
+                };
+                let covered = |plan: &FramePlan| {
+                    let mut levels = Vec::new();
+                    plan.patch_levels(grid, &mut levels);
+                    levels.iter().map(|&l| l != NOT_DRAWN).collect::<Vec<_>>()
+                };
+                let whole = walked(0);
+                let found = whole.blocks.len();
+                let large = whole.blocks.iter().filter(|b| b.level > 0).count();
+                assert!(large >= 8, "{eye}: {large} blocks of several patches");
+                let budget = found + 3 * (large / 2);
+                for (room, plan) in [(budget, walked(budget)), (usize::MAX, walked(usize::MAX))] {
+                    // Parts outside the frustum are left out: the patches
+                    // the whole blocks took along.
+                    for (p, (&now, &before)) in
+                        covered(&plan).iter().zip(&covered(&whole)).enumerate()
+                    {
+                        let patch = NodeId::patch(grid.patch_id(p));
+                        let outside = NodeBox::of(hierarchy.node(patch)).outside(&v);
+                        assert!(
+                            now == before || (before && outside),
+                            "{eye}, room for {room}: patch {p} covered {now}, before {before}"
+                        );
+                    }
+                    assert!(
+                        plan.blocks.len() <= room,
+                        "{eye}: {} blocks",
+                        plan.blocks.len()
+                    );
+                    let kept = |b: &&PlannedBlock| {
+                        plan.blocks
+                            .iter()
+                            .any(|p| (p.level, p.col, p.row) == (b.level, b.col, b.row))
+                    };
+                    let (left, split): (Vec<&PlannedBlock>, Vec<&PlannedBlock>) =
+                        whole.blocks.iter().filter(|b| b.level > 0).partition(kept);
+                    assert!(!split.is_empty(), "{eye}, room for {room}: none split");
+                    let smallest_split = split.iter().map(|b| extent(b)).fold(f32::MAX, f32::min);
+                    for b in &left {
+                        let e = extent(b);
+                        assert!(
+                            e <= smallest_split || e <= BLOCK_EXTENT_MIN_PX,
+                            "{eye}: a block {e} px across left whole, one {smallest_split} px split"
+                        );
+                        if room == usize::MAX {
+                            assert!(e <= BLOCK_EXTENT_MIN_PX, "{eye}: {e} px left whole");
+                        }
+                    }
+                    some_left_whole |= room == budget && !left.is_empty();
+                    for b in plan.blocks.iter().filter(|b| b.level > 0) {
+                        assert!(extent(b) <= BLOCK_EXTENT_PX, "{eye}: {} px", extent(b));
+                    }
+                }
+            }
+        }
+        assert!(some_left_whole, "the budget never bound");
+    }
+
     /// With counts, a block that showed no pixel is not read where the
     /// level it was drawn at kept some of its pixels within tau, was
     /// within tau, or was not drawn: the candidates and the frame's pixels
@@ -1611,7 +1910,7 @@ mod tests {
                     };
                     let mut planner = Planner::default();
                     let pending = &mut planner.pending;
-                    let walked = (&mut planner.plan, &mut planner.stack, None);
+                    let walked = (&mut planner.plan, &mut planner.walker, None);
                     walk(&terrain, &hierarchy, &v, &inputs, walked, pending);
                     for pattern in 0..4 {
                         let group = |p: usize| {
