@@ -765,13 +765,13 @@ fn walk(
             splittable.push(Splittable { extent, id, bounds });
             continue;
         }
-        let decided = (id, &bounds, (near, far), modelled);
+        let found = (id, &bounds, (near, far), modelled);
         if !decide(
             terrain,
             hierarchy,
             view,
             inputs,
-            decided,
+            found,
             (plan, &mut horizon),
             pending,
         ) {
@@ -795,13 +795,13 @@ fn walk(
                 }
                 let (near, far) = bounds.distances(eye);
                 if id.level == 0 {
-                    let decided = (id, &bounds, (near, far), inputs.sight);
+                    let found = (id, &bounds, (near, far), inputs.sight);
                     decide(
                         terrain,
                         hierarchy,
                         view,
                         inputs,
-                        decided,
+                        found,
                         (plan, &mut horizon),
                         pending,
                     );
@@ -820,13 +820,13 @@ fn walk(
     }
     for block in splittable.iter() {
         let (near, far) = block.bounds.distances(eye);
-        let decided = (block.id, &block.bounds, (near, far), inputs.sight);
+        let found = (block.id, &block.bounds, (near, far), inputs.sight);
         decide(
             terrain,
             hierarchy,
             view,
             inputs,
-            decided,
+            found,
             (plan, &mut horizon),
             pending,
         );
