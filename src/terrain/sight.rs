@@ -96,8 +96,8 @@ pub const LEVELS: usize = LEVEL_COUNT - 1;
 /// part of its on-disk cache key. A number is never taken twice, not even
 /// by a change that was tried and dropped: the tables it cached stay on
 /// the machines that ran it and would be read back as the next change's.
-/// 10 to 14 were taken so (notes sections 51, 55, 58 and 59); the next
-/// change takes 16.
+/// 10 to 14, 16 and 17 were taken so (notes sections 51, 55, 58, 59 and
+/// 60); the next change takes 18.
 pub const MODEL_VERSION: u32 = 15;
 /// How far above the largest of four errors their weighted sum can round
 /// (`LatticePoint`'s weights add up to 1 within a few roundings).
