@@ -1742,6 +1742,28 @@ mod tests {
         assert!(pending.iter().all(|p| !p.hidden));
     }
 
+    /// Rough ridged ground of `samples` x `samples` samples 4 m apart in
+    /// 16-cell patches, its error table and its view model.
+    fn rough_ridged(samples: usize) -> (Terrain, ErrorTable, SightTable) {
+        let map = crate::terrain::Heightmap::from_fn(samples, samples, |r, c| {
+            let (x, z) = (c as f32, r as f32);
+            let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
+            40.0 * (x / 23.0).sin() * (z / 17.0).cos() + 6.0 * rough + 0.2 * x
+        })
+        .expect("a heightmap");
+        let info =
+            crate::terrain::TerrainInfo::new(map, glam::DVec2::splat(4.0), 16, glam::DVec2::ZERO)
+                .expect("a terrain");
+        let terrain = Terrain::new(info, 0.0).expect("a margin");
+        let table = terrain.error_table();
+        let sight = SightTable::compute(
+            terrain.info().heightmap().expect("samples"),
+            terrain.grid(),
+            (4.0, 4.0),
+        );
+        (terrain, table, sight)
+    }
+
     /// Blocks are split largest on screen first while the plan has room:
     /// with no room the walk's blocks stand; with room for a few more,
     /// every block split was at least as large on screen as every block
@@ -1753,24 +1775,9 @@ mod tests {
     /// readings.
     #[test]
     fn blocks_largest_on_screen_are_split_while_the_plan_has_room() {
-        let map = crate::terrain::Heightmap::from_fn(513, 513, |r, c| {
-            let (x, z) = (c as f32, r as f32);
-            let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
-            40.0 * (x / 23.0).sin() * (z / 17.0).cos() + 6.0 * rough + 0.2 * x
-        })
-        .expect("a heightmap");
-        let info =
-            crate::terrain::TerrainInfo::new(map, glam::DVec2::splat(4.0), 16, glam::DVec2::ZERO)
-                .expect("a terrain");
-        let terrain = Terrain::new(info, 0.0).expect("a margin");
-        let table = terrain.error_table();
+        let (terrain, table, sight) = rough_ridged(513);
         let hierarchy = Hierarchy::new(&terrain, &table);
         let grid = terrain.grid();
-        let sight = SightTable::compute(
-            terrain.info().heightmap().expect("samples"),
-            grid,
-            (4.0, 4.0),
-        );
         let mut some_left_whole = false;
         for (eye, forward) in [
             (Vec3::new(-300.0, 120.0, -300.0), Vec3::new(1.0, -0.15, 1.0)),
@@ -1873,24 +1880,9 @@ mod tests {
     /// level, a middle one, full resolution or not drawn.
     #[test]
     fn blocks_counted_dark_are_read_as_reading_them_gives() {
-        let map = crate::terrain::Heightmap::from_fn(257, 257, |r, c| {
-            let (x, z) = (c as f32, r as f32);
-            let rough = ((x * 12.9898 + z * 78.233).sin() * 43758.547).fract();
-            40.0 * (x / 23.0).sin() * (z / 17.0).cos() + 6.0 * rough + 0.2 * x
-        })
-        .expect("a heightmap");
-        let info =
-            crate::terrain::TerrainInfo::new(map, glam::DVec2::splat(4.0), 16, glam::DVec2::ZERO)
-                .expect("a terrain");
-        let terrain = Terrain::new(info, 0.0).expect("a margin");
-        let table = terrain.error_table();
+        let (terrain, table, sight) = rough_ridged(257);
         let hierarchy = Hierarchy::new(&terrain, &table);
         let grid = terrain.grid();
-        let sight = SightTable::compute(
-            terrain.info().heightmap().expect("samples"),
-            grid,
-            (4.0, 4.0),
-        );
         let (mut hid, mut dark_read) = (0, 0);
         for (eye, forward) in [
             (Vec3::new(-600.0, 50.0, -600.0), Vec3::new(1.0, -0.08, 1.0)),
