@@ -915,16 +915,76 @@ fn the_patch_holding_the_eye_is_seen_from_its_ground() {
 /// bumps up to 2.5 m, and, where `wall`, a 200 m wall across its whole
 /// width over sample rows 60 to 84 (patch row 4 whole).
 fn walled_plain(wall: bool) -> Terrain {
+    plain_with_wall(wall.then_some(60..=84), 16)
+}
+
+/// 257 x 257 samples 10 m apart in `cells`-cell patches: a plain at 0 with
+/// bumps up to 2.5 m, and a 200 m wall across its whole width over the
+/// sample rows `wall`.
+fn plain_with_wall(wall: Option<std::ops::RangeInclusive<usize>>, cells: u32) -> Terrain {
     let map = Heightmap::from_fn(257, 257, |r, c| {
         let bumps = ((r * 7 + c * 13) % 11) as f32 * 0.25;
-        match wall && (60..=84).contains(&r) {
+        match wall.as_ref().is_some_and(|w| w.contains(&r)) {
             true => 200.0,
             false => bumps,
         }
     })
     .unwrap();
-    let info = TerrainInfo::new(map, DVec2::splat(10.0), 16, DVec2::ZERO).unwrap();
+    let info = TerrainInfo::new(map, DVec2::splat(10.0), cells, DVec2::ZERO).unwrap();
     Terrain::new(info, 0.0).unwrap()
+}
+
+/// The plan at 1 px of `terrain` (a `plain_with_wall`) from `height` m up
+/// at local z `z` over its middle column, looking down the plain towards
+/// its last row.
+fn planned_down_the_plain(terrain: &Terrain, height: f64, z: f64) -> FramePlan {
+    let info = terrain.info();
+    let x = info.local_x(128);
+    let view = view_of(
+        terrain,
+        DVec3::new(x, height, z),
+        DVec3::new(x, 0.0, info.local_z(256)),
+        1.0,
+    );
+    let table = terrain.error_table();
+    planned(terrain, &table, terrain.sight_table(), &view)
+}
+
+/// The blocks of `frame` wholly in patch rows `row` on.
+fn blocks_from_row<'f>(
+    frame: &'f FramePlan,
+    grid: &PatchGrid,
+    row: usize,
+) -> Vec<&'f PlannedBlock> {
+    frame
+        .blocks
+        .iter()
+        .filter(|b| b.patches(grid).all(|p| grid.patch_id(p).row >= row))
+        .collect()
+}
+
+/// A ridge inside a patch large on screen hides the ground behind it
+/// without counts, though the patch's mean lies far below it: the patch
+/// also hides as its parts, each solid up to its own mean
+/// (`terrain::slabs`). From 60 m over the plain, 100 m before its edge,
+/// a 40 m-wide, 200 m ridge 400 m in, inside the first row of 640 m
+/// patches (its mean 17 m), leaves every block beyond that row at the
+/// coarsest level; without the ridge, they need finer ones.
+#[test]
+fn a_ridge_inside_a_near_patch_hides_the_ground_behind_it() {
+    let coarsest_beyond = |ridge: bool| {
+        let terrain = plain_with_wall(ridge.then_some(40..=44), 64);
+        let z = terrain.info().local_z(0) + 100.0;
+        let frame = planned_down_the_plain(&terrain, 60.0, z);
+        let beyond = blocks_from_row(&frame, terrain.grid(), 1);
+        assert!(beyond.len() >= 4, "{} blocks beyond", beyond.len());
+        beyond.iter().all(|b| b.patch_level == 0)
+    };
+    assert!(
+        !coarsest_beyond(false),
+        "the bumps need finer levels in view"
+    );
+    assert!(coarsest_beyond(true), "ground behind the ridge is refined");
 }
 
 /// Without counts, ground that nearer ground hides is not
@@ -936,23 +996,10 @@ fn walled_plain(wall: bool) -> Terrain {
 fn ground_behind_a_wall_is_not_refined_without_counts() {
     let coarsest_behind = |wall: bool| {
         let terrain = walled_plain(wall);
-        let info = terrain.info();
-        let (x, z) = (info.local_x(128), info.local_z(20));
-        let view = view_of(
-            &terrain,
-            DVec3::new(x, 20.0, z),
-            DVec3::new(x, 0.0, info.local_z(256)),
-            1.0,
-        );
-        let table = terrain.error_table();
-        let frame = planned(&terrain, &table, terrain.sight_table(), &view);
+        let frame = planned_down_the_plain(&terrain, 20.0, terrain.info().local_z(20));
         let grid = terrain.grid();
         // Blocks wholly in patch rows 8 on: 1.1 km and more from the eye.
-        let behind: Vec<_> = frame
-            .blocks
-            .iter()
-            .filter(|b| b.patches(grid).all(|p| grid.patch_id(p).row >= 8))
-            .collect();
+        let behind = blocks_from_row(&frame, grid, 8);
         assert!(behind.len() >= 10, "{} blocks behind", behind.len());
         let before = frame
             .blocks

@@ -15,6 +15,15 @@
 //! frame with bottoms, 53,563 with means, and 28,636 once its counts were
 //! read (notes section 50).
 //!
+//! A patch large on screen is also added as its parts higher than its
+//! mean (`add_part`, `terrain::slabs`), each solid up to its own samples'
+//! mean. They only hide: a ridge among them hides the ground behind it
+//! where the patch's mean, below the ridge, would not (notes section 61).
+//! A part lower than the patch's mean lies under the patch's own slab,
+//! which already hides more of what lies beyond the patch: leaving such
+//! parts out drew the same triangles on the DEM's flythrough and the
+//! 4097^2 grazing view.
+//!
 //! Seen from the eye, a vertical line of sight over the footprint at
 //! azimuth `a` crosses the slab from where it enters the footprint to
 //! where it leaves it, `t_out(a)` away horizontally: anything further
@@ -112,6 +121,13 @@ impl Horizon {
     /// asked for: it only hides.
     pub fn add_occluder(&mut self, lo: Vec3, hi: Vec3) {
         self.push(lo, hi, lo.y, false);
+    }
+
+    /// Adds a part of a box added before, solid up to `solid` (clamped to
+    /// its heights), whose own share is not asked for: it only hides
+    /// (`terrain::slabs`).
+    pub fn add_part(&mut self, lo: Vec3, hi: Vec3, solid: f32) {
+        self.push(lo, hi, solid, false);
     }
 
     fn push(&mut self, lo: Vec3, hi: Vec3, solid: f32, target: bool) -> usize {
@@ -330,6 +346,39 @@ mod tests {
         assert_eq!(mean, 0.0);
         // Clamped to the box's heights.
         assert_eq!(shown_behind(-30.0), bottom);
+    }
+
+    /// A wide box whose mean lies under a ridge along its far side hides
+    /// what is behind the ridge once its parts are added, each solid up
+    /// to its own mean; the parts hide nothing of the box itself, and a
+    /// part lower than the box's mean hides no more than the box does.
+    #[test]
+    fn a_ridge_among_a_boxs_parts_hides_what_its_mean_does_not() {
+        let shown = |parts: &[([f32; 3], [f32; 3], f32)]| {
+            let mut h = Horizon::default();
+            // A plain 20 to 60 away, 30 below the eye, with a ridge 50 to
+            // 60 away rising to 10 below it: mean -26 over the whole box.
+            let near = h.add(
+                Vec3::new(-40.0, -30.0, 20.0),
+                Vec3::new(40.0, -10.0, 60.0),
+                -26.0,
+            );
+            for &(lo, hi, solid) in parts {
+                h.add_part(Vec3::from(lo), Vec3::from(hi), solid);
+            }
+            // Ground 200 to 210 away, 70 to 60 below the eye: -60/210 is
+            // over -26/60 (not hidden by the box), under -12/60 (hidden by
+            // the ridge's part).
+            let behind = solid_to_bottom(&mut h, [-5.0, -70.0, 200.0], [5.0, -60.0, 210.0]);
+            let mut shown = Vec::new();
+            h.shown(&mut shown);
+            (shown[near], shown[behind])
+        };
+        let plain = ([-40.0, -30.0, 20.0], [40.0, -29.0, 50.0], -29.5);
+        let ridge = ([-40.0, -30.0, 50.0], [40.0, -10.0, 60.0], -12.0);
+        assert_eq!(shown(&[]), (1.0, 1.0));
+        assert_eq!(shown(&[plain]), (1.0, 1.0));
+        assert_eq!(shown(&[plain, ridge]), (1.0, 0.0));
     }
 
     /// A wall across the line of sight hides lower ground behind it, not

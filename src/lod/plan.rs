@@ -54,7 +54,9 @@
 //! counts (a moving camera's, a view's first) reads
 //! each block at the share of its azimuth bins where the plan's nearer
 //! boxes do not hide it, each block with a model taken as solid up to its
-//! mean height (`lod::horizon`); a block hidden in every bin it spans
+//! mean height, and a patch at least `PARTS_HIDE_EXTENT_PX` across also
+//! as its parts higher than its mean, each solid up to its own mean
+//! (`lod::horizon`, `terrain::slabs`); a block hidden in every bin it spans
 //! shows no pixel at any level, and its model is not read (`place_parts`).
 //! Patches without a model (the far remainders, or a terrain without
 //! one) keep the bound's choice, made by the control shader from their
@@ -83,6 +85,7 @@ use crate::terrain::error_table::{ErrorTable, PatchErrors, LEVEL_COUNT};
 use crate::terrain::sight::{
     Block, BlockShares, BlockView, LatticePoint, SightTable, BLOCK_LEVELS,
 };
+use crate::terrain::slabs::SLABS_PER_PATCH;
 use crate::terrain::{PatchGrid, PatchId, Terrain};
 
 /// Share of the frame's terrain pixels the view model's choice may put
@@ -101,6 +104,15 @@ pub const BLOCK_EXTENT_PX: f32 = 128.0;
 /// The smallest block split further while the plan has room
 /// (`BLOCK_BUDGET`), in pixels across as `BLOCK_EXTENT_PX`.
 pub const BLOCK_EXTENT_MIN_PX: f32 = 32.0;
+
+/// The smallest patch, in pixels across as `BLOCK_EXTENT_PX`, that the
+/// horizon also takes as its parts (`terrain::slabs`), each solid up to
+/// its own mean (`lod::horizon`). A part hides only in the azimuth bins
+/// wholly inside its span (20 to 40 px each, `horizon::BINS`): a part a
+/// quarter of this across spans about two. From 128 px (a part about a
+/// bin) the DEM's flythrough drew as many triangles, with more boxes in
+/// the horizon (notes section 61).
+pub const PARTS_HIDE_EXTENT_PX: f32 = 256.0;
 
 /// The most blocks (patches included) a plan splits its blocks up to:
 /// blocks found at `BLOCK_EXTENT_PX` are split, largest on screen first,
@@ -462,7 +474,11 @@ impl Planner {
         touched(&mut share.steps, LEVEL_COUNT * blocks);
         touched(&mut share.levels, blocks);
         touched(&mut share.trims, blocks);
-        planner.horizon.reserve(2 * blocks);
+        // Room for a few hundred patches large on screen, each hiding as
+        // its parts too.
+        planner
+            .horizon
+            .reserve(2 * blocks + SLABS_PER_PATCH * blocks.min(256));
         planner
     }
 
@@ -868,7 +884,21 @@ fn decide(
         match &to_read {
             // Solid up to its mean height, where the model's rays
             // land, where the model has one.
-            Some(p) => Some(h.add(lo, hi, p.mean.map_or(lo.y, |m| m - eye.y))),
+            Some(p) => {
+                let at = h.add(lo, hi, p.mean.map_or(lo.y, |m| m - eye.y));
+                // A patch large on screen also hides as its parts, each
+                // solid up to its own mean (`terrain::slabs`): those
+                // higher than the patch's, which hide what it does not.
+                let large = id.level == 0 && bounds.extent(view, near) >= PARTS_HIDE_EXTENT_PX;
+                if let (Some(slabs), Some(mean)) = (terrain.patch_slabs().filter(|_| large), p.mean)
+                {
+                    let parts = slabs.of(pr[0] * terrain.grid().patch_cols() + pc[0]);
+                    for s in parts.iter().filter(|s| s.mean > mean) {
+                        h.add_part(s.min - eye, s.max - eye, s.mean - eye.y);
+                    }
+                }
+                Some(at)
+            }
             None => {
                 h.add_occluder(lo, hi);
                 None

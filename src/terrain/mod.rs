@@ -16,6 +16,7 @@ pub mod placement;
 mod query;
 pub mod shading;
 pub mod sight;
+pub mod slabs;
 pub mod tiled;
 
 pub use camera::{look_at, perspective, Frustum};
@@ -47,6 +48,9 @@ pub struct Terrain {
     /// The error LOD's view model (`sight`), computed on first use and
     /// kept; None for a terrain whose heights the CPU does not hold whole.
     sight: std::sync::OnceLock<Option<std::sync::Arc<sight::SightTable>>>,
+    /// Each patch's parts (`slabs`), computed with the view model; None
+    /// where the heights are not held whole.
+    slabs: std::sync::OnceLock<Option<std::sync::Arc<slabs::PatchSlabs>>>,
 }
 
 /// The height under each control point of a tiled terrain, from each
@@ -131,6 +135,7 @@ impl Terrain {
             indices,
             error_tables,
             sight: std::sync::OnceLock::new(),
+            slabs: std::sync::OnceLock::new(),
         })
     }
 
@@ -180,12 +185,14 @@ impl Terrain {
     }
 
     /// The error LOD's view model of every full-size patch (see `sight`),
-    /// computed the first time it is asked for; None where the heights are
-    /// not held whole (a tiled terrain read a tile at a time).
+    /// computed the first time it is asked for, with each patch's parts
+    /// (`patch_slabs`), so a frame reads both ready; None where the
+    /// heights are not held whole (a tiled terrain read a tile at a time).
     pub fn sight_table(&self) -> Option<&sight::SightTable> {
         self.sight
             .get_or_init(|| {
                 let map = self.info.heightmap()?;
+                self.patch_slabs();
                 let spacing = self.info.spacing();
                 let compute = || {
                     sight::SightTable::compute(map, &self.grid, (spacing.x, spacing.y)).to_bytes()
@@ -209,6 +216,19 @@ impl Terrain {
                     compute,
                 );
                 sight::SightTable::from_bytes(&self.grid, &bytes).map(std::sync::Arc::new)
+            })
+            .as_deref()
+    }
+
+    /// Each patch's parts (see `slabs`), computed the first time they
+    /// are asked for (`sight_table` asks); None where the heights are not
+    /// held whole.
+    pub fn patch_slabs(&self) -> Option<&slabs::PatchSlabs> {
+        self.slabs
+            .get_or_init(|| {
+                let map = self.info.heightmap()?;
+                let slabs = slabs::PatchSlabs::compute(map, &self.grid, self.info.placement());
+                Some(std::sync::Arc::new(slabs))
             })
             .as_deref()
     }
