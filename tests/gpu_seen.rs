@@ -145,8 +145,9 @@ fn counts_of_a_still_view_and_none_of_a_moving_one(
 }
 
 /// On the DEM's grazing view, where the hill under the eye hides most of
-/// the ground behind it, the frames that read the counts draw fewer
-/// triangles than the view's first frame, on either path, and stay within
+/// the ground behind it, the frames that read the counts draw at least
+/// 10 % fewer triangles than the view's first frame (whose horizon finds
+/// part of what is hidden, `lod::horizon`), on either path, and stay within
 /// tau at the 99th percentile against the full-resolution reference. The
 /// choice settles: the last frames draw the same triangles.
 #[test]
@@ -182,7 +183,7 @@ fn counted_pixels_spare_hidden_ground_within_tau() {
         let last = frames.last().expect("frames");
         assert!(scene.renderer().seen_pixels().is_some());
         assert!(
-            triangles(last) * 10 < triangles(&first) * 8,
+            triangles(last) * 10 < triangles(&first) * 9,
             "{path:?} at tau {tau}: {} triangles after counting, {} before",
             triangles(last),
             triangles(&first)
