@@ -688,6 +688,20 @@ fn walk(
         (f64::from(n) * spacing.x) as f32,
         (f64::from(n) * spacing.y) as f32,
     );
+    // Adds a node found at its distances to the plan (`decide`).
+    let mut decide_found = |found: (NodeId, &NodeBox, (f32, f32), Option<&SightTable>),
+                            plan: &mut FramePlan,
+                            horizon: &mut Option<&mut Horizon>| {
+        decide(
+            terrain,
+            hierarchy,
+            view,
+            inputs,
+            found,
+            (plan, horizon),
+            pending,
+        )
+    };
     stack.clear();
     stack.push(NodeBox::entry(hierarchy, hierarchy.root()));
     while let Some((id, bounds)) = stack.pop() {
@@ -782,15 +796,7 @@ fn walk(
             continue;
         }
         let found = (id, &bounds, (near, far), modelled);
-        if !decide(
-            terrain,
-            hierarchy,
-            view,
-            inputs,
-            found,
-            (plan, &mut horizon),
-            pending,
-        ) {
+        if !decide_found(found, plan, &mut horizon) {
             NodeBox::push_children(hierarchy, id, stack);
         }
     }
@@ -812,15 +818,7 @@ fn walk(
                 let (near, far) = bounds.distances(eye);
                 if id.level == 0 {
                     let found = (id, &bounds, (near, far), inputs.sight);
-                    decide(
-                        terrain,
-                        hierarchy,
-                        view,
-                        inputs,
-                        found,
-                        (plan, &mut horizon),
-                        pending,
-                    );
+                    decide_found(found, plan, &mut horizon);
                 } else if near > 0.0 && far <= BLOCK_DEPTH_RATIO * near {
                     let extent = bounds.extent(view, near);
                     heap.push(Splittable { extent, id, bounds });
@@ -837,15 +835,7 @@ fn walk(
     for block in splittable.iter() {
         let (near, far) = block.bounds.distances(eye);
         let found = (block.id, &block.bounds, (near, far), inputs.sight);
-        decide(
-            terrain,
-            hierarchy,
-            view,
-            inputs,
-            found,
-            (plan, &mut horizon),
-            pending,
-        );
+        decide_found(found, plan, &mut horizon);
     }
 }
 
