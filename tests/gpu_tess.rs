@@ -1493,13 +1493,17 @@ fn reference_height(info: &TerrainInfo, x: f64, z: f64) -> Option<f64> {
 ///
 /// The slack: 0.02 px for positions rebuilt from 32-bit depth at pixel
 /// centres (a full-resolution patch on the rough map reads 0.011 px), and
-/// 10 % for the tessellator's transition rings. Where an edge's factor is
+/// 15 % for the tessellator's transition rings. Where an edge's factor is
 /// finer than the inside's, the triangles joining the two are of no
-/// level's regular grid, so no table row measured them: 7.3 % over the
-/// prediction is the most seen here (DEM, straight down, 0.5 px, a patch
-/// at two segments inside whose four neighbours are all finer, so that
-/// every triangle of it is a transition's; 4.8 % before the view model
-/// read each path's own diagonal and chose other levels).
+/// level's regular grid, so no table row measured them: 11.7 % over the
+/// prediction is the most seen here (the rough map, straight down, 2 px,
+/// a patch at four segments inside three of whose neighbours are at
+/// eight; the DEM obliquely at 0.5 px, a patch at two segments inside
+/// whose four neighbours are all finer, so that every triangle of it is a
+/// transition's, 8.0 %). It was 7.3 % before the view model read ground
+/// falling away along the ray at its face-on error and chose coarser
+/// levels beside finer ones, and 4.8 % before it read each path's own
+/// diagonal.
 #[test]
 fn each_patch_stays_within_its_predicted_error() {
     use vkterrain::lod::hierarchy::Hierarchy;
@@ -1562,7 +1566,7 @@ fn each_patch_stays_within_its_predicted_error() {
                     };
                     let over = m - f64::from(pred);
                     assert!(
-                        over <= 0.02 + 0.1 * f64::from(pred),
+                        over <= 0.02 + 0.15 * f64::from(pred),
                         "{name}/{view_name}/{tau} px: patch {p} measured {m:.4} px, predicted {pred:.4}"
                     );
                     if over > worst.0 {
