@@ -17,7 +17,8 @@ use serde::Serialize;
 
 use super::look::{extra_percent, LookRow};
 use super::run::{
-    Row, RowLod, RowPath, ORACLE_EXCEED_FRACTION, SINGLE_FRAME_TIMING, TIMED_FRAMES, WARM_UP,
+    Row, RowLod, RowPath, FLYTHROUGH_PASSES, ORACLE_EXCEED_FRACTION, SINGLE_FRAME_TIMING,
+    TIMED_FRAMES, WARM_UP,
 };
 use crate::output::write_atomically;
 
@@ -745,20 +746,23 @@ Where one surface hides another (a ridge in front of a valley), a pixel's two po
 on different hills, and its error is large even when both surfaces are close: such pixels are \
 counted as they are, never filtered out.\n\n\
 **Speed.** `gpu_ms` is the time between timestamps written before and after the terrain draw, \
-the median of {TIMED_FRAMES} frames (`--timed-frames`) after {WARM_UP} untimed ones for a fixed view, and of all \
-frames but the first {WARM_UP} for the flythrough. A fixed view's frames are timed in \
+the median of {TIMED_FRAMES} frames (`--timed-frames`) after {WARM_UP} untimed ones for a fixed view. The \
+flythrough's closed loop is flown {FLYTHROUGH_PASSES} times, each row drawing each frame in turn and going on \
+from its own frame before; a row's time for a frame is its median over the passes, and its time \
+for the flythrough the median of those over all frames but the first {WARM_UP}, so a single slow \
+draw of one frame does not move the row. A fixed view's frames are timed in \
 rounds, one frame of every row (brute included) a round, nothing read back or measured \
 between them, so that whatever slows the machine during the run slows every row alike; each \
-row's error and counts come from one more frame, drawn and read back after the rounds. A flythrough frame is timed and read back at once (the \
-readback is recorded after the second timestamp). With `--single-frame` a fixed view is read back once, and each row is \
+row's error and counts come from one more frame, drawn and read back after the rounds. In the flythrough's first pass a frame is timed and read back at once (the \
+readback is recorded after the second timestamp); the later passes read nothing back. With `--single-frame` a fixed view is read back once, and each row is \
 timed by that frame and the frames it draws straight after it, up to {TIMED_FRAMES} in all within \
 {timing_ms} ms of that frame's start: a row a GPU draws in milliseconds is timed by a median, one \
 that takes longer (brute's tens of millions of triangles on lavapipe) once. {GPU_CLOCK_NOTE} `cpu_ms` is the median time to choose \
 levels, write uniforms and record the frame's commands; `lod_ms` is the level choice alone \
 (its median over the timed frames), and `lod_ms_max` its largest in any frame of the row, \
 warm-up frames and each view's first frame included, so a choice that only a still camera \
-could reuse is not hidden. `frame_ms` is the median over the timed frames of CPU plus GPU \
-time: what a frame costs a user. `triangles` are clipping primitives and \
+could reuse is not hidden. `frame_ms` is the median over the timed frames (the flythrough's, each a median over its \
+passes) of CPU plus GPU time: what a frame costs a user. `triangles` are clipping primitives and \
 `tes_invocations` tessellation evaluation invocations, from pipeline statistics (the mean per \
 frame over the flythrough). `overdraw` is `fragment_invocations` (fragment shader invocations, \
 from the same statistics) over `covered_pixels` (the pixels the terrain covers in the row's \

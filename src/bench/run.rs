@@ -33,6 +33,15 @@ pub const VIEW_MEASURE_TAU: f32 = 1.0;
 /// otherwise (`BenchOptions::timed_frames`).
 pub const TIMED_FRAMES: usize = 10;
 pub const WARM_UP: usize = 2;
+/// Times the flythrough's loop is flown. The first pass reads every frame
+/// back and measures it; the others only time it. A row's time for each
+/// frame is its median over the passes, and the row's the median over
+/// its frames. A frame's cost differs from the next one's, so a single
+/// slow draw would otherwise move the row's median by a rank or two: on a
+/// 2-core machine running lavapipe, a one-pass run drew three or four of
+/// twenty frames 14 to 25 ms slower in one row than in another row making
+/// the same draws.
+pub const FLYTHROUGH_PASSES: usize = 3;
 
 /// Untimed frames a fixed view's single timed frame follows, for a row
 /// whose choice reads earlier frames of its view (`render::seen`): the
@@ -467,8 +476,10 @@ pub trait Progress {
 /// Figures of one configuration, gathered over a camera sequence.
 #[derive(Default)]
 struct Gathered {
-    /// The timed frames' figures, and those of the frames counted.
-    timed: Vec<FrameFigures>,
+    /// The timed frames' figures, each with its sample of the row's
+    /// sequence (the flythrough's passes time each sample more than once),
+    /// and the figures of the frames counted.
+    timed: Vec<(usize, FrameFigures)>,
     counted: Vec<FrameFigures>,
     lod_ms_max: Option<f64>,
     fragment_invocations: Vec<u64>,
@@ -721,7 +732,7 @@ impl<'a> Bench<'a> {
         if sample < self.warm_up {
             return;
         }
-        gathered.timed.push(timed.figures());
+        gathered.timed.push((sample, timed.figures()));
         let culling = timed.measurements.occlusion.and_then(|o| o.culling_ms);
         gathered.culling_ms.extend(culling);
     }
@@ -824,6 +835,14 @@ impl<'a> Bench<'a> {
                 _ => None,
             })
             .collect();
+        // The flythrough's later passes draw each frame's oracle levels
+        // again.
+        let passes = if cameras.len() > 1 {
+            FLYTHROUGH_PASSES
+        } else {
+            1
+        };
+        let mut oracle_by_frame: Vec<Vec<Vec<u8>>> = Vec::new();
         for (f, camera) in cameras.iter().enumerate() {
             let first_sample = f * repeats;
             let message = if cameras.len() > 1 {
@@ -893,13 +912,7 @@ impl<'a> Bench<'a> {
                     &message,
                 )?
             };
-            let levels_of = |config: &Config| match config {
-                Config::Oracle(t) => {
-                    let i = oracle_taus.iter().position(|x| x == t).expect("listed");
-                    Some(oracle[i].as_slice())
-                }
-                _ => None,
-            };
+            let levels_of = |config: &Config| oracle_levels_of(config, &oracle_taus, &oracle);
             // A fixed view is a camera cut for an occluded row: its first
             // frame starts from the last view's visibility. That frame is
             // compared too, and not timed, against the first frame of the
@@ -1001,6 +1014,21 @@ impl<'a> Bench<'a> {
                         .push(drawn.saturating_sub(visible_patches));
                 }
             }
+            if passes > 1 {
+                oracle_by_frame.push(oracle);
+            }
+        }
+        // The loop flown again, each frame of every row timed and nothing
+        // read back; each row's renderer goes on from the frame before, as
+        // a camera flying the loop round would.
+        for _ in 1..passes {
+            for (f, camera) in cameras.iter().enumerate() {
+                for (config, g) in gathered.iter_mut() {
+                    let levels = oracle_levels_of(config, &oracle_taus, &oracle_by_frame[f]);
+                    self.time_sample(camera, config, levels, f * repeats, g)?;
+                    progress.advance(&format!("{name} {}/{} again", f + 1, cameras.len()));
+                }
+            }
         }
         Ok(gathered)
     }
@@ -1062,8 +1090,11 @@ impl<'a> Bench<'a> {
             views
                 .iter()
                 .map(|(_, cams, repeats)| {
-                    let cut = if cams.len() == 1 { occluded } else { 0 };
-                    cams.len() as u64 * per_frame(*repeats as u64) + cut
+                    let (cut, again) = match cams.len() {
+                        1 => (occluded, 0),
+                        n => (0, (FLYTHROUGH_PASSES - 1) * n * configs.len()),
+                    };
+                    cams.len() as u64 * per_frame(*repeats as u64) + cut + again as u64
                 })
                 .sum(),
         );
@@ -1076,6 +1107,7 @@ impl<'a> Bench<'a> {
         for (name, cameras, repeats) in &views {
             for (config, mut g) in self.sequence(name, cameras, *repeats, configs, progress)? {
                 let stats = g.errors.stats();
+                let (timed, frame_ms) = per_sample(&g.timed);
                 let bytes = renderer_for(&mut self.renderers, &config).bytes + self.target_bytes;
                 rows.push(Row {
                     scene: scene.to_string(),
@@ -1089,15 +1121,9 @@ impl<'a> Bench<'a> {
                     lod: config.lod(),
                     tau: config.tau(),
                     config: config.label(),
-                    figures: FrameFigures::summary(&g.timed, &g.counted),
+                    figures: FrameFigures::summary(&timed, &g.counted),
                     lod_ms_max: g.lod_ms_max,
-                    frame_ms: median(
-                        &mut g
-                            .timed
-                            .iter()
-                            .filter_map(FrameFigures::frame_ms)
-                            .collect::<Vec<_>>(),
-                    ),
+                    frame_ms,
                     fragment_invocations: mean_count(&g.fragment_invocations),
                     covered_pixels: mean_count(&g.covered_pixels),
                     gpu_memory_bytes: bytes,
@@ -1127,6 +1153,40 @@ impl<'a> Bench<'a> {
     }
 }
 
+/// The timed frames of a row, one for each sample of its sequence: each
+/// time the median of that sample's frames (the flythrough's passes over
+/// one camera; a single-frame view's frames drawn back to back), and the
+/// median over the samples of their CPU plus GPU time, each sample's
+/// itself a median.
+fn per_sample(timed: &[(usize, FrameFigures)]) -> (Vec<FrameFigures>, Option<f64>) {
+    let mut samples: std::collections::BTreeMap<usize, Vec<FrameFigures>> = Default::default();
+    for &(sample, figures) in timed {
+        samples.entry(sample).or_default().push(figures);
+    }
+    let mut frame_ms = Vec::with_capacity(samples.len());
+    let figures = samples
+        .values()
+        .map(|frames| {
+            let mut ms: Vec<f64> = frames.iter().filter_map(FrameFigures::frame_ms).collect();
+            frame_ms.extend(median(&mut ms));
+            FrameFigures::summary(frames, frames)
+        })
+        .collect();
+    (figures, median(&mut frame_ms))
+}
+
+/// The oracle's levels at tau `t` for an oracle row (`levels`, in the
+/// order of `taus`); None for any other row.
+fn oracle_levels_of<'l>(config: &Config, taus: &[f32], levels: &'l [Vec<u8>]) -> Option<&'l [u8]> {
+    match config {
+        Config::Oracle(t) => {
+            let i = taus.iter().position(|x| x == t).expect("listed");
+            Some(levels[i].as_slice())
+        }
+        _ => None,
+    }
+}
+
 fn renderer_for<'r>(renderers: &'r mut [PathRenderer], config: &Config) -> &'r mut PathRenderer {
     let (path, occlusion) = (config.render_path(), config.occlusion());
     renderers
@@ -1147,4 +1207,52 @@ fn pixel_patches(terrain: &Terrain, camera: &Camera, view: &DepthView) -> Vec<Op
             Some(grid.patch_index(grid.patch_at(g.x, g.y)))
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(cpu_ms: f64, gpu_ms: f64) -> FrameFigures {
+        FrameFigures {
+            cpu_ms,
+            lod_ms: Some(cpu_ms / 2.0),
+            gpu_ms: Some(gpu_ms),
+            triangles: Some(100),
+            tes_invocations: None,
+        }
+    }
+
+    #[test]
+    fn a_slow_draw_of_one_pass_does_not_move_its_frame() {
+        // Three passes over two frames; the second pass drew frame 0 25 ms
+        // slower, and frame 1 was timed twice.
+        let timed = [
+            (0, frame(1.0, 40.0)),
+            (1, frame(2.0, 60.0)),
+            (0, frame(1.0, 65.0)),
+            (1, frame(4.0, 62.0)),
+            (0, frame(3.0, 41.0)),
+        ];
+        let (figures, frame_ms) = per_sample(&timed);
+        assert_eq!(figures.len(), 2);
+        assert_eq!(figures[0].gpu_ms, Some(41.0));
+        assert_eq!(figures[0].cpu_ms, 1.0);
+        assert_eq!(figures[0].lod_ms, Some(0.5));
+        assert_eq!(figures[1].gpu_ms, Some(61.0));
+        assert_eq!(figures[1].cpu_ms, 3.0);
+        // Frame 0 costs 44 ms (the median of 41, 66 and 44), frame 1 64
+        // (of 62 and 66).
+        assert_eq!(frame_ms, Some(54.0));
+        // One sample a frame, as a fixed view's rounds give: the median
+        // over them, as before.
+        let rounds = [
+            (0, frame(1.0, 10.0)),
+            (1, frame(1.0, 30.0)),
+            (2, frame(1.0, 12.0)),
+        ];
+        let (figures, frame_ms) = per_sample(&rounds);
+        assert_eq!(figures.len(), 3);
+        assert_eq!(frame_ms, Some(13.0));
+    }
 }
