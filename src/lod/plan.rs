@@ -882,7 +882,10 @@ fn decide(
                 let large = id.level == 0 && bounds.extent(view, near) >= PARTS_HIDE_EXTENT_PX;
                 if let (Some(slabs), Some(mean)) = (terrain.patch_slabs().filter(|_| large), p.mean)
                 {
-                    let parts = slabs.of(pr[0] * terrain.grid().patch_cols() + pc[0]);
+                    let parts = slabs.of(terrain.grid().patch_index(PatchId {
+                        col: pc[0],
+                        row: pr[0],
+                    }));
                     for s in parts.iter().filter(|s| s.mean > mean) {
                         h.add_part(s.min - eye, s.max - eye, s.mean - eye.y);
                     }
