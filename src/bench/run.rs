@@ -837,11 +837,7 @@ impl<'a> Bench<'a> {
             .collect();
         // The flythrough's later passes draw each frame's oracle levels
         // again.
-        let passes = if cameras.len() > 1 {
-            FLYTHROUGH_PASSES
-        } else {
-            1
-        };
+        let passes = passes_over(cameras.len());
         let mut oracle_by_frame: Vec<Vec<Vec<u8>>> = Vec::new();
         for (f, camera) in cameras.iter().enumerate() {
             let first_sample = f * repeats;
@@ -1090,10 +1086,8 @@ impl<'a> Bench<'a> {
             views
                 .iter()
                 .map(|(_, cams, repeats)| {
-                    let (cut, again) = match cams.len() {
-                        1 => (occluded, 0),
-                        n => (0, (FLYTHROUGH_PASSES - 1) * n * configs.len()),
-                    };
+                    let cut = if cams.len() == 1 { occluded } else { 0 };
+                    let again = (passes_over(cams.len()) - 1) * cams.len() * configs.len();
                     cams.len() as u64 * per_frame(*repeats as u64) + cut + again as u64
                 })
                 .sum(),
@@ -1150,6 +1144,16 @@ impl<'a> Bench<'a> {
             }
         }
         Ok(rows)
+    }
+}
+
+/// How many times a sequence of `cameras` cameras is drawn: a fixed view
+/// once, the flythrough's loop `FLYTHROUGH_PASSES` times.
+fn passes_over(cameras: usize) -> usize {
+    if cameras > 1 {
+        FLYTHROUGH_PASSES
+    } else {
+        1
     }
 }
 
