@@ -3,14 +3,13 @@
 
 mod common;
 
-use common::gpu::skip_gpu;
+use common::gpu::{open_gpu, skip_gpu};
 use common::vkterrain_in as vkterrain;
 use common::*;
 use glam::DVec2;
 use vkterrain::bench::run::{
     configs, Bench, BenchOptions, Progress, Row, RowLod, RowPath, TIMED_FRAMES,
 };
-use vkterrain::gpu::Gpu;
 use vkterrain::lod::plan::EXCEED_SHARE;
 use vkterrain::terrain::{DistanceLod, Terrain, TerrainInfo};
 
@@ -36,7 +35,7 @@ fn a_quick_run_measures_every_configuration() {
     if skip_gpu() {
         return;
     }
-    let gpu = Gpu::new(true).expect("a Vulkan device with the validation layer");
+    let gpu = open_gpu(None);
     let info =
         TerrainInfo::new(noise_map(65, 49, 4), DVec2::new(4.0, 3.0), 16, DVec2::ZERO).unwrap();
     let terrain = Terrain::new(info, 0.0).unwrap();
@@ -392,7 +391,7 @@ fn a_single_frame_run_renders_each_view_once() {
     if skip_gpu() {
         return;
     }
-    let gpu = Gpu::new(true).expect("a Vulkan device with the validation layer");
+    let gpu = open_gpu(None);
     let info =
         TerrainInfo::new(noise_map(33, 33, 7), DVec2::new(4.0, 4.0), 16, DVec2::ZERO).unwrap();
     let terrain = Terrain::new(info, 0.0).unwrap();

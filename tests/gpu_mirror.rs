@@ -7,7 +7,6 @@ mod common;
 use common::gpu::*;
 use common::*;
 use glam::{DVec2, Vec2, Vec3};
-use vkterrain::gpu::Gpu;
 use vkterrain::lod::plan::chosen_errors;
 use vkterrain::lod::{
     box_distance, cdlod_tess_factor, edge_distance, edge_length_tess_factor, error_tess_factor,
@@ -23,7 +22,7 @@ fn glsl_formulas_match_their_rust_mirrors() {
     if skip_gpu() {
         return;
     }
-    let gpu = Gpu::new(true).expect("a Vulkan device (set VKTERRAIN_SKIP_GPU=1 to skip)");
+    let gpu = open_gpu(None);
     let terrain = dem_terrain(32, DVec2::ZERO);
     let map = terrain.info().whole().clone();
     let (lo, hi) = map.min_max();

@@ -2,7 +2,7 @@
 //! flythrough with validation on, and memory stays flat.
 
 mod common;
-use common::gpu::skip_gpu;
+use common::gpu::{open_gpu, skip_gpu};
 use common::*;
 
 #[test]
@@ -86,7 +86,7 @@ fn shutdown_reports_objects_left_alive() {
     if skip_gpu() {
         return;
     }
-    let gpu = vkterrain::gpu::Gpu::new(true).expect("a Vulkan device with validation");
+    let gpu = open_gpu(None);
     let leaked = gpu
         .device
         .create_host_buffer(

@@ -1,7 +1,9 @@
 //! GPU test harness: validation always on, any message fails the test, and
 //! no device is a failure unless VKTERRAIN_SKIP_GPU=1 says to skip.
 
+use std::cell::RefCell;
 use std::path::PathBuf;
+use std::sync::{Mutex, MutexGuard, PoisonError};
 
 use glam::DVec3;
 use vkterrain::appearance::Appearance;
@@ -34,6 +36,32 @@ pub fn skip_gpu() -> bool {
     skip
 }
 
+/// Taken by a test's thread before it opens its first device, and held
+/// until the thread ends, after every device it opened is destroyed: one
+/// test binary's GPU tests run one at a time. The validation layer keeps
+/// every instance and device in one process-wide map that each call reads
+/// and that creating or destroying one writes, without a lock (1.3.239,
+/// Debian 12's; KhronosGroup/Vulkan-ValidationLayers#4391). A test opening
+/// or closing its device while another test's thread drew has crashed the
+/// process inside the layer. gpu_harness.rs checks the lock holds.
+static DEVICES: Mutex<()> = Mutex::new(());
+
+thread_local! {
+    static HELD: RefCell<Option<MutexGuard<'static, ()>>> = const { RefCell::new(None) };
+}
+
+/// Takes `DEVICES` for this thread, unless it has it already (a test may
+/// open several devices).
+fn hold_devices() {
+    HELD.with(|held| {
+        held.borrow_mut().get_or_insert_with(|| {
+            // A test that panicked while holding the lock still destroyed
+            // its devices on the way out.
+            DEVICES.lock().unwrap_or_else(PoisonError::into_inner)
+        });
+    });
+}
+
 /// The device golden images were made on, picked by name for every test
 /// that compares against one: lavapipe's rasteriser, not whichever device
 /// ranks best here.
@@ -43,6 +71,7 @@ pub const GOLDEN_DEVICE: &str = "llvmpipe";
 /// it when it is missing: every other GPU test runs on whatever device
 /// VKTERRAIN_DEVICE names.
 pub fn open_golden_gpu() -> Gpu {
+    hold_devices();
     Gpu::open(&GpuOptions {
         validate: true,
         device: Some(GOLDEN_DEVICE.to_string()),
@@ -69,6 +98,7 @@ pub fn open_gpu(device: Option<&str>) -> Gpu {
 
 /// Opens the GPU for a test with `options`, validation on.
 fn open_gpu_with(options: GpuOptions) -> Gpu {
+    hold_devices();
     Gpu::open(&GpuOptions {
         validate: true,
         ..options
