@@ -17,8 +17,8 @@ use serde::Serialize;
 
 use super::look::{extra_percent, LookRow};
 use super::run::{
-    Row, RowLod, RowPath, FLYTHROUGH_PASSES, ORACLE_EXCEED_FRACTION, SINGLE_FRAME_TIMING,
-    TIMED_FRAMES, WARM_UP,
+    Row, RowLod, RowPath, FLYTHROUGH_PASSES, ORACLE_EXCEED_FRACTION, SINGLE_FRAME_TIMED_FRAMES,
+    SINGLE_FRAME_TIMING, TIMED_FRAMES, WARM_UP,
 };
 use crate::output::write_atomically;
 
@@ -755,7 +755,7 @@ rounds, one frame of every row (brute included) a round, nothing read back or me
 between them, so that whatever slows the machine during the run slows every row alike; each \
 row's error and counts come from one more frame, drawn and read back after the rounds. In the flythrough's first pass a frame is timed and read back at once (the \
 readback is recorded after the second timestamp); the later passes read nothing back. With `--single-frame` a fixed view is read back once, and each row is \
-timed by that frame and the frames it draws straight after it, up to {TIMED_FRAMES} in all within \
+timed by that frame and the frames it draws straight after it, up to {SINGLE_FRAME_TIMED_FRAMES} in all within \
 {timing_ms} ms of that frame's start: a row a GPU draws in milliseconds is timed by a median, one \
 that takes longer (brute's tens of millions of triangles on lavapipe) once. {GPU_CLOCK_NOTE} `cpu_ms` is the median time to choose \
 levels, write uniforms and record the frame's commands; `lod_ms` is the level choice alone \

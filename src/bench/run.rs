@@ -50,12 +50,19 @@ pub const FLYTHROUGH_PASSES: usize = 3;
 pub const STILL_FRAMES: usize = 3;
 /// How long `--single-frame` goes on timing a fixed view's row after the
 /// frame it reads back: frames of the same row are drawn back to back, up
-/// to the run's timed frames in all (`BenchOptions::timed_frames`), until
-/// this long after that frame began. A
-/// device that draws the row in a few milliseconds times it by a median,
-/// as a full run does; a frame that takes longer (brute's 33.5 M
-/// triangles on lavapipe) is timed once.
-pub const SINGLE_FRAME_TIMING: std::time::Duration = std::time::Duration::from_millis(500);
+/// to the run's timed frames in all (`BenchOptions::timed_frames`,
+/// `SINGLE_FRAME_TIMED_FRAMES` unless told otherwise), until this long
+/// after that frame began. A device that draws the row in a few
+/// milliseconds times it by a median, as a full run does; a frame that
+/// takes longer (brute's 33.5 M triangles on lavapipe) is timed once.
+pub const SINGLE_FRAME_TIMING: std::time::Duration = std::time::Duration::from_millis(2500);
+/// Frames `--single-frame` times per row unless told otherwise. A row's
+/// frames there are drawn back to back, so one slow stretch of the machine
+/// moves a short run's median: with up to 10 frames within 500 ms (about 6
+/// of a 75 ms frame), the 4097^2 valley's tess row at 1 px came to 1.17x to
+/// 1.36x its fastest row in seven runs; with up to 30 within 2.5 s, 1.25x,
+/// 1.26x and 1.25x in three (notes section 64).
+pub const SINGLE_FRAME_TIMED_FRAMES: usize = 30;
 /// Share of a patch's pixels the oracle lets exceed tau (its per-patch
 /// 99th percentile is then at most tau).
 pub const ORACLE_EXCEED_FRACTION: f64 = 0.01;

@@ -9,7 +9,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::FLYTHROUGH;
 use crate::bench::report::{self, check_targets};
-use crate::bench::run::{configs, Bench, BenchOptions, Progress};
+use crate::bench::run::{
+    configs, Bench, BenchOptions, Progress, SINGLE_FRAME_TIMED_FRAMES, TIMED_FRAMES,
+};
 use crate::render::{LoadedScene, Loading};
 use crate::scene::HeightmapSource;
 use crate::terrain::Terrain;
@@ -43,9 +45,9 @@ pub struct BenchCmd {
     pub quick: bool,
 
     /// Render and measure each fixed view once, without warm-up, timing each
-    /// row by that frame and those drawn straight after it (up to 10 within
-    /// half a second), and leave the flythrough out: for terrains whose brute
-    /// frame takes seconds.
+    /// row by that frame and those drawn straight after it (up to 30 within
+    /// 2.5 s), and leave the flythrough out: for terrains whose brute frame
+    /// takes seconds.
     #[arg(long)]
     pub single_frame: bool,
 
@@ -65,11 +67,11 @@ pub struct BenchCmd {
     #[arg(long, value_name = "MS", default_value = "0", value_parser = clap::value_parser!(u32).range(0..=10_000))]
     pub gpu_warm_ms: u32,
 
-    /// Frames timed per row of a fixed view, whose median the row reports
-    /// (after 2 untimed ones; with --single-frame, as many of them as fit
-    /// in half a second, at least one).
-    #[arg(long, value_name = "N", default_value = "10", value_parser = clap::value_parser!(u32).range(1..=1000))]
-    pub timed_frames: u32,
+    /// Frames timed per row of a fixed view, whose median the row reports:
+    /// 10 by default, after 2 untimed ones; with --single-frame 30 by
+    /// default, as many of them as fit in 2.5 s, at least one.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    pub timed_frames: Option<u32>,
 
     /// Frames of the flythrough (0 leaves it out).
     #[arg(long, value_name = "N", default_value = "200", value_parser = parse_frames)]
@@ -313,7 +315,14 @@ fn measure(
         single_frame: cmd.single_frame,
         views: cmd.views.clone(),
         gpu_warm_ms: cmd.gpu_warm_ms,
-        timed_frames: cmd.timed_frames as usize,
+        timed_frames: cmd.timed_frames.map_or(
+            if cmd.single_frame {
+                SINGLE_FRAME_TIMED_FRAMES
+            } else {
+                TIMED_FRAMES
+            },
+            |n| n as usize,
+        ),
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
