@@ -115,14 +115,6 @@ impl Gpu {
         Ok(Gpu { device })
     }
 
-    /// A device with validation as asked, and nothing else set.
-    pub fn new(validate: bool) -> Result<Self> {
-        Gpu::open(&GpuOptions {
-            validate,
-            ..GpuOptions::default()
-        })
-    }
-
     /// Validation warnings and errors so far.
     pub fn validation_messages(&self) -> u32 {
         self.device.instance().validation_log().count()
