@@ -384,9 +384,19 @@ pub struct BenchOptions {
     /// lightly loaded draws the timed one at the clock a busy application
     /// would see (0: not drawn).
     pub gpu_warm_ms: u32,
-    /// Frames timed per row of a fixed view (`TIMED_FRAMES` unless told
-    /// otherwise); with `single_frame`, at most this many.
+    /// Frames timed per row of a fixed view (`default_timed_frames`
+    /// unless told otherwise); with `single_frame`, at most this many.
     pub timed_frames: usize,
+}
+
+/// Frames timed per row of a fixed view unless told otherwise:
+/// `SINGLE_FRAME_TIMED_FRAMES` with `single_frame`, else `TIMED_FRAMES`.
+pub fn default_timed_frames(single_frame: bool) -> usize {
+    if single_frame {
+        SINGLE_FRAME_TIMED_FRAMES
+    } else {
+        TIMED_FRAMES
+    }
 }
 
 /// One configuration seen from one camera (or the whole flythrough).

@@ -9,9 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use super::args::{FeatureArgs, SizeArgs, TerrainArgs};
 use crate::bench::cameras::FLYTHROUGH;
 use crate::bench::report::{self, check_targets};
-use crate::bench::run::{
-    configs, Bench, BenchOptions, Progress, SINGLE_FRAME_TIMED_FRAMES, TIMED_FRAMES,
-};
+use crate::bench::run::{configs, default_timed_frames, Bench, BenchOptions, Progress};
 use crate::render::{LoadedScene, Loading};
 use crate::scene::HeightmapSource;
 use crate::terrain::Terrain;
@@ -315,14 +313,9 @@ fn measure(
         single_frame: cmd.single_frame,
         views: cmd.views.clone(),
         gpu_warm_ms: cmd.gpu_warm_ms,
-        timed_frames: cmd.timed_frames.map_or(
-            if cmd.single_frame {
-                SINGLE_FRAME_TIMED_FRAMES
-            } else {
-                TIMED_FRAMES
-            },
-            |n| n as usize,
-        ),
+        timed_frames: cmd
+            .timed_frames
+            .map_or(default_timed_frames(cmd.single_frame), |n| n as usize),
     };
     let bar = ProgressBar::new(0).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} renders, {msg}")
