@@ -8,7 +8,7 @@ use common::*;
 use glam::{DVec2, DVec3, Vec3};
 use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
 use vkterrain::lod::plan::{
-    patches_in_view, plan, FramePlan, PlanInputs, PlannedBlock, SightReading,
+    patches_in_view, plan, view_patches, FramePlan, PlanInputs, PlannedBlock, SightReading,
 };
 use vkterrain::lod::seen::{SeenPixels, NOT_DRAWN};
 use vkterrain::lod::view::{LodView, Tau};
@@ -199,7 +199,9 @@ fn blocks_and_merged_nodes_cover_the_patches_in_view_once() {
 /// whole, are those whose own boxes the frustum does not exclude, in grid
 /// order, and the walk visits fewer nodes than there are patches in view
 /// when most of the terrain is: on the DEM and the 512 x 512 grid, from
-/// low, high and outside, and every patch without culling.
+/// low, high and outside, and every patch without culling. The patches
+/// the frustum's boundary crosses (`view_patches`) are those in view whose
+/// boxes are not wholly inside it.
 #[test]
 fn patches_in_view_are_those_whose_boxes_are_not_outside() {
     for terrain in [dem_terrain(16, DVec2::ZERO), wide_grid()] {
@@ -212,6 +214,7 @@ fn patches_in_view_are_those_whose_boxes_are_not_outside() {
             .world_width()
             .max(terrain.info().world_depth());
         let mut fewer_visits = false;
+        let mut some_crossing = false;
         for (eye, target) in [
             (
                 DVec3::new(-0.4 * size, f64::from(hi) + 200.0, -0.3 * size),
@@ -228,31 +231,56 @@ fn patches_in_view_are_those_whose_boxes_are_not_outside() {
         ] {
             let view = view_of(&terrain, eye, target, 1.0);
             let (visible, visited) = patches_in_view(&terrain, &hierarchy, &view, true);
+            // Each patch's box, eye-relative, as centre and half extents.
+            let patch_box = |p: usize| {
+                let cols = grid.patch_cols();
+                let node = hierarchy.node(NodeId {
+                    level: 0,
+                    col: (p % cols) as u32,
+                    row: (p / cols) as u32,
+                });
+                let [a, b] = node.footprint;
+                let [y0, y1] = node.bounds;
+                let (min, max) = (Vec3::new(a[0], y0, a[1]), Vec3::new(b[0], y1, b[1]));
+                (0.5 * (min + max) - view.eye_local, 0.5 * (max - min))
+            };
             let expected: Vec<u32> = (0..grid.patch_count())
                 .filter(|&p| {
-                    let cols = grid.patch_cols();
-                    let node = hierarchy.node(NodeId {
-                        level: 0,
-                        col: (p % cols) as u32,
-                        row: (p / cols) as u32,
-                    });
-                    let [a, b] = node.footprint;
-                    let [y0, y1] = node.bounds;
-                    let (min, max) = (Vec3::new(a[0], y0, a[1]), Vec3::new(b[0], y1, b[1]));
-                    !view
-                        .frustum
-                        .aabb_outside(0.5 * (min + max) - view.eye_local, 0.5 * (max - min))
+                    let (centre, half) = patch_box(p);
+                    !view.frustum.aabb_outside(centre, half)
                 })
                 .map(|p| p as u32)
                 .collect();
             assert!(!expected.is_empty(), "{eye}: nothing in view");
             assert_eq!(visible, expected, "{eye}");
+            // The patches the frustum's boundary crosses: those in view
+            // whose boxes are not wholly inside it.
+            let in_view = view_patches(&terrain, &hierarchy, &view, true);
+            assert_eq!(in_view.patches, visible);
+            assert_eq!(in_view.visited, visited);
+            let crossing: Vec<u32> = expected
+                .iter()
+                .copied()
+                .filter(|&p| {
+                    let (centre, half) = patch_box(p as usize);
+                    !view.frustum.aabb_inside(centre, half)
+                })
+                .collect();
+            some_crossing |= !crossing.is_empty() && crossing.len() < visible.len();
+            assert_eq!(in_view.crossing, crossing, "{eye}");
+            assert!(view_patches(&terrain, &hierarchy, &view, false)
+                .crossing
+                .is_empty());
             fewer_visits |= visited < visible.len();
             let (all, visited) = patches_in_view(&terrain, &hierarchy, &view, false);
             assert_eq!(all, (0..grid.patch_count() as u32).collect::<Vec<_>>());
             assert_eq!(visited, 1);
         }
         assert!(fewer_visits, "no view took a node whole");
+        assert!(
+            some_crossing,
+            "no view's boundary crossed some patches and not others"
+        );
     }
 }
 

@@ -762,7 +762,9 @@ levels, write uniforms and record the frame's commands; `lod_ms` is the level ch
 (its median over the timed frames), and `lod_ms_max` its largest in any frame of the row, \
 warm-up frames and each view's first frame included, so a choice that only a still camera \
 could reuse is not hidden. `frame_ms` is the median over the timed frames (the flythrough's, each a median over its \
-passes) of CPU plus GPU time: what a frame costs a user. `triangles` are clipping primitives and \
+passes) of CPU plus GPU time: what a frame costs a user. `triangles` are clipping primitives \
+(lavapipe leaves out the back-facing triangles of a draw it sends through its clipper, \
+and counts them in any other draw) and \
 `tes_invocations` tessellation evaluation invocations, from pipeline statistics (the mean per \
 frame over the flythrough). `overdraw` is `fragment_invocations` (fragment shader invocations, \
 from the same statistics) over `covered_pixels` (the pixels the terrain covers in the row's \

@@ -1522,9 +1522,37 @@ pub fn patches_in_view(
     view: &LodView,
     cull: bool,
 ) -> (Vec<u32>, usize) {
+    let in_view = view_patches(terrain, hierarchy, view, cull);
+    (in_view.patches, in_view.visited)
+}
+
+/// What `view_patches` finds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct InView {
+    /// The patches whose boxes are not outside the frustum, in grid order.
+    pub patches: Vec<u32>,
+    /// Those of them whose boxes are not wholly inside it either (the
+    /// frustum's boundary crosses them), in grid order; none without
+    /// culling.
+    pub crossing: Vec<u32>,
+    /// The hierarchy's nodes visited.
+    pub visited: usize,
+}
+
+/// `patches_in_view`, with the patches the frustum's boundary crosses:
+/// the patches the walk reaches one by one (in nodes that cross it) and
+/// does not find wholly inside.
+pub fn view_patches(
+    terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    view: &LodView,
+    cull: bool,
+) -> InView {
     // The patch rectangles (columns, rows) of the nodes taken whole.
     let mut taken: Vec<([usize; 2], [usize; 2])> = Vec::new();
+    let mut crossing = Vec::new();
     let mut visited = 0;
+    let cols = terrain.grid().patch_cols();
     let mut stack = vec![NodeBox::entry(hierarchy, hierarchy.root())];
     while let Some((id, bounds)) = stack.pop() {
         visited += 1;
@@ -1537,14 +1565,23 @@ pub fn patches_in_view(
             if view.frustum.aabb_outside(centre, half) {
                 continue;
             }
-            whole = whole || view.frustum.aabb_inside(centre, half);
+            let inside = view.frustum.aabb_inside(centre, half);
+            if id.level == 0 && !inside {
+                crossing.push((id.row as usize * cols + id.col as usize) as u32);
+            }
+            whole = whole || inside;
         }
         match whole {
             true => taken.push(hierarchy.patch_range(id)),
             false => NodeBox::push_children(hierarchy, id, &mut stack),
         }
     }
-    (in_grid_order(&taken, terrain.grid().patch_cols()), visited)
+    crossing.sort_unstable();
+    InView {
+        patches: in_grid_order(&taken, cols),
+        crossing,
+        visited,
+    }
 }
 
 /// The patches of disjoint rectangles (columns, rows) of a grid `cols`

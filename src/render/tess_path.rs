@@ -460,9 +460,43 @@ pub(super) fn run_batches(
         .collect()
 }
 
+/// `run_batches`, with each patch of `alone` (in increasing order) drawn
+/// by itself: a run is cut around it, and no run joins its draw. A driver
+/// that clips a whole draw wherever one of its vertices needs clipping
+/// (lavapipe sends such a draw down its per-primitive path) then clips
+/// that patch alone, not the dense patches drawn with it. `alone` holds
+/// the patches the frustum's boundary crosses (`plan::view_patches`).
+pub(super) fn run_batches_apart(
+    runs: impl IntoIterator<Item = (u32, u32)>,
+    alone: &[u32],
+    max_patches: Option<u32>,
+) -> Vec<(u32, u32)> {
+    let is_alone = |p: u32| alone.binary_search(&p).is_ok();
+    let mut batches = Vec::new();
+    let mut pending: Vec<(u32, u32)> = Vec::new();
+    for (first, n) in runs {
+        let mut start = first;
+        for p in first..first + n {
+            if is_alone(p) {
+                if p > start {
+                    pending.push((start, p - start));
+                }
+                batches.extend(run_batches(pending.drain(..), max_patches));
+                batches.extend(run_batches([(p, 1)], max_patches));
+                start = p + 1;
+            }
+        }
+        if first + n > start {
+            pending.push((start, first + n - start));
+        }
+    }
+    batches.extend(run_batches(pending, max_patches));
+    batches
+}
+
 #[cfg(test)]
 mod tests {
-    use super::{patch_batches, run_batches};
+    use super::{patch_batches, run_batches, run_batches_apart};
 
     fn batches(drawn: &str, max: Option<u32>) -> Vec<(u32, u32)> {
         let indices = drawn
@@ -486,6 +520,29 @@ mod tests {
         );
         let all = batches(&"#".repeat(17), Some(8));
         assert_eq!(all, vec![(0, 32), (32, 32), (64, 4)]);
+    }
+
+    #[test]
+    fn patches_drawn_alone_are_cut_out_of_their_runs_and_joined_to_none() {
+        // Runs nearest first, as in the test below; 5 and 9 drawn alone.
+        let runs = [(2, 2), (4, 2), (0, 2), (9, 5)];
+        assert_eq!(
+            run_batches_apart(runs, &[5, 9], None),
+            vec![(8, 12), (20, 4), (0, 8), (36, 4), (40, 16)]
+        );
+        // Nothing alone: the same draws as `run_batches`.
+        assert_eq!(
+            run_batches_apart(runs, &[], Some(3)),
+            run_batches(runs, Some(3))
+        );
+        // Every patch alone: one draw each, in the runs' order.
+        let each: Vec<(u32, u32)> = [2, 3, 4, 5, 0, 1, 9, 10, 11, 12, 13]
+            .map(|p| (4 * p, 4))
+            .to_vec();
+        assert_eq!(
+            run_batches_apart(runs, &[0, 1, 2, 3, 4, 5, 9, 10, 11, 12, 13], None),
+            each
+        );
     }
 
     #[test]

@@ -8,7 +8,7 @@ use std::time::Instant;
 use super::TerrainRenderer;
 use crate::lod::geomip;
 use crate::lod::order::DrawOrder;
-use crate::lod::plan::patches_in_view;
+use crate::lod::plan::view_patches;
 use crate::lod::seen::SeenPixels;
 use crate::lod::view::Tau;
 use crate::render::error::{RenderError, Result};
@@ -18,7 +18,7 @@ use crate::render::occlusion::LastFrame;
 use crate::render::pipelines::{create_culled_pipeline, CulledPipelines};
 use crate::render::seen::CountKey;
 use crate::render::settings::{ErrorMeasure, LodMetric, RenderPath, RenderSettings};
-use crate::render::tess_path::run_batches;
+use crate::render::tess_path::run_batches_apart;
 use crate::render::uniforms::FrameUniforms;
 use crate::render::view::FrameView;
 use crate::terrain::{PatchGrid, Terrain};
@@ -159,12 +159,18 @@ impl TerrainRenderer {
                     .ok_or(RenderError::NotBuilt("the tess path"))?;
                 let start = Instant::now();
                 let lod_view = view.lod_view(Tau::DEFAULT);
-                let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
+                let in_view = view_patches(terrain, hierarchy, &lod_view, settings.cull);
                 let frame = &mut self.frames[slot];
                 frame.prepared.lod_ms = Some(start.elapsed().as_secs_f64() * 1e3);
-                frame.prepared.patches_in_view = visible.len();
+                frame.prepared.patches_in_view = in_view.patches.len();
                 let order = DrawOrder::new(terrain.info(), terrain.grid(), view.eye_local);
-                frame.tess_batches = run_batches(order.runs(visible), self.max_patches_per_draw);
+                // The patches the frustum's boundary crosses are drawn one
+                // a draw (`run_batches_apart`).
+                frame.tess_batches = run_batches_apart(
+                    order.runs(in_view.patches),
+                    &in_view.crossing,
+                    self.max_patches_per_draw,
+                );
             }
             (RenderPath::Brute, _) => {
                 self.frames[slot].prepared.patches_in_view = terrain.grid().patch_count()
