@@ -1522,7 +1522,7 @@ pub fn patches_in_view(
     view: &LodView,
     cull: bool,
 ) -> (Vec<u32>, usize) {
-    let in_view = view_patches(terrain, hierarchy, view, cull);
+    let in_view = walk_view(terrain, hierarchy, view, cull, false);
     (in_view.patches, in_view.visited)
 }
 
@@ -1548,6 +1548,18 @@ pub fn view_patches(
     view: &LodView,
     cull: bool,
 ) -> InView {
+    walk_view(terrain, hierarchy, view, cull, true)
+}
+
+/// `view_patches`; the crossing patches are listed only where
+/// `list_crossing` asks for them (`patches_in_view` drops them).
+fn walk_view(
+    terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    view: &LodView,
+    cull: bool,
+    list_crossing: bool,
+) -> InView {
     // The patch rectangles (columns, rows) of the nodes taken whole.
     let mut taken: Vec<([usize; 2], [usize; 2])> = Vec::new();
     let mut crossing = Vec::new();
@@ -1566,7 +1578,7 @@ pub fn view_patches(
                 continue;
             }
             let inside = view.frustum.aabb_inside(centre, half);
-            if id.level == 0 && !inside {
+            if list_crossing && id.level == 0 && !inside {
                 crossing.push((id.row as usize * cols + id.col as usize) as u32);
             }
             whole = whole || inside;

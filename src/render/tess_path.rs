@@ -440,24 +440,11 @@ pub(super) fn run_batches(
     runs: impl IntoIterator<Item = (u32, u32)>,
     max_patches: Option<u32>,
 ) -> Vec<(u32, u32)> {
-    let max_patches = max_patches.unwrap_or(u32::MAX).max(1);
-    let mut batches: Vec<(u32, u32)> = Vec::new();
-    for (mut first, mut n) in runs {
-        if let Some(last) = batches.last_mut().filter(|l| l.0 + l.1 == first) {
-            let joined = n.min(max_patches - last.1);
-            last.1 += joined;
-            (first, n) = (first + joined, n - joined);
-        }
-        while n > 0 {
-            let taken = n.min(max_patches);
-            batches.push((first, taken));
-            (first, n) = (first + taken, n - taken);
-        }
+    let mut batches = Batches::new(max_patches);
+    for (first, n) in runs {
+        batches.push_run(first, n);
     }
-    batches
-        .into_iter()
-        .map(|(first, n)| (first * 4, n * 4))
-        .collect()
+    batches.into_indices()
 }
 
 /// `run_batches`, with each patch of `alone` (in increasing order) drawn
@@ -472,26 +459,74 @@ pub(super) fn run_batches_apart(
     max_patches: Option<u32>,
 ) -> Vec<(u32, u32)> {
     let is_alone = |p: u32| alone.binary_search(&p).is_ok();
-    let mut batches = Vec::new();
-    let mut pending: Vec<(u32, u32)> = Vec::new();
+    let mut batches = Batches::new(max_patches);
     for (first, n) in runs {
         let mut start = first;
-        for p in first..first + n {
-            if is_alone(p) {
-                if p > start {
-                    pending.push((start, p - start));
-                }
-                batches.extend(run_batches(pending.drain(..), max_patches));
-                batches.extend(run_batches([(p, 1)], max_patches));
-                start = p + 1;
-            }
+        for p in (first..first + n).filter(|&p| is_alone(p)) {
+            batches.push_run(start, p - start);
+            batches.push_alone(p);
+            start = p + 1;
         }
-        if first + n > start {
-            pending.push((start, first + n - start));
+        batches.push_run(start, first + n - start);
+    }
+    batches.into_indices()
+}
+
+/// Draws built run by run, in patches (`run_batches`).
+struct Batches {
+    max_patches: u32,
+    draws: Vec<(u32, u32)>,
+    /// Whether the next run may join the last draw: not where that draw
+    /// is a patch drawn alone.
+    joinable: bool,
+}
+
+impl Batches {
+    fn new(max_patches: Option<u32>) -> Batches {
+        Batches {
+            max_patches: max_patches.unwrap_or(u32::MAX).max(1),
+            draws: Vec::new(),
+            joinable: false,
         }
     }
-    batches.extend(run_batches(pending, max_patches));
-    batches
+
+    /// Adds the run of `n` patches from `first` (none where `n` is 0),
+    /// joining the last draw where it continues it.
+    fn push_run(&mut self, mut first: u32, mut n: u32) {
+        if n == 0 {
+            return;
+        }
+        let max = self.max_patches;
+        if let Some(last) = self
+            .draws
+            .last_mut()
+            .filter(|l| self.joinable && l.0 + l.1 == first)
+        {
+            let joined = n.min(max - last.1);
+            last.1 += joined;
+            (first, n) = (first + joined, n - joined);
+        }
+        while n > 0 {
+            let taken = n.min(max);
+            self.draws.push((first, taken));
+            (first, n) = (first + taken, n - taken);
+        }
+        self.joinable = true;
+    }
+
+    /// Adds patch `p` in a draw of its own, which no run joins.
+    fn push_alone(&mut self, p: u32) {
+        self.draws.push((p, 1));
+        self.joinable = false;
+    }
+
+    /// The draws as (first index, index count), four indices a patch.
+    fn into_indices(self) -> Vec<(u32, u32)> {
+        self.draws
+            .into_iter()
+            .map(|(first, n)| (first * 4, n * 4))
+            .collect()
+    }
 }
 
 #[cfg(test)]
