@@ -169,6 +169,12 @@ fn an_eye_outside_the_map_sweeps_from_beyond_its_edge() {
     let shed = viewshed(&map, Vec3::new(0.0, 3.0, 72.0), 0.0, None);
     assert!(!shed.hidden(0, 32) && !shed.hidden(19, 32));
     assert!(shed.hidden(30, 32), "behind the wall from outside too");
+    // The near edge is the outline of the map's edge; nothing else is.
+    assert!((0..65).all(|c| shed.edge(0, c)), "row 0, towards the eye");
+    assert!((1..65).all(|r| (0..65).all(|c| !shed.edge(r, c))));
+    // Seen from over the map, no sample is.
+    let shed = viewshed(&map, local(5, 32, 2.0), 0.0, None);
+    assert!((0..65).all(|r| (0..65).all(|c| !shed.edge(r, c))));
 }
 
 #[test]
@@ -484,4 +490,43 @@ fn a_spike_just_off_the_side_of_the_view_is_measured_by_the_faces_it_shows() {
     // part of the view this near, are off by up to its height.
     let coarsest = view.table.patch(spike)[0];
     assert!(coarsest > 1.0, "{:?}", view.table.patch(spike));
+}
+
+#[test]
+fn the_maps_near_edge_seen_from_outside_moves_its_outline_with_the_level() {
+    // Flat ground but for spikes 20 high on the odd columns of row 0, the
+    // map's edge towards an eye 40 beyond it and 30 up: the spikes' faces
+    // fall away from the eye, so what shows of them is the edge's outline
+    // against the background below it. A level that drops every other
+    // sample draws the spikes away and moves that outline by their height.
+    let map = Heightmap::from_fn(65, 65, |r, c| if r == 0 && c % 2 == 1 { 20.0 } else { 0.0 })
+        .expect("valid size");
+    let t = terrain(map);
+    let view = view_table(&t, [0.0, 30.0, 72.0], [0.0, 0.0, 0.0], 1.0);
+    let grid = t.grid();
+    let edge = grid.patch_index(vkterrain::terrain::PatchId { row: 0, col: 2 });
+    let coarsest = view.table.patch(edge)[0];
+    assert!(coarsest > 1.0, "{:?}", view.table.patch(edge));
+    // The patches behind the edge, flat, have none.
+    let inner = grid.patch_index(vkterrain::terrain::PatchId { row: 2, col: 2 });
+    assert!(view.table.patch(inner).iter().all(|&e| e == 0.0));
+}
+
+#[test]
+fn ground_beside_the_near_edge_seen_from_outside_rises_from_the_edge_not_along_it() {
+    // Flat ground but for a spike 30 high on the near edge (row 0), seen
+    // from 5 beyond that edge and 20 up. A line of sight to flat ground
+    // far along the edge enters the map well past the spike: nothing in
+    // front of it rises above the ground, which shows.
+    let map = Heightmap::from_fn(65, 65, |r, c| if (r, c) == (0, 20) { 30.0 } else { 0.0 })
+        .expect("valid size");
+    let eye = Vec3::new(12.0 - 32.0, 20.0, 32.0 + 5.0);
+    let shed = viewshed(&map, eye, 0.0, None);
+    for (r, c) in [(1, 50), (2, 60), (3, 45)] {
+        assert!(!shed.hidden(r, c), "({r}, {c})");
+        let exposure = shed.exposure(r, c).expect("swept");
+        assert!(exposure > 0.0, "({r}, {c}): {exposure}");
+    }
+    // The edge towards the eye is the map's outline all along.
+    assert!((0..65).all(|c| shed.edge(0, c)));
 }

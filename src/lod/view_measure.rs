@@ -68,6 +68,12 @@
 //! the ground where its line of sight lands in the other: as far apart, in
 //! pixels, as the line of sight falls between them, seen at the sample.
 //! Against the sky, each is off by its distance to the moved silhouette.
+//! Seen from outside the map, the samples of its edge towards the eye
+//! (`Viewshed::edge`) show no ground of their own, but draw the map's
+//! outline against the background below it: a vertical error moves that
+//! outline by its face-on size either way, and each pixel it sweeps is
+//! off by its distance to the moved outline, as against the sky
+//! (`Seen::outline_width`).
 //!
 //! **The frame's share.** The benchmark's target is the frame's 99th
 //! percentile, so 1 % of the frame's terrain pixels may exceed tau; the
@@ -557,10 +563,16 @@ fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: 
                 let blend = |f: fn(&Signed) -> f64| ((1.0 - m) * a.map_or(0.0, f) + m * f(b)).abs();
                 let moved = blend(|s| s.moved);
                 let swept = silhouette(moved, b.crest_width, b.crest_px);
+                let outline = silhouette(blend(|s| s.face_on), b.outline_width, f64::INFINITY);
                 // Where either level's ray escapes, so may the blend's.
                 let band = a.map_or(0.0, |a| a.band).max(b.band);
                 let over_in = |px: f64, pixels: f64| if px > tau { pixels } else { 0.0 };
-                swept.iter().filter(|s| s.0 > tau).map(|s| s.1).sum::<f64>()
+                swept
+                    .iter()
+                    .chain(&outline)
+                    .filter(|s| s.0 > tau)
+                    .map(|s| s.1)
+                    .sum::<f64>()
                     + over_in(blend(|s| s.face_on), band)
                     + over_in(blend(|s| s.px), b.pixels - band)
             })
@@ -999,6 +1011,8 @@ struct Signed {
     /// `Seen::crest_width` and `Seen::crest_px`.
     crest_width: f64,
     crest_px: f64,
+    /// `Seen::outline_width`.
+    outline_width: f64,
     /// The sample's pixels.
     pixels: f64,
 }
@@ -1032,6 +1046,11 @@ struct Seen {
     /// in pixels: the silhouette sinks no further before nearer ground
     /// takes it over.
     crest_rise_px: f64,
+    /// On the outline of the map's edge seen from outside the map
+    /// (`Viewshed::edge`) and in view: the pixels across the sample's
+    /// cell, along which a vertical error moves the outline against the
+    /// background below it, by its face-on size either way; else 0.
+    outline_width: f64,
     /// The reference's own slope along the ray.
     ground_rise: f64,
     /// Horizontal distance from the sample to the terrain's edge along the
@@ -1178,6 +1197,7 @@ impl<'a> PatchSamples<'a> {
                         crest_width: 0.0,
                         crest_px: 0.0,
                         crest_rise_px: 0.0,
+                        outline_width: 0.0,
                         ground_rise: 0.0,
                         beyond: 0.0,
                         reach: 0.0,
@@ -1195,6 +1215,13 @@ impl<'a> PatchSamples<'a> {
                 let gz = (h(r0, c) - h(r1, c)) / ((r1 - r0) as f64 * spacing.y);
                 let rise = gx * dir.x + gz * dir.y;
                 let crest = viewshed.crest(r, c).filter(|_| shown > 0.0);
+                // The edge's outline shows where the sample itself lies in
+                // the view.
+                let outline = viewshed.edge(r, c)
+                    && view.frustum.planes.iter().all(|p| {
+                        let p = p.as_dvec4();
+                        p.truncate().dot(rel) + p.w >= 0.0
+                    });
                 let solid_angle = exposure.unwrap_or_else(|| {
                     (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance)
                         * cell_area
@@ -1212,6 +1239,11 @@ impl<'a> PatchSamples<'a> {
                     crest_px: crest.map_or(0.0, |crest| crest.fall * k / distance),
                     crest_rise_px: crest
                         .map_or(0.0, |crest| crest.rise * k * (1.0 + fall * fall).sqrt()),
+                    outline_width: if outline {
+                        spacing.min_element() * k / distance
+                    } else {
+                        0.0
+                    },
                     ground_rise: rise,
                     reach,
                     beside,
@@ -1408,7 +1440,7 @@ impl<'a> PatchSamples<'a> {
             for c in 0..=cx {
                 let i = r * stride + c;
                 let seen = self.seen[i];
-                if seen.pixels <= 0.0 {
+                if seen.pixels <= 0.0 && seen.outline_width <= 0.0 {
                     continue;
                 }
                 let (own, face_on) = field[i];
@@ -1447,12 +1479,20 @@ impl<'a> PatchSamples<'a> {
                         moved,
                         crest_width: seen.crest_width,
                         crest_px: seen.crest_px,
+                        outline_width: seen.outline_width,
                         pixels: seen.pixels,
                     });
                 }
                 if seen.crest_width > 0.0 {
                     self.scratch.extend(
                         silhouette(moved.abs(), seen.crest_width, seen.crest_px)
+                            .into_iter()
+                            .filter(|s| s.1 > 0.0),
+                    );
+                }
+                if seen.outline_width > 0.0 {
+                    self.scratch.extend(
+                        silhouette(face_on.abs(), seen.outline_width, f64::INFINITY)
                             .into_iter()
                             .filter(|s| s.1 > 0.0),
                     );
@@ -1873,6 +1913,7 @@ mod tests {
             crest_width: 0.0,
             crest_px: 0.0,
             crest_rise_px: 0.0,
+            outline_width: 0.0,
             ground_rise: 0.0,
             beyond,
             reach: 20.0,

@@ -33,6 +33,12 @@
 //! (a neighbour on the same ridge), or past the last ring swept, the
 //! crest's own line of sight is followed over the surface to where it
 //! meets the ground, or leaves the map (sky).
+//!
+//! Seen from outside the map, the samples of its edge towards the eye have
+//! no ground in front of them: their steps rise from nothing, and add no
+//! exposure. Below them on screen lies the background, not nearer ground,
+//! so each is on the outline of the map's edge (`edge`), which a drawn
+//! surface lying lower or higher moves against the background.
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
@@ -69,6 +75,8 @@ pub struct Viewshed {
     /// Per sample: the solid angle, in steradians, of the ground its ring
     /// step raises the horizon by (see `exposure`); NaN where not swept.
     exposure: Vec<f32>,
+    /// Per sample: on the outline of the map's edge (`edge`).
+    edge: Vec<bool>,
 }
 
 /// What a swept sample passes on to the next ring: the horizons (the
@@ -194,6 +202,8 @@ impl Viewshed {
         self.crest.resize(cols * rows, [f32::NAN, 0.0]);
         self.exposure.clear();
         self.exposure.resize(cols * rows, f32::NAN);
+        self.edge.clear();
+        self.edge.resize(cols * rows, false);
         // The sample whose elevation sets each sample's lower horizon, and
         // per such sample the largest height its line of sight falls or
         // rises to where the ground it hides ends (NaN: none yet).
@@ -301,9 +311,16 @@ impl Viewshed {
                         let behind = ha[0].min(hb[0]);
                         // The predecessor whose horizon is the lower one.
                         let lower = if hb[0] < ha[0] { sb } else { sa };
-                        // Interpolated, or the one inside the map.
+                        // Interpolated. Where either cell lies outside the
+                        // map, the line of sight crosses ring k-1 outside
+                        // it (the cell inside is on the map's edge, and the
+                        // crossing lies beyond it): no ground in front.
+                        // Taking the cell inside instead would carry the
+                        // edge's horizon along the edge from cell to cell,
+                        // over ground no line of sight to this sample
+                        // crosses.
                         let line = if ha[1] == f32::NEG_INFINITY || hb[1] == f32::NEG_INFINITY {
-                            ha[1].max(hb[1])
+                            f32::NEG_INFINITY
                         } else {
                             ha[1] + (hb[1] - ha[1]) * f.abs() as f32
                         };
@@ -353,6 +370,8 @@ impl Viewshed {
                         // Only the part of the step within the frustum's
                         // height counts.
                         let (rise, crest_rise) = if line == f32::NEG_INFINITY {
+                            // The map's edge, seen from outside it.
+                            self.edge[i] = true;
                             (0.0, 0.0)
                         } else {
                             let (lo, hi) = in_view(dx, dz, reach);
@@ -433,6 +452,18 @@ impl Viewshed {
             .get(row * self.cols + col)
             .filter(|e| !e.is_nan())
             .map(|&e| f64::from(e))
+    }
+
+    /// Whether sample (row, col), seen from outside the map, lies on its
+    /// edge towards the eye with no ground in front of it: the background
+    /// lies below it on screen, and its height places the outline of the
+    /// map's edge there. Such a sample adds no exposure (its step rises
+    /// from nothing) and hides nothing in front of it.
+    pub fn edge(&self, row: usize, col: usize) -> bool {
+        self.edge
+            .get(row * self.cols + col)
+            .copied()
+            .unwrap_or(false)
     }
 
     /// Whether sample (row, col) is hidden.
