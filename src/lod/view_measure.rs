@@ -1222,6 +1222,9 @@ impl<'a> PatchSamples<'a> {
                         let p = p.as_dvec4();
                         p.truncate().dot(rel) + p.w >= 0.0
                     });
+                // The pixels across the sample's cell, along which a
+                // silhouette or the edge's outline moves.
+                let cell_px = spacing.min_element() * k / distance;
                 let solid_angle = exposure.unwrap_or_else(|| {
                     (rise + fall).max(0.0) / ((1.0 + fall * fall).sqrt() * distance * distance)
                         * cell_area
@@ -1231,19 +1234,11 @@ impl<'a> PatchSamples<'a> {
                     dir,
                     fall,
                     pixels: shown * (solid_angle * per_steradian(rel)).min(view.viewport_pixels),
-                    crest_width: if crest.is_some() {
-                        spacing.min_element() * k / distance
-                    } else {
-                        0.0
-                    },
+                    crest_width: if crest.is_some() { cell_px } else { 0.0 },
                     crest_px: crest.map_or(0.0, |crest| crest.fall * k / distance),
                     crest_rise_px: crest
                         .map_or(0.0, |crest| crest.rise * k * (1.0 + fall * fall).sqrt()),
-                    outline_width: if outline {
-                        spacing.min_element() * k / distance
-                    } else {
-                        0.0
-                    },
+                    outline_width: if outline { cell_px } else { 0.0 },
                     ground_rise: rise,
                     reach,
                     beside,
@@ -1483,19 +1478,20 @@ impl<'a> PatchSamples<'a> {
                         pixels: seen.pixels,
                     });
                 }
-                if seen.crest_width > 0.0 {
-                    self.scratch.extend(
-                        silhouette(moved.abs(), seen.crest_width, seen.crest_px)
-                            .into_iter()
-                            .filter(|s| s.1 > 0.0),
-                    );
-                }
-                if seen.outline_width > 0.0 {
-                    self.scratch.extend(
-                        silhouette(face_on.abs(), seen.outline_width, f64::INFINITY)
-                            .into_iter()
-                            .filter(|s| s.1 > 0.0),
-                    );
+                // A silhouette, and the edge's outline against the
+                // background (moved by the face-on error, as against the
+                // sky).
+                for (moved, width, behind) in [
+                    (moved.abs(), seen.crest_width, seen.crest_px),
+                    (face_on.abs(), seen.outline_width, f64::INFINITY),
+                ] {
+                    if width > 0.0 {
+                        self.scratch.extend(
+                            silhouette(moved, width, behind)
+                                .into_iter()
+                                .filter(|s| s.1 > 0.0),
+                        );
+                    }
                 }
             }
         }
