@@ -561,9 +561,9 @@ fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: 
             .map(|b| {
                 let a = finer_at[b.sample as usize];
                 let blend = |f: fn(&Signed) -> f64| ((1.0 - m) * a.map_or(0.0, f) + m * f(b)).abs();
-                let moved = blend(|s| s.moved);
+                let (moved, face_on) = (blend(|s| s.moved), blend(|s| s.face_on));
                 let swept = silhouette(moved, b.crest_width, b.crest_px);
-                let outline = silhouette(blend(|s| s.face_on), b.outline_width, f64::INFINITY);
+                let outline = silhouette(face_on, b.outline_width, f64::INFINITY);
                 // Where either level's ray escapes, so may the blend's.
                 let band = a.map_or(0.0, |a| a.band).max(b.band);
                 let over_in = |px: f64, pixels: f64| if px > tau { pixels } else { 0.0 };
@@ -573,7 +573,7 @@ fn morph_limit(finer: Option<&[Signed]>, coarser: &[Signed], tau: f64, allowed: 
                     .filter(|s| s.0 > tau)
                     .map(|s| s.1)
                     .sum::<f64>()
-                    + over_in(blend(|s| s.face_on), band)
+                    + over_in(face_on, band)
                     + over_in(blend(|s| s.px), b.pixels - band)
             })
             .sum()
@@ -1060,6 +1060,11 @@ struct Seen {
     reach: f64,
 }
 
+/// Whether `rel` (relative to the eye) lies on the inner side of `plane`.
+fn in_front(plane: glam::DVec4, rel: DVec3) -> bool {
+    plane.truncate().dot(rel) + plane.w >= 0.0
+}
+
 /// The share of the box `lo`..`hi` in front of `plane` (its normal's side),
 /// measured along the normal: 1 for a box wholly in front, 0 for one
 /// wholly behind.
@@ -1170,7 +1175,7 @@ impl<'a> PatchSamples<'a> {
                     .iter()
                     .map(|&i| {
                         let p = view.frustum.planes[i].as_dvec4();
-                        if p.truncate().dot(rel) + p.w >= 0.0 {
+                        if in_front(p, rel) {
                             1.0
                         } else if i >= 2 {
                             0.0
@@ -1218,10 +1223,11 @@ impl<'a> PatchSamples<'a> {
                 // The edge's outline shows where the sample itself lies in
                 // the view.
                 let outline = viewshed.edge(r, c)
-                    && view.frustum.planes.iter().all(|p| {
-                        let p = p.as_dvec4();
-                        p.truncate().dot(rel) + p.w >= 0.0
-                    });
+                    && view
+                        .frustum
+                        .planes
+                        .iter()
+                        .all(|p| in_front(p.as_dvec4(), rel));
                 // The pixels across the sample's cell, along which a
                 // silhouette or the edge's outline moves.
                 let cell_px = spacing.min_element() * k / distance;
