@@ -6,7 +6,10 @@
 //! view model (warm, and with the caches flushed first) and with the bound
 //! alone (one core, 1280x720, tau 1 px), and the geomip path's refining
 //! and balancing of the default scene's plan's blocks, from beyond the
-//! blocks' sides beside from every side patch's neighbours.
+//! blocks' sides beside from every side patch's neighbours. Last, the
+//! geomip path's whole error choice (`ChosenPatches::by_error`: its plan,
+//! levels, stitching, balancing and drawn list) on both terrains, warm
+//! and cold, at tau 0.25 and 1 px.
 
 use std::ffi::OsStr;
 use std::hint::black_box;
@@ -19,6 +22,7 @@ use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
 use vkterrain::cli::args::TerrainArgs;
 use vkterrain::lod::geomip;
+use vkterrain::lod::geomip_choice::ChosenPatches;
 use vkterrain::lod::hierarchy::Hierarchy;
 use vkterrain::lod::plan::{plan, PlanInputs, Planner, SightReading};
 use vkterrain::lod::view::Tau;
@@ -278,5 +282,58 @@ fn geomip_levels(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench, frame_plan, geomip_levels);
+/// The geomip path's error choice as a frame makes it, with a frame
+/// slot's kept buffers (`ChosenPatches`, `Planner`): the time its
+/// `lod_ms` reads less what the renderer adds around it.
+fn geomip_choice(c: &mut Criterion) {
+    let junk = vec![1u8; 96 << 20];
+    let terrains = [
+        Some(("default", default_scene_terrain())),
+        large_terrain().map(|t| ("large-4097", t)),
+    ];
+    for (name, terrain) in terrains.into_iter().flatten() {
+        let (tess_table, table) = terrain.error_tables();
+        let hierarchy = Hierarchy::new(&terrain, tess_table);
+        let grid = terrain.grid();
+        let map = terrain.info().heightmap().expect("a whole terrain");
+        let stitch = geomip::StitchErrors::compute(map, grid, table);
+        let inputs = PlanInputs {
+            table,
+            sight: terrain.sight_table(),
+            merge: false,
+            cull: true,
+            reading: SightReading::Template,
+            seen: None,
+        };
+        let mut group = c.benchmark_group(format!("geomip_choice/{name}"));
+        for view in named_views(terrain.info()) {
+            for tau in [0.25, 1.0] {
+                let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720)
+                    .lod_view(Tau::new(tau).expect("a valid tau"));
+                let mut planner = Planner::default();
+                let mut chosen = ChosenPatches::default();
+                let mut choose = || {
+                    black_box(chosen.by_error(
+                        &terrain,
+                        &hierarchy,
+                        black_box(&lod_view),
+                        (&mut planner, &inputs),
+                        Some(&stitch),
+                    ));
+                };
+                group.bench_function(format!("{tau}px/{}", view.name), |b| b.iter(&mut choose));
+                group.bench_function(format!("{tau}px-cold/{}", view.name), |b| {
+                    b.iter_batched_ref(
+                        || flush_caches(&junk),
+                        |_| choose(),
+                        BatchSize::PerIteration,
+                    )
+                });
+            }
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bench, frame_plan, geomip_levels, geomip_choice);
 criterion_main!(benches);

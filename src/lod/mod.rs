@@ -4,6 +4,8 @@
 //! - [`factors`]: the tessellation-factor formulas the control shader
 //!   mirrors (distance, error-bounded, the peers' policies).
 //! - [`geomip`]: geomipmapping's levels, stitching and morphing.
+//! - [`geomip_choice`]: the geomip path's levels for one view, by distance
+//!   or by the error plan, in buffers kept from frame to frame.
 //! - [`view`]: what a frame's choice sees: eye, frustum, pixels per radian,
 //!   tau.
 //! - [`hierarchy`]: the node quadtree over the patch grid, built once per
@@ -24,6 +26,7 @@
 pub mod buffers;
 pub mod factors;
 pub mod geomip;
+pub mod geomip_choice;
 pub mod hierarchy;
 pub mod horizon;
 pub mod order;

@@ -7,7 +7,7 @@ use std::mem::size_of;
 use ash::vk;
 
 use super::appearance::GpuAppearance;
-use super::geomip_path::{ChosenPatches, GeomipConstants, GeomipDraw};
+use super::geomip_path::{GeomipConstants, GeomipDraw};
 use super::occlusion::{DrawCommand, DRAW_COMMAND_BYTES, MAX_LISTED_DRAWS};
 use super::seen::SeenBuffer;
 use super::settings::RenderSettings;
@@ -18,6 +18,7 @@ use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::Sampler;
 use crate::gpu::queries::FrameQueries;
 use crate::gpu::Device;
+use crate::lod::geomip_choice::ChosenPatches;
 use crate::lod::plan::Planner;
 use crate::render::error::Result;
 use crate::shader_constants::{

@@ -33,7 +33,7 @@ use ash::vk;
 
 use super::appearance::GpuAppearance;
 use super::frame::{build_frames, DescriptorPlan, FrameSlot};
-use super::geomip_path::{ChosenPatches, GeomipGeometry};
+use super::geomip_path::GeomipGeometry;
 use super::occlusion::Occlusion;
 use super::pipelines::{
     build_pipelines, create_sky_pipeline, CulledPipelines, PathPipelines, PipelineTarget,
@@ -50,6 +50,7 @@ use crate::gpu::memory::{Buffer, Image};
 use crate::gpu::owned::{DescriptorSetLayout, Pipeline, PipelineLayout, Sampler};
 use crate::gpu::queries::PipelineStatistics;
 use crate::gpu::{sample_count_flag, Device, Gpu, VkError};
+use crate::lod::geomip_choice::ChosenPatches;
 use crate::lod::hierarchy::Hierarchy;
 use crate::lod::plan::{Planner, PLANNED_BLOCKS};
 use crate::render::error::{RenderError, Result};

@@ -1,0 +1,375 @@
+//! The geomip path's level choice: every patch's level and morph factor
+//! for one view, by distance or by the error plan, balanced so that
+//! neighbours differ by at most one level, and the list of patches drawn.
+//! Its buffers are kept from frame to frame, and only what the last choice
+//! wrote is reset, so a choice costs what is in view, not the grid.
+
+use glam::Vec3;
+
+use super::buffers::touched;
+use super::geomip::{self, PatchLevels, StitchErrors};
+use super::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
+use super::plan::{patches_in_view, PlanInputs, Planner};
+use super::view::LodView;
+use crate::terrain::grid::{PatchGrid, PatchId};
+use crate::terrain::Terrain;
+
+/// A choice of levels for every patch (`by_distance`, `by_error`), which
+/// the geomip path turns into draws: a frame slot's, kept from its last
+/// frame so that a choice fills memory it filled before.
+#[derive(Debug, Default)]
+pub struct ChosenPatches {
+    /// Every patch's level and morph factor.
+    levels: geomip::PatchLevels,
+    /// One flag per patch: whether it is drawn.
+    drawn: Vec<bool>,
+    /// The drawn patches, in grid order.
+    visible: Vec<u32>,
+    /// The error LOD's blocks as columns and rows of patches.
+    rects: Vec<Rect>,
+    /// Per block of `rects`, the sides a drawn neighbour may be one level
+    /// coarser beyond (`geomip::stitchable_sides`).
+    stitched: Vec<[bool; geomip::BLOCK_SIDES]>,
+    /// The distance LOD's distances, one per drawn patch in grid order.
+    distances: Vec<f32>,
+    /// Where the last choice may have left entries unlike `reset`'s;
+    /// None: anywhere.
+    written: Option<Written>,
+}
+
+/// Patches of a grid as columns and rows, end exclusive.
+type Rect = ([usize; 2], [usize; 2]);
+
+/// The patches a choice may have changed from `ChosenPatches::reset`'s
+/// state, on the grid it was sized for (its columns, its coarsest level).
+#[derive(Clone, Copy, Debug)]
+struct Written {
+    cols: usize,
+    coarsest: u8,
+    rect: Rect,
+}
+
+impl ChosenPatches {
+    /// Room for the levels, morph factors and flags of `patches` patches,
+    /// the list of those drawn, and `blocks` blocks, their memory written
+    /// once (`buffers::touched`): the first choice's `reset` sizes them to
+    /// the grid, and finds its pages already the process's.
+    pub fn with_capacity(patches: usize, blocks: usize) -> Self {
+        let mut chosen = ChosenPatches::default();
+        touched(&mut chosen.levels.levels, patches);
+        touched(&mut chosen.levels.morph, patches);
+        touched(&mut chosen.drawn, patches);
+        touched(&mut chosen.visible, patches);
+        touched(&mut chosen.rects, blocks);
+        touched(&mut chosen.stitched, blocks);
+        chosen
+    }
+
+    /// Every patch of `grid` at level `coarsest`, with no morph and not
+    /// drawn. Where the last choice was on the same grid, only the patches
+    /// it wrote are reset (`Written`), so a frame's choice costs what is
+    /// in view, not the grid.
+    fn reset(&mut self, grid: &PatchGrid, coarsest: u8) {
+        let (patches, cols) = (grid.patch_count(), grid.patch_cols());
+        let PatchLevels { levels, morph } = &mut self.levels;
+        match self.written.take() {
+            Some(w) if w.cols == cols && w.coarsest == coarsest && levels.len() == patches => {
+                for row in rect_rows(cols, w.rect) {
+                    levels[row.clone()].fill(coarsest);
+                    morph[row.clone()].fill(0.0);
+                    self.drawn[row].fill(false);
+                }
+            }
+            _ => {
+                levels.clear();
+                levels.resize(patches, coarsest);
+                morph.clear();
+                morph.resize(patches, 0.0);
+                self.drawn.clear();
+                self.drawn.resize(patches, false);
+            }
+        }
+        self.visible.clear();
+        self.rects.clear();
+        self.stitched.clear();
+        self.distances.clear();
+    }
+
+    /// Notes what a choice on `grid` drew (`drawn`: the bounds of its drawn
+    /// patches, None for none) for the next `reset`: those patches, and
+    /// those refining and balancing can have lowered around them
+    /// (`geomip::balance_reach`).
+    fn wrote(&mut self, grid: &PatchGrid, coarsest: u8, drawn: Option<Rect>) {
+        let reach = geomip::balance_reach(grid.cells_per_patch());
+        let rect = drawn.map_or(([0, 0], [0, 0]), |([c0, c1], [r0, r1])| {
+            (
+                [
+                    c0.saturating_sub(reach),
+                    (c1 + reach).min(grid.patch_cols()),
+                ],
+                [
+                    r0.saturating_sub(reach),
+                    (r1 + reach).min(grid.patch_rows()),
+                ],
+            )
+        });
+        self.written = Some(Written {
+            cols: grid.patch_cols(),
+            coarsest,
+            rect,
+        });
+    }
+
+    /// `visible` from the drawn flags of the patches in `within` (of a grid
+    /// `cols` patches wide; none are drawn outside it), in grid order,
+    /// eight flags at a time: a run of eight patches all drawn or none
+    /// drawn costs one test.
+    fn list_drawn(&mut self, cols: usize, within: Rect) {
+        let visible = &mut self.visible;
+        visible.clear();
+        for row in rect_rows(cols, within) {
+            let flags: &[u8] = bytemuck::cast_slice(&self.drawn[row.clone()]);
+            let words = flags.chunks_exact(8);
+            let rest = words.remainder();
+            let mut first = row.start as u32;
+            for word in words {
+                let bits = u64::from_le_bytes(word.try_into().expect("eight flags"));
+                match bits {
+                    0 => {}
+                    ALL_DRAWN => visible.extend(first..first + 8),
+                    _ => push_flagged(visible, first, word),
+                }
+                first += 8;
+            }
+            push_flagged(visible, first, rest);
+        }
+    }
+}
+
+/// Pushes `first + i` for each flag `i` of `flags` that is set.
+fn push_flagged(out: &mut Vec<u32>, first: u32, flags: &[u8]) {
+    out.extend(
+        (first..)
+            .zip(flags)
+            .filter(|(_, &flag)| flag != 0)
+            .map(|(p, _)| p),
+    );
+}
+
+/// Eight drawn flags (`true` is 1) read as one little-endian word.
+const ALL_DRAWN: u64 = 0x0101_0101_0101_0101;
+
+impl ChosenPatches {
+    /// Every patch's level and morph factor.
+    pub fn levels(&self) -> &PatchLevels {
+        &self.levels
+    }
+
+    /// The drawn patches, in grid order.
+    pub fn visible(&self) -> &[u32] {
+        &self.visible
+    }
+
+    /// Levels by distance (`geomip::level_for_distance` from `min_dist`,
+    /// the finest level's reach) for the patches in `view` (all of them
+    /// without `cull`), refined and balanced, with their morph factors.
+    pub fn by_distance(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        view: &LodView,
+        (cull, min_dist): (bool, f32),
+    ) {
+        let grid = terrain.grid();
+        let count = geomip::level_count(grid.cells_per_patch());
+        // Every patch starts at the coarsest level, and those in view get
+        // theirs; the coarsest constrains no neighbour.
+        let coarsest = (count - 1) as u8;
+        self.reset(grid, coarsest);
+        let PatchLevels { levels, morph } = &mut self.levels;
+        let visible = patches_in_view(terrain, hierarchy, view, cull).0;
+        let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
+        let distances = &mut self.distances;
+        distances.extend(
+            edges
+                .iter()
+                .map(|&id| patch_distance(hierarchy, id, view.eye_local)),
+        );
+        for (&p, &d) in visible.iter().zip(distances.iter()) {
+            levels[p as usize] = geomip::level_for_distance(d, min_dist, count) as u8;
+        }
+        mark_drawn(&mut self.drawn, &visible);
+        // Every drawn patch can lower a neighbour; the morph factors
+        // follow the balanced levels.
+        geomip::refine_and_balance(levels, grid, &self.drawn, &edges);
+        for (&p, &d) in visible.iter().zip(distances.iter()) {
+            let level = usize::from(levels[p as usize]);
+            if level + 1 < count {
+                morph[p as usize] = geomip::morph_factor(d, min_dist, level);
+            }
+        }
+        let cols = grid.patch_cols();
+        let drawn = rect_bounds(
+            visible
+                .iter()
+                .map(|&p| (p as usize % cols, p as usize / cols))
+                .map(|(c, r)| ([c, c + 1], [r, r + 1])),
+        );
+        self.visible = visible;
+        self.wrote(grid, coarsest, drawn);
+    }
+
+    /// Levels from the error plan (`Planner::plan` with `inputs`): a
+    /// block's patches take its level (`geomip::level_of_index`) and glide
+    /// towards the next coarser one (`geomip::block_glide`); a block's
+    /// sides that may not be stitched (`geomip::stitchable_sides`, from
+    /// `stitch`) keep a drawn neighbour at its level; then the levels are
+    /// refined and balanced. Returns the plan's predicted share of pixels
+    /// over tau (`FramePlan::predicted_over_share`).
+    pub fn by_error(
+        &mut self,
+        terrain: &Terrain,
+        hierarchy: &Hierarchy,
+        view: &LodView,
+        (planner, inputs): (&mut Planner, &PlanInputs),
+        stitch: Option<&StitchErrors>,
+    ) -> Option<f32> {
+        let grid = terrain.grid();
+        let count = geomip::level_count(grid.cells_per_patch());
+        let coarsest = (count - 1) as u8;
+        self.reset(grid, coarsest);
+        let PatchLevels { levels, morph } = &mut self.levels;
+        let frame_plan = planner.plan(terrain, hierarchy, view, inputs);
+        let cols = grid.patch_cols();
+        for block in &frame_plan.blocks {
+            let k = usize::from(block.patch_level).min(count - 1);
+            let level = geomip::level_of_index(k, count);
+            let glide = geomip::block_glide(block, k, hierarchy, view);
+            let rect = block.patch_range(grid);
+            for row in rect_rows(cols, rect) {
+                levels[row.clone()].fill(level as u8);
+                // Every morph factor starts at none.
+                if glide > 0.0 {
+                    morph[row.clone()].fill(glide);
+                }
+                self.drawn[row].fill(true);
+            }
+            self.rects.push(rect);
+            self.stitched.push(geomip::stitchable_sides(
+                (block, k),
+                (hierarchy, grid),
+                view,
+                stitch,
+            ));
+        }
+        // A block's patches share its level: only its sides can lower a
+        // neighbour.
+        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, &self.stitched);
+        let drawn = rect_bounds(self.rects.iter().copied());
+        self.list_drawn(cols, drawn.unwrap_or_default());
+        self.wrote(grid, coarsest, drawn);
+        frame_plan.predicted_over_share
+    }
+}
+
+/// Distance from `eye_local` to the nearest point of patch `p`'s box (its
+/// node's in `hierarchy`: one read, where the terrain's box is three).
+fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: Vec3) -> f32 {
+    hierarchy.node(NodeId::patch(p)).distance(eye_local)
+}
+
+/// Sets the flag (one per patch) of each of `visible`.
+pub fn mark_drawn(drawn: &mut [bool], visible: &[u32]) {
+    for &p in visible {
+        drawn[p as usize] = true;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every drawn patch is listed once, in grid order, whatever runs of
+    /// drawn and not drawn the flags hold within the rectangle read, the
+    /// last short word of each row included.
+    #[test]
+    fn list_drawn_lists_each_drawn_patch_in_grid_order() {
+        let (cols, rows) = (67usize, 3usize);
+        let mut chosen = ChosenPatches::default();
+        for within in [
+            ([0, 0], [0, 0]),
+            ([0, 5], [1, 2]),
+            ([3, 11], [0, 3]),
+            ([0, 67], [0, 3]),
+            ([30, 59], [1, 3]),
+        ] {
+            let ([c0, c1], [r0, r1]) = within;
+            // Runs of all, none and some drawn, inside the rectangle only.
+            let drawn: Vec<bool> = (0..cols * rows)
+                .map(|p| {
+                    let (c, r) = (p % cols, p / cols);
+                    (c0..c1).contains(&c)
+                        && (r0..r1).contains(&r)
+                        && match (p / 8) % 3 {
+                            0 => true,
+                            1 => false,
+                            _ => p % 3 == 0,
+                        }
+                })
+                .collect();
+            chosen.drawn = drawn.clone();
+            chosen.list_drawn(cols, within);
+            let expected: Vec<u32> = (0..(cols * rows) as u32)
+                .filter(|&p| drawn[p as usize])
+                .collect();
+            assert_eq!(chosen.visible, expected, "{within:?}");
+        }
+    }
+
+    /// A reset after a choice leaves every patch as a reset of a fresh
+    /// choice does, where the choice wrote only within the reach of what
+    /// it drew; on another grid, or at another coarsest level, the whole
+    /// grid is reset.
+    #[test]
+    fn a_reset_restores_what_the_last_choice_wrote() {
+        // 32 x 16 patches of 16 cells: levels 0 to 4.
+        let grid = PatchGrid::for_size(513, 257, 16);
+        let (cols, coarsest) = (grid.patch_cols(), 4u8);
+        let reach = geomip::balance_reach(grid.cells_per_patch());
+        let mut fresh = ChosenPatches::default();
+        fresh.reset(&grid, coarsest);
+        let mut chosen = ChosenPatches::default();
+        chosen.reset(&grid, coarsest);
+        // A block drawn at the finest level, near the grid's first
+        // corner, and what refining and balancing can lower around it.
+        let block: Rect = ([2, 6], [1, 3]);
+        for p in 0..grid.patch_count() {
+            let (c, r) = (p % cols, p / cols);
+            let (dc, dr) = (
+                (block.0[0].saturating_sub(c)).max(c.saturating_sub(block.0[1] - 1)),
+                (block.1[0].saturating_sub(r)).max(r.saturating_sub(block.1[1] - 1)),
+            );
+            if dc + dr == 0 {
+                chosen.levels.levels[p] = 0;
+                chosen.levels.morph[p] = 0.5;
+                chosen.drawn[p] = true;
+            } else if dc + dr <= reach {
+                chosen.levels.levels[p] = (dc + dr - 1) as u8;
+            }
+        }
+        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.reset(&grid, coarsest);
+        assert_eq!(chosen.levels.levels, fresh.levels.levels);
+        assert_eq!(chosen.levels.morph, fresh.levels.morph);
+        assert_eq!(chosen.drawn, fresh.drawn);
+        // Another coarsest level, then another grid: everything anew.
+        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.reset(&grid, 3);
+        assert!(chosen.levels.levels.iter().all(|&l| l == 3));
+        let other = PatchGrid::for_size(257, 257, 16);
+        chosen.wrote(&grid, 3, None);
+        chosen.reset(&other, 3);
+        assert_eq!(chosen.levels.levels.len(), other.patch_count());
+        assert_eq!(chosen.drawn.len(), other.patch_count());
+    }
+}
