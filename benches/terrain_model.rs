@@ -267,7 +267,7 @@ fn geomip_levels(c: &mut Criterion) {
         group.bench_function(format!("blocks/{}", view.name), |b| {
             b.iter_batched_ref(
                 || levels.clone(),
-                |l| geomip::refine_and_balance_blocks(l, grid, &drawn, &rects, &stitched),
+                |l| geomip::refine_and_balance_blocks(l, grid, &drawn, &rects, |i| stitched[i]),
                 BatchSize::SmallInput,
             )
         });

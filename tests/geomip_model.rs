@@ -353,7 +353,7 @@ fn block_sides_alone_refine_and_balance_as_every_patch_does() {
         .map(|&(c0, r0, span, _)| ([c0, c0 + span], [r0, r0 + span]))
         .collect();
     let stitched = vec![[true; 4]; rects.len()];
-    refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects, &stitched);
+    refine_and_balance_blocks(&mut by_blocks, &grid, &drawn, &rects, |i| stitched[i]);
     assert_eq!(by_blocks, every);
     // So does balancing only from the sides finer than the coarsest but one.
     refine_and_balance(&mut by_sides, &grid, &drawn, &edges);
@@ -381,7 +381,7 @@ fn refining_and_balancing_reach_no_further_than_balance_reach() {
             levels[p] = 0;
             drawn[p] = true;
             let block = [([c, c + 1], [r, r + 1])];
-            refine_and_balance_blocks(&mut levels, &grid, &drawn, &block, &[[true; 4]]);
+            refine_and_balance_blocks(&mut levels, &grid, &drawn, &block, |_| [true; 4]);
             let farthest = (0..grid.patch_count())
                 .filter(|&q| levels[q] < coarsest)
                 .map(|q| (q % cols).abs_diff(c) + (q / cols).abs_diff(r))
@@ -547,9 +547,9 @@ fn a_side_that_may_not_be_stitched_keeps_its_neighbour_at_its_level() {
     let blocks: Vec<_> = (0..4).map(|c| ([c, c + 1], [0, 1])).collect();
     for (left, expected) in [(true, [1, 0, 1, 2]), (false, [0, 0, 1, 2])] {
         let mut levels = vec![coarsest, 0, coarsest, coarsest];
-        let mut sides = vec![[true; 4]; 4];
+        let mut sides = [[true; 4]; 4];
         sides[1][0] = left;
-        refine_and_balance_blocks(&mut levels, &grid, &drawn, &blocks, &sides);
+        refine_and_balance_blocks(&mut levels, &grid, &drawn, &blocks, |i| sides[i]);
         assert_eq!(levels, expected, "left side stitchable: {left}");
     }
 }

@@ -688,17 +688,19 @@ pub fn refine_and_balance(levels: &mut [u8], grid: &PatchGrid, drawn: &[bool], e
 /// sides. Inside a block no side changes level, so only the patches just
 /// beyond a block's sides are looked at, once each: refining the culled
 /// ones and seeding the balancing in the same pass. Where a side of a
-/// block may not be stitched to a coarser neighbour (`stitched[i][s]`
+/// block may not be stitched to a coarser neighbour (`stitched(i)[s]`
 /// false for side `s` of block `i`, `stitchable_sides`), a drawn patch
 /// beyond it is refined to the block's level as a culled one is.
+/// `stitched(i)` is asked for only where a drawn patch beyond block `i`
+/// is coarser than it, at most once a block: most blocks border none
+/// (6 to 44 % of the bench views' blocks do, at 0.25 and 1 px).
 pub fn refine_and_balance_blocks(
     levels: &mut [u8],
     grid: &PatchGrid,
     drawn: &[bool],
     blocks: &[([usize; 2], [usize; 2])],
-    stitched: &[[bool; BLOCK_SIDES]],
+    mut stitched: impl FnMut(usize) -> [bool; BLOCK_SIDES],
 ) {
-    assert_eq!(blocks.len(), stitched.len(), "one set of sides a block");
     let mut queue = Vec::new();
     // The blocks' own levels: balancing may lower a block's patches one by
     // one, and those it lowers go on the queue themselves.
@@ -711,12 +713,16 @@ pub fn refine_and_balance_blocks(
     // (none beyond a side that may not be stitched). Both are minima over
     // the blocks, so one pass in any order gives them; a patch at its
     // blocks' finest is never more than one coarser than any of them.
-    for ((block, &level), sides) in blocks.iter().zip(&own).zip(stitched) {
+    for (b, (block, &level)) in blocks.iter().zip(&own).enumerate() {
+        let mut sides = None;
         for_each_beyond(grid, block, |side, i, q| {
-            let limit = if drawn[i] && sides[side] {
-                level + 1
-            } else {
-                level
+            // A patch beyond at the block's level or finer stays.
+            if levels[i] <= level {
+                return;
+            }
+            let limit = match drawn[i] && sides.get_or_insert_with(|| stitched(b))[side] {
+                true => level + 1,
+                false => level,
             };
             if levels[i] > limit {
                 levels[i] = limit;

@@ -27,9 +27,6 @@ pub struct ChosenPatches {
     visible: Vec<u32>,
     /// The error LOD's blocks as columns and rows of patches.
     rects: Vec<Rect>,
-    /// Per block of `rects`, the sides a drawn neighbour may be one level
-    /// coarser beyond (`geomip::stitchable_sides`).
-    stitched: Vec<[bool; geomip::BLOCK_SIDES]>,
     /// The distance LOD's distances, one per drawn patch in grid order.
     distances: Vec<f32>,
     /// Where the last choice may have left entries unlike `reset`'s;
@@ -61,7 +58,6 @@ impl ChosenPatches {
         touched(&mut chosen.drawn, patches);
         touched(&mut chosen.visible, patches);
         touched(&mut chosen.rects, blocks);
-        touched(&mut chosen.stitched, blocks);
         chosen
     }
 
@@ -91,7 +87,6 @@ impl ChosenPatches {
         }
         self.visible.clear();
         self.rects.clear();
-        self.stitched.clear();
         self.distances.clear();
     }
 
@@ -255,16 +250,14 @@ impl ChosenPatches {
                 self.drawn[row].fill(true);
             }
             self.rects.push(rect);
-            self.stitched.push(geomip::stitchable_sides(
-                (block, k),
-                (hierarchy, grid),
-                view,
-                stitch,
-            ));
         }
         // A block's patches share its level: only its sides can lower a
         // neighbour.
-        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, &self.stitched);
+        let blocks = &frame_plan.blocks;
+        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, |i| {
+            let k = usize::from(blocks[i].patch_level).min(count - 1);
+            geomip::stitchable_sides((&blocks[i], k), (hierarchy, grid), view, stitch)
+        });
         let drawn = rect_bounds(self.rects.iter().copied());
         self.list_drawn(cols, drawn.unwrap_or_default());
         self.wrote(grid, coarsest, drawn);
