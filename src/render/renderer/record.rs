@@ -149,6 +149,11 @@ impl TerrainRenderer {
                 (S::HOST, A::HOST_READ),
             );
         }
+        // The page loads the frame asked for start once it is recorded,
+        // not while it chooses and records (`Streamer::dispatch`).
+        if let Some(streamer) = self.streamer.as_mut() {
+            streamer.dispatch()?;
+        }
         Ok(())
     }
 
