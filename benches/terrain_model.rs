@@ -17,7 +17,10 @@ use std::path::Path;
 
 use clap::Parser;
 
-use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{
+    criterion_group, criterion_main, BatchSize, BenchmarkGroup, Criterion, Throughput,
+};
 use glam::DVec2;
 use vkterrain::bench::cameras::named_views;
 use vkterrain::cli::args::TerrainArgs;
@@ -169,6 +172,32 @@ fn flush_caches(junk: &[u8]) {
     black_box(junk.iter().step_by(64).fold(0u8, |a, &x| a ^ x));
 }
 
+/// The default scene's terrain and, where `scripts/bench` has generated
+/// it, the 4097^2 terrain, by name.
+fn plan_terrains() -> Vec<(&'static str, Terrain)> {
+    [
+        Some(("default", default_scene_terrain())),
+        large_terrain().map(|t| ("large-4097", t)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect()
+}
+
+/// Times `run` warm as `{label}/{view}`, and as `{label}-cold/{view}`
+/// after the caches are flushed (`flush_caches`).
+fn warm_and_cold(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    (label, view): (&str, &str),
+    junk: &[u8],
+    mut run: impl FnMut(),
+) {
+    group.bench_function(format!("{label}/{view}"), |b| b.iter(&mut run));
+    group.bench_function(format!("{label}-cold/{view}"), |b| {
+        b.iter_batched_ref(|| flush_caches(junk), |_| run(), BatchSize::PerIteration)
+    });
+}
+
 /// The error LOD's plan for each bench view, with the view model and
 /// with the bound alone, on the default scene and, where `scripts/bench`
 /// has generated it, the 4097^2 terrain; and with the view model again
@@ -177,11 +206,7 @@ fn flush_caches(junk: &[u8]) {
 /// same cores and caches.
 fn frame_plan(c: &mut Criterion) {
     let junk = vec![1u8; 96 << 20];
-    let terrains = [
-        Some(("default", default_scene_terrain())),
-        large_terrain().map(|t| ("large-4097", t)),
-    ];
-    for (name, terrain) in terrains.into_iter().flatten() {
+    for (name, terrain) in plan_terrains() {
         let (table, _) = terrain.error_tables();
         let sight = terrain.sight_table();
         let hierarchy = Hierarchy::new(&terrain, table);
@@ -204,17 +229,13 @@ fn frame_plan(c: &mut Criterion) {
                 let mut plan_once = || {
                     black_box(planner.plan(&terrain, &hierarchy, black_box(&lod_view), &inputs));
                 };
-                group.bench_function(format!("{measure}/{}", view.name), |b| {
-                    b.iter(&mut plan_once)
-                });
-                if measure == "sight" {
-                    group.bench_function(format!("{measure}-cold/{}", view.name), |b| {
-                        b.iter_batched_ref(
-                            || flush_caches(&junk),
-                            |_| plan_once(),
-                            BatchSize::PerIteration,
-                        )
-                    });
+                match measure {
+                    "sight" => warm_and_cold(&mut group, (measure, view.name), &junk, plan_once),
+                    _ => {
+                        group.bench_function(format!("{measure}/{}", view.name), |b| {
+                            b.iter(&mut plan_once)
+                        });
+                    }
                 }
             }
         }
@@ -287,11 +308,7 @@ fn geomip_levels(c: &mut Criterion) {
 /// `lod_ms` reads less what the renderer adds around it.
 fn geomip_choice(c: &mut Criterion) {
     let junk = vec![1u8; 96 << 20];
-    let terrains = [
-        Some(("default", default_scene_terrain())),
-        large_terrain().map(|t| ("large-4097", t)),
-    ];
-    for (name, terrain) in terrains.into_iter().flatten() {
+    for (name, terrain) in plan_terrains() {
         let (tess_table, table) = terrain.error_tables();
         let hierarchy = Hierarchy::new(&terrain, tess_table);
         let grid = terrain.grid();
@@ -312,7 +329,7 @@ fn geomip_choice(c: &mut Criterion) {
                     .lod_view(Tau::new(tau).expect("a valid tau"));
                 let mut planner = Planner::default();
                 let mut chosen = ChosenPatches::default();
-                let mut choose = || {
+                let choose = || {
                     black_box(chosen.by_error(
                         &terrain,
                         &hierarchy,
@@ -321,14 +338,7 @@ fn geomip_choice(c: &mut Criterion) {
                         Some(&stitch),
                     ));
                 };
-                group.bench_function(format!("{tau}px/{}", view.name), |b| b.iter(&mut choose));
-                group.bench_function(format!("{tau}px-cold/{}", view.name), |b| {
-                    b.iter_batched_ref(
-                        || flush_caches(&junk),
-                        |_| choose(),
-                        BatchSize::PerIteration,
-                    )
-                });
+                warm_and_cold(&mut group, (&format!("{tau}px"), view.name), &junk, choose);
             }
         }
         group.finish();

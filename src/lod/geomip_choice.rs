@@ -9,7 +9,7 @@ use glam::Vec3;
 use super::buffers::touched;
 use super::geomip::{self, PatchLevels, StitchErrors};
 use super::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
-use super::plan::{patches_in_view, PlanInputs, Planner};
+use super::plan::{patches_in_view, PlanInputs, PlannedBlock, Planner};
 use super::view::LodView;
 use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::Terrain;
@@ -236,8 +236,10 @@ impl ChosenPatches {
         let PatchLevels { levels, morph } = &mut self.levels;
         let frame_plan = planner.plan(terrain, hierarchy, view, inputs);
         let cols = grid.patch_cols();
+        // A block's level index (2^k segments a patch side).
+        let index = |block: &PlannedBlock| usize::from(block.patch_level).min(count - 1);
         for block in &frame_plan.blocks {
-            let k = usize::from(block.patch_level).min(count - 1);
+            let k = index(block);
             let level = geomip::level_of_index(k, count);
             let glide = geomip::block_glide(block, k, hierarchy, view);
             let rect = block.patch_range(grid);
@@ -255,8 +257,12 @@ impl ChosenPatches {
         // neighbour.
         let blocks = &frame_plan.blocks;
         geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, |i| {
-            let k = usize::from(blocks[i].patch_level).min(count - 1);
-            geomip::stitchable_sides((&blocks[i], k), (hierarchy, grid), view, stitch)
+            geomip::stitchable_sides(
+                (&blocks[i], index(&blocks[i])),
+                (hierarchy, grid),
+                view,
+                stitch,
+            )
         });
         let drawn = rect_bounds(self.rects.iter().copied());
         self.list_drawn(cols, drawn.unwrap_or_default());
