@@ -32,6 +32,7 @@ use vkterrain::lod::view::Tau;
 use vkterrain::render::{FrameView, LoadedScene, Loading};
 use vkterrain::scene::Scene;
 use vkterrain::terrain::grid::patch_y_bounds;
+use vkterrain::terrain::lod_params::DistanceLod;
 use vkterrain::terrain::{ErrorTable, Heightmap, PatchId, Terrain, TerrainInfo};
 
 const SIZE: usize = 4097;
@@ -339,6 +340,28 @@ fn geomip_choice(c: &mut Criterion) {
                     ));
                 };
                 warm_and_cold(&mut group, (&format!("{tau}px"), view.name), &junk, choose);
+            }
+            // The distance LOD at the bench's nearest and farthest reach
+            // of the finest level (half and four times the scene's).
+            let lod = DistanceLod::for_extent(terrain.info().world_width());
+            let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
+            for scale in [0.5, 4.0] {
+                let mut chosen = ChosenPatches::default();
+                let choose = || {
+                    chosen.by_distance(
+                        &terrain,
+                        &hierarchy,
+                        black_box(&lod_view),
+                        (true, lod.min_dist * scale),
+                    );
+                    black_box(&chosen);
+                };
+                warm_and_cold(
+                    &mut group,
+                    (&format!("distance-x{scale}"), view.name),
+                    &junk,
+                    choose,
+                );
             }
         }
         group.finish();

@@ -4,9 +4,15 @@
 mod common;
 
 use common::*;
-use glam::{DVec2, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 use vkterrain::lod::geomip::*;
-use vkterrain::terrain::{Terrain, TerrainInfo};
+use vkterrain::lod::geomip_choice::ChosenPatches;
+use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
+use vkterrain::lod::plan::patches_in_view;
+use vkterrain::lod::view::{LodView, Tau};
+use vkterrain::render::FrameView;
+use vkterrain::terrain::camera::Camera;
+use vkterrain::terrain::{Heightmap, PatchId, Terrain, TerrainInfo};
 
 /// (row, column) of a template vertex index.
 fn rc(n: usize, v: u32) -> (i64, i64) {
@@ -586,4 +592,99 @@ fn levels_by_error_keep_a_neighbour_where_stitching_would_cut_a_spike() {
     let coarse = select_levels_by_error(&terrain, table, far, 600.0, 1.0, &all, Some(&stitch));
     let plain = select_levels_by_error(&terrain, table, far, 600.0, 1.0, &all, None);
     assert_eq!(coarse.levels, plain.levels);
+}
+
+/// The distance LOD's levels, morph factors and drawn patches decided
+/// patch by patch: each patch in view at its own distance's level,
+/// refined and balanced from every drawn patch, then morphed at its
+/// balanced level.
+fn by_distance_patch_by_patch(
+    terrain: &Terrain,
+    hierarchy: &Hierarchy,
+    view: &LodView,
+    (cull, d0): (bool, f32),
+) -> (PatchLevels, Vec<u32>) {
+    let grid = terrain.grid();
+    let count = level_count(grid.cells_per_patch());
+    let visible = patches_in_view(terrain, hierarchy, view, cull).0;
+    let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
+    let distance = |id: PatchId| hierarchy.node(NodeId::patch(id)).distance(view.eye_local);
+    let mut levels = vec![(count - 1) as u8; grid.patch_count()];
+    let mut morph = vec![0.0; grid.patch_count()];
+    let mut drawn = vec![false; grid.patch_count()];
+    for &id in &edges {
+        let p = grid.patch_index(id);
+        levels[p] = level_for_distance(distance(id), d0, count) as u8;
+        drawn[p] = true;
+    }
+    refine_and_balance(&mut levels, grid, &drawn, &edges);
+    for &id in &edges {
+        let p = grid.patch_index(id);
+        let level = usize::from(levels[p]);
+        if level + 1 < count {
+            morph[p] = morph_factor(distance(id), d0, level);
+        }
+    }
+    (PatchLevels { levels, morph }, visible)
+}
+
+/// The distance LOD decides whole blocks of patches at a level where it
+/// can, and gives every patch the level, morph factor and drawn flag it
+/// gets decided on its own: from the ground, from above and from beyond
+/// the edge, culled or not, at a short and a long reach of the finest
+/// level, with one kept set of buffers, as a frame slot keeps them.
+#[test]
+fn the_distance_lod_in_blocks_decides_as_patch_by_patch() {
+    let wide = {
+        let map = Heightmap::from_fn(513, 513, |r, c| {
+            let (x, z) = (c as f32 / 40.0, r as f32 / 31.0);
+            200.0 * x.sin() * z.cos() + 0.05 * (((r * 7919 + c * 104_729) % 97) as f32)
+        })
+        .unwrap();
+        let info = TerrainInfo::new(map, DVec2::splat(8.0), 4, DVec2::ZERO).unwrap();
+        Terrain::new(info, 0.0).unwrap()
+    };
+    let mut chosen = ChosenPatches::default();
+    let mut morphing = 0;
+    for terrain in [dem_terrain(16, DVec2::ZERO), wide] {
+        let hierarchy = Hierarchy::new(&terrain, &terrain.error_table());
+        let (lo, hi) = terrain.info().min_max();
+        let (lo, hi) = (f64::from(lo), f64::from(hi));
+        let size = terrain.info().world_width();
+        for (eye, target) in [
+            (
+                DVec3::new(0.1 * size, hi + 20.0, 0.05 * size),
+                DVec3::new(0.5 * size, lo, 0.3 * size),
+            ),
+            (
+                DVec3::new(0.0, hi + size, -0.8 * size),
+                DVec3::new(0.0, lo, 0.0),
+            ),
+            (
+                DVec3::new(-0.9 * size, hi + 300.0, -0.7 * size),
+                DVec3::ZERO,
+            ),
+        ] {
+            let camera = Camera {
+                eye,
+                target,
+                fov_y_deg: 55.0,
+            };
+            let view = FrameView::new(&terrain, &camera, 1280, 720).lod_view(Tau::DEFAULT);
+            for cull in [true, false] {
+                for d0 in [0.005 * size as f32, 0.08 * size as f32] {
+                    chosen.by_distance(&terrain, &hierarchy, &view, (cull, d0));
+                    let (expected, visible) =
+                        by_distance_patch_by_patch(&terrain, &hierarchy, &view, (cull, d0));
+                    let at = format!("eye {eye}, cull {cull}, d0 {d0}");
+                    assert_eq!(chosen.visible(), visible, "{at}");
+                    assert_eq!(chosen.levels().levels, expected.levels, "{at}");
+                    assert_eq!(chosen.levels().morph, expected.morph, "{at}");
+                    morphing += expected.morph.iter().filter(|&&m| m > 0.0).count();
+                }
+            }
+        }
+    }
+    // The views put patches in the middle of their glides too.
+    assert!(morphing > 100, "{morphing}");
 }

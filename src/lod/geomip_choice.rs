@@ -7,9 +7,10 @@
 use glam::Vec3;
 
 use super::buffers::touched;
+use super::factors::box_distance;
 use super::geomip::{self, PatchLevels, StitchErrors};
 use super::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
-use super::plan::{patches_in_view, PlanInputs, PlannedBlock, Planner};
+use super::plan::{PlanInputs, PlannedBlock, Planner};
 use super::view::LodView;
 use crate::terrain::grid::{PatchGrid, PatchId};
 use crate::terrain::Terrain;
@@ -27,8 +28,12 @@ pub struct ChosenPatches {
     visible: Vec<u32>,
     /// The error LOD's blocks as columns and rows of patches.
     rects: Vec<Rect>,
-    /// The distance LOD's distances, one per drawn patch in grid order.
-    distances: Vec<f32>,
+    /// The distance LOD's blocks' levels and their boxes' farthest
+    /// distances, one per block of `rects`.
+    decided: Vec<(u8, f32)>,
+    /// The distance LOD's walk: nodes still to visit, and whether each is
+    /// known to lie wholly in view.
+    stack: Vec<(NodeId, bool)>,
     /// Where the last choice may have left entries unlike `reset`'s;
     /// None: anywhere.
     written: Option<Written>,
@@ -58,6 +63,7 @@ impl ChosenPatches {
         touched(&mut chosen.drawn, patches);
         touched(&mut chosen.visible, patches);
         touched(&mut chosen.rects, blocks);
+        touched(&mut chosen.decided, blocks);
         chosen
     }
 
@@ -87,7 +93,7 @@ impl ChosenPatches {
         }
         self.visible.clear();
         self.rects.clear();
-        self.distances.clear();
+        self.decided.clear();
     }
 
     /// Notes what a choice on `grid` drew (`drawn`: the bounds of its drawn
@@ -168,6 +174,18 @@ impl ChosenPatches {
     /// Levels by distance (`geomip::level_for_distance` from `min_dist`,
     /// the finest level's reach) for the patches in `view` (all of them
     /// without `cull`), refined and balanced, with their morph factors.
+    ///
+    /// The hierarchy is walked from its top node down, as far as it takes
+    /// to find blocks in view whose patches all share one level: a node
+    /// wholly in the frustum whose box's nearest and farthest points are at
+    /// the same level is drawn whole, at that level, since every patch's
+    /// distance lies between the two. Balancing then looks only beyond the
+    /// blocks' sides (`refine_and_balance_blocks`), and morph factors are
+    /// found patch by patch only in blocks where one can be above 0: a
+    /// patch balancing lowered, or one whose box reaches 70 % of its
+    /// level's far distance (`geomip::morph_factor`). The levels, morph
+    /// factors and drawn patches are those of deciding every patch in view
+    /// on its own, in time that grows with the blocks, not the patches.
     pub fn by_distance(
         &mut self,
         terrain: &Terrain,
@@ -181,36 +199,68 @@ impl ChosenPatches {
         // theirs; the coarsest constrains no neighbour.
         let coarsest = (count - 1) as u8;
         self.reset(grid, coarsest);
+        let cols = grid.patch_cols();
+        let eye = view.eye_local;
+        let level_at = |d: f32| geomip::level_for_distance(d, min_dist, count) as u8;
         let PatchLevels { levels, morph } = &mut self.levels;
-        let visible = patches_in_view(terrain, hierarchy, view, cull).0;
-        let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
-        let distances = &mut self.distances;
-        distances.extend(
-            edges
-                .iter()
-                .map(|&id| patch_distance(hierarchy, id, view.eye_local)),
-        );
-        for (&p, &d) in visible.iter().zip(distances.iter()) {
-            levels[p as usize] = geomip::level_for_distance(d, min_dist, count) as u8;
+        // Nodes still to visit, each with whether it is known to lie wholly
+        // in view (every node without `cull`).
+        let stack = &mut self.stack;
+        stack.clear();
+        stack.push((hierarchy.root(), !cull));
+        while let Some((id, known_inside)) = stack.pop() {
+            let (lo, hi) = hierarchy.node(id).aabb();
+            let (lo, hi) = (lo - eye, hi - eye);
+            let inside = known_inside || {
+                let (centre, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+                if view.frustum.aabb_outside(centre, half) {
+                    continue;
+                }
+                // A patch not outside is drawn, as `patches_in_view` finds.
+                id.level == 0 || view.frustum.aabb_inside(centre, half)
+            };
+            let (near, far) = (box_distance(lo, hi), lo.abs().max(hi.abs()).length());
+            let level = level_at(near);
+            if !inside || (id.level > 0 && level_at(far) != level) {
+                hierarchy.for_each_child(id, |c, _| stack.push((c, inside)));
+                continue;
+            }
+            let rect = hierarchy.patch_range(id);
+            for row in rect_rows(cols, rect) {
+                levels[row.clone()].fill(level);
+                self.drawn[row].fill(true);
+            }
+            self.rects.push(rect);
+            self.decided.push((level, far));
         }
-        mark_drawn(&mut self.drawn, &visible);
-        // Every drawn patch can lower a neighbour; the morph factors
-        // follow the balanced levels.
-        geomip::refine_and_balance(levels, grid, &self.drawn, &edges);
-        for (&p, &d) in visible.iter().zip(distances.iter()) {
-            let level = usize::from(levels[p as usize]);
-            if level + 1 < count {
-                morph[p as usize] = geomip::morph_factor(d, min_dist, level);
+        // A block's patches share its level: only its sides can lower a
+        // neighbour.
+        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, |_| {
+            [true; geomip::BLOCK_SIDES]
+        });
+        // Morph factors follow the balanced levels. A block whose patches
+        // kept its level and whose farthest point has no morph at it has
+        // none anywhere: the factor grows with distance.
+        for (&rect, &(level, far)) in self.rects.iter().zip(&self.decided) {
+            let kept = rect_rows(cols, rect).all(|row| levels[row].iter().all(|&l| l == level));
+            let l = usize::from(level);
+            if kept && (l + 1 >= count || geomip::morph_factor(far, min_dist, l) <= 0.0) {
+                continue;
+            }
+            let ([c0, c1], [r0, r1]) = rect;
+            for row in r0..r1 {
+                for col in c0..c1 {
+                    let p = row * cols + col;
+                    let l = usize::from(levels[p]);
+                    if l + 1 < count {
+                        let d = patch_distance(hierarchy, PatchId { row, col }, eye);
+                        morph[p] = geomip::morph_factor(d, min_dist, l);
+                    }
+                }
             }
         }
-        let cols = grid.patch_cols();
-        let drawn = rect_bounds(
-            visible
-                .iter()
-                .map(|&p| (p as usize % cols, p as usize / cols))
-                .map(|(c, r)| ([c, c + 1], [r, r + 1])),
-        );
-        self.visible = visible;
+        let drawn = rect_bounds(self.rects.iter().copied());
+        self.list_drawn(cols, drawn.unwrap_or_default());
         self.wrote(grid, coarsest, drawn);
     }
 
