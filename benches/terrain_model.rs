@@ -244,6 +244,20 @@ fn frame_plan(c: &mut Criterion) {
     }
 }
 
+/// The plan's inputs as the geomip path's error choice gives them, with
+/// its error table `table`: the view model read by template, culled, no
+/// nodes merged, no counts.
+fn geomip_inputs<'a>(terrain: &'a Terrain, table: &'a ErrorTable) -> PlanInputs<'a> {
+    PlanInputs {
+        table,
+        sight: terrain.sight_table(),
+        merge: false,
+        cull: true,
+        reading: SightReading::Template,
+        seen: None,
+    }
+}
+
 /// The geomip path's levels after its plan: each block's patches at its
 /// level, then culled patches beside drawn ones refined and the levels
 /// balanced, by `refine_and_balance_blocks` and, in the same run, by
@@ -257,14 +271,7 @@ fn geomip_levels(c: &mut Criterion) {
     let mut group = c.benchmark_group("geomip_levels");
     for view in named_views(terrain.info()) {
         let lod_view = FrameView::new(&terrain, &view.camera, 1280, 720).lod_view(Tau::DEFAULT);
-        let inputs = PlanInputs {
-            table,
-            sight: terrain.sight_table(),
-            merge: false,
-            cull: true,
-            reading: SightReading::Template,
-            seen: None,
-        };
+        let inputs = geomip_inputs(&terrain, table);
         let frame_plan = plan(&terrain, &hierarchy, &lod_view, &inputs);
         let mut levels = vec![(count - 1) as u8; grid.patch_count()];
         let mut drawn = vec![false; grid.patch_count()];
@@ -315,14 +322,7 @@ fn geomip_choice(c: &mut Criterion) {
         let grid = terrain.grid();
         let map = terrain.info().heightmap().expect("a whole terrain");
         let stitch = geomip::StitchErrors::compute(map, grid, table);
-        let inputs = PlanInputs {
-            table,
-            sight: terrain.sight_table(),
-            merge: false,
-            cull: true,
-            reading: SightReading::Template,
-            seen: None,
-        };
+        let inputs = geomip_inputs(&terrain, table);
         let mut group = c.benchmark_group(format!("geomip_choice/{name}"));
         for view in named_views(terrain.info()) {
             for tau in [0.25, 1.0] {

@@ -327,13 +327,6 @@ fn patch_distance(hierarchy: &Hierarchy, p: PatchId, eye_local: Vec3) -> f32 {
     hierarchy.node(NodeId::patch(p)).distance(eye_local)
 }
 
-/// Sets the flag (one per patch) of each of `visible`.
-pub fn mark_drawn(drawn: &mut [bool], visible: &[u32]) {
-    for &p in visible {
-        drawn[p as usize] = true;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,7 +18,7 @@ use crate::gpu::descriptors::DescriptorSet;
 use crate::gpu::memory::Buffer;
 use crate::gpu::owned::{DescriptorSetLayout, PipelineLayout};
 use crate::lod::geomip;
-use crate::lod::geomip_choice::{mark_drawn, ChosenPatches};
+use crate::lod::geomip_choice::ChosenPatches;
 use crate::lod::hierarchy::{Hierarchy, NodeId};
 use crate::lod::order::DrawOrder;
 use crate::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
@@ -166,7 +166,9 @@ impl GeomipGeometry {
             let (visible, _) = patches_in_view(terrain, hierarchy, &lod_view, settings.cull);
             let mut levels = given.clone();
             let mut drawn = vec![false; grid.patch_count()];
-            mark_drawn(&mut drawn, &visible);
+            for &p in &visible {
+                drawn[p as usize] = true;
+            }
             let edges: Vec<PatchId> = visible.iter().map(|&p| grid.patch_id(p as usize)).collect();
             let lowered = geomip::refine_beside(&mut levels.levels, grid, &drawn, &edges);
             geomip::balance_from(&mut levels.levels, grid, &lowered);
