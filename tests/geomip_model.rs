@@ -8,7 +8,7 @@ use glam::{DVec2, DVec3, Vec3};
 use vkterrain::lod::geomip::*;
 use vkterrain::lod::geomip_choice::ChosenPatches;
 use vkterrain::lod::hierarchy::{Hierarchy, NodeId};
-use vkterrain::lod::plan::patches_in_view;
+use vkterrain::lod::plan::{patches_in_view, PlanInputs, Planner, SightReading};
 use vkterrain::lod::view::{LodView, Tau};
 use vkterrain::render::FrameView;
 use vkterrain::terrain::camera::Camera;
@@ -687,4 +687,77 @@ fn the_distance_lod_in_blocks_decides_as_patch_by_patch() {
     }
     // The views put patches in the middle of their glides too.
     assert!(morphing > 100, "{morphing}");
+}
+
+/// The error LOD's choice into one kept set of buffers, frame after frame
+/// with the view, tau and policy changing between them, gives every patch
+/// the level, morph factor and drawn flag a fresh set gives it: each
+/// choice resets what the one before wrote, morph factors included, and
+/// only that.
+#[test]
+fn the_error_lod_in_kept_buffers_chooses_as_in_fresh_ones() {
+    let terrain = dem_terrain(16, DVec2::ZERO);
+    let (tess_table, table) = terrain.error_tables();
+    let hierarchy = Hierarchy::new(&terrain, tess_table);
+    let map = terrain.info().heightmap().expect("a whole terrain");
+    let stitch = StitchErrors::compute(map, terrain.grid(), table);
+    let (lo, hi) = terrain.info().min_max();
+    let (lo, hi) = (f64::from(lo), f64::from(hi));
+    let size = terrain.info().world_width();
+    let mut kept = (ChosenPatches::default(), Planner::default());
+    let mut morphing = 0;
+    for (eye, target) in [
+        (
+            DVec3::new(0.1 * size, hi + 20.0, 0.05 * size),
+            DVec3::new(0.5 * size, lo, 0.3 * size),
+        ),
+        (
+            DVec3::new(0.0, hi + size, -0.8 * size),
+            DVec3::new(0.0, lo, 0.0),
+        ),
+        (
+            DVec3::new(-0.3 * size, hi + 100.0, 0.4 * size),
+            DVec3::new(0.2 * size, lo, -0.1 * size),
+        ),
+    ] {
+        let camera = Camera {
+            eye,
+            target,
+            fov_y_deg: 55.0,
+        };
+        for (tau, cull) in [(0.5, true), (4.0, false), (1.0, true)] {
+            let view = FrameView::new(&terrain, &camera, 1280, 720)
+                .lod_view(Tau::new(tau).expect("a valid tau"));
+            let inputs = PlanInputs {
+                table,
+                sight: None,
+                merge: false,
+                cull,
+                reading: SightReading::Template,
+                seen: None,
+            };
+            let (chosen, planner) = &mut kept;
+            chosen.by_error(
+                &terrain,
+                &hierarchy,
+                &view,
+                (planner, &inputs),
+                Some(&stitch),
+            );
+            let mut fresh = ChosenPatches::default();
+            let mut planner = Planner::default();
+            let stitch = Some(&stitch);
+            fresh.by_error(&terrain, &hierarchy, &view, (&mut planner, &inputs), stitch);
+            let at = format!("eye {eye}, tau {tau}, cull {cull}");
+            assert!(!fresh.visible().is_empty(), "{at}");
+            assert_eq!(chosen.visible(), fresh.visible(), "{at}");
+            assert_eq!(chosen.levels(), fresh.levels(), "{at}");
+            morphing += fresh.levels().morph.iter().filter(|&&m| m > 0.0).count();
+            // The distance LOD between two error frames, as a user
+            // switching policies leaves it.
+            chosen.by_distance(&terrain, &hierarchy, &view, (cull, 0.02 * size as f32));
+        }
+    }
+    // Blocks glide towards their coarser levels on some of the views.
+    assert!(morphing > 0, "{morphing}");
 }

@@ -603,7 +603,11 @@ pub fn balance(levels: &mut [u8], grid: &PatchGrid) {
 /// A lowered patch lowers its neighbours to one level above it, and so on
 /// outwards, which ends within `level_count` steps of it.
 pub fn balance_from(levels: &mut [u8], grid: &PatchGrid, lowered: &[PatchId]) {
-    let mut queue: Vec<PatchId> = lowered.to_vec();
+    balance_queue(levels, grid, &mut lowered.to_vec());
+}
+
+/// `balance_from` the patches in `queue`, which it empties.
+fn balance_queue(levels: &mut [u8], grid: &PatchGrid, queue: &mut Vec<PatchId>) {
     while let Some(p) = queue.pop() {
         let limit = levels[grid.patch_index(p)] + 1;
         for q in grid.neighbours_of(p).into_iter().flatten() {
@@ -699,21 +703,68 @@ pub fn refine_and_balance_blocks(
     grid: &PatchGrid,
     drawn: &[bool],
     blocks: &[([usize; 2], [usize; 2])],
-    mut stitched: impl FnMut(usize) -> [bool; BLOCK_SIDES],
+    stitched: impl FnMut(usize) -> [bool; BLOCK_SIDES],
 ) {
-    let mut queue = Vec::new();
-    // The blocks' own levels: balancing may lower a block's patches one by
-    // one, and those it lowers go on the queue themselves.
-    let own: Vec<u8> = blocks
-        .iter()
-        .map(|&([c0, _], [r0, _])| levels[grid.patch_index(PatchId { row: r0, col: c0 })])
-        .collect();
+    Balancing::default().blocks(levels, grid, (drawn, blocks), stitched);
+}
+
+/// Patches of a grid as columns and rows, end exclusive.
+pub type PatchRect = ([usize; 2], [usize; 2]);
+
+/// The buffers of `refine_and_balance_blocks`, kept from one choice to the
+/// next so that a frame's balancing allocates nothing.
+#[derive(Debug, Default)]
+pub struct Balancing {
+    /// Each block's own level.
+    own: Vec<u8>,
+    /// Patches lowered whose neighbours are still to be looked at.
+    queue: Vec<PatchId>,
+}
+
+impl Balancing {
+    /// `refine_and_balance_blocks` in these buffers.
+    pub fn blocks(
+        &mut self,
+        levels: &mut [u8],
+        grid: &PatchGrid,
+        (drawn, blocks): (&[bool], &[PatchRect]),
+        stitched: impl FnMut(usize) -> [bool; BLOCK_SIDES],
+    ) {
+        let Balancing { own, queue } = self;
+        queue.clear();
+        // The blocks' own levels: balancing may lower a block's patches
+        // one by one, and those it lowers go on the queue themselves.
+        own.clear();
+        own.extend(
+            blocks
+                .iter()
+                .map(|&([c0, _], [r0, _])| levels[grid.patch_index(PatchId { row: r0, col: c0 })]),
+        );
+        refine_beyond_sides(levels, grid, (drawn, blocks, own), stitched, queue);
+        balance_queue(levels, grid, queue);
+    }
+}
+
+/// The one look beyond each block's sides of `refine_and_balance_blocks`,
+/// each patch it lowers added to `queue`.
+fn refine_beyond_sides(
+    levels: &mut [u8],
+    grid: &PatchGrid,
+    (drawn, blocks, own): (&[bool], &[PatchRect], &[u8]),
+    mut stitched: impl FnMut(usize) -> [bool; BLOCK_SIDES],
+    queue: &mut Vec<PatchId>,
+) {
     // One look beyond each side: a culled patch takes the finest level of
     // the blocks beside it, a drawn one at most one coarser than each
     // (none beyond a side that may not be stitched). Both are minima over
     // the blocks, so one pass in any order gives them; a patch at its
     // blocks' finest is never more than one coarser than any of them.
-    for (b, (block, &level)) in blocks.iter().zip(&own).enumerate() {
+    // Nothing is coarser than a block at the coarsest level.
+    let coarsest = (level_count(grid.cells_per_patch()) - 1) as u8;
+    for (b, (block, &level)) in blocks.iter().zip(own).enumerate() {
+        if level >= coarsest {
+            continue;
+        }
         let mut sides = None;
         for_each_beyond(grid, block, |side, i, q| {
             // A patch beyond at the block's level or finer stays.
@@ -730,7 +781,6 @@ pub fn refine_and_balance_blocks(
             }
         });
     }
-    balance_from(levels, grid, &queue);
 }
 
 /// Calls `f` with the side (`BLOCK_SIDES`' order), index and place of

@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use super::buffers::touched;
 use super::factors::box_distance;
-use super::geomip::{self, PatchLevels, StitchErrors};
+use super::geomip::{self, Balancing, PatchLevels, StitchErrors};
 use super::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use super::plan::{PlanInputs, PlannedBlock, Planner};
 use super::view::LodView;
@@ -34,6 +34,8 @@ pub struct ChosenPatches {
     /// The distance LOD's walk: nodes still to visit, and whether each is
     /// known to lie wholly in view.
     stack: Vec<(NodeId, bool)>,
+    /// Refining and balancing's buffers.
+    balancing: Balancing,
     /// Where the last choice may have left entries unlike `reset`'s;
     /// None: anywhere.
     written: Option<Written>,
@@ -49,6 +51,8 @@ struct Written {
     cols: usize,
     coarsest: u8,
     rect: Rect,
+    /// Within `rect`, where morph factors may have been written.
+    morph: Rect,
 }
 
 impl ChosenPatches {
@@ -78,8 +82,10 @@ impl ChosenPatches {
             Some(w) if w.cols == cols && w.coarsest == coarsest && levels.len() == patches => {
                 for row in rect_rows(cols, w.rect) {
                     levels[row.clone()].fill(coarsest);
-                    morph[row.clone()].fill(0.0);
                     self.drawn[row].fill(false);
+                }
+                for row in rect_rows(cols, w.morph) {
+                    morph[row].fill(0.0);
                 }
             }
             _ => {
@@ -99,8 +105,14 @@ impl ChosenPatches {
     /// Notes what a choice on `grid` drew (`drawn`: the bounds of its drawn
     /// patches, None for none) for the next `reset`: those patches, and
     /// those refining and balancing can have lowered around them
-    /// (`geomip::balance_reach`).
-    fn wrote(&mut self, grid: &PatchGrid, coarsest: u8, drawn: Option<Rect>) {
+    /// (`geomip::balance_reach`); and the bounds of the blocks it wrote
+    /// morph factors in (`morph`), all within the drawn ones.
+    fn wrote(
+        &mut self,
+        grid: &PatchGrid,
+        coarsest: u8,
+        (drawn, morph): (Option<Rect>, Option<Rect>),
+    ) {
         let reach = geomip::balance_reach(grid.cells_per_patch());
         let rect = drawn.map_or(([0, 0], [0, 0]), |([c0, c1], [r0, r1])| {
             (
@@ -118,6 +130,7 @@ impl ChosenPatches {
             cols: grid.patch_cols(),
             coarsest,
             rect,
+            morph: morph.unwrap_or_default(),
         });
     }
 
@@ -227,7 +240,10 @@ impl ChosenPatches {
             }
             let rect = hierarchy.patch_range(id);
             for row in rect_rows(cols, rect) {
-                levels[row.clone()].fill(level);
+                // Every patch starts at the coarsest.
+                if level != coarsest {
+                    levels[row.clone()].fill(level);
+                }
                 self.drawn[row].fill(true);
             }
             self.rects.push(rect);
@@ -235,18 +251,21 @@ impl ChosenPatches {
         }
         // A block's patches share its level: only its sides can lower a
         // neighbour.
-        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, |_| {
+        let (drawn, rects) = (&self.drawn, &self.rects);
+        self.balancing.blocks(levels, grid, (drawn, rects), |_| {
             [true; geomip::BLOCK_SIDES]
         });
         // Morph factors follow the balanced levels. A block whose patches
         // kept its level and whose farthest point has no morph at it has
         // none anywhere: the factor grows with distance.
+        let mut morphed = None;
         for (&rect, &(level, far)) in self.rects.iter().zip(&self.decided) {
             let kept = rect_rows(cols, rect).all(|row| levels[row].iter().all(|&l| l == level));
             let l = usize::from(level);
             if kept && (l + 1 >= count || geomip::morph_factor(far, min_dist, l) <= 0.0) {
                 continue;
             }
+            morphed = rect_bounds(morphed.into_iter().chain([rect]));
             let ([c0, c1], [r0, r1]) = rect;
             for row in r0..r1 {
                 for col in c0..c1 {
@@ -261,7 +280,7 @@ impl ChosenPatches {
         }
         let drawn = rect_bounds(self.rects.iter().copied());
         self.list_drawn(cols, drawn.unwrap_or_default());
-        self.wrote(grid, coarsest, drawn);
+        self.wrote(grid, coarsest, (drawn, morphed));
     }
 
     /// Levels from the error plan (`Planner::plan` with `inputs`): a
@@ -288,14 +307,20 @@ impl ChosenPatches {
         let cols = grid.patch_cols();
         // A block's level index (2^k segments a patch side).
         let index = |block: &PlannedBlock| usize::from(block.patch_level).min(count - 1);
+        let mut morphed = None;
         for block in &frame_plan.blocks {
             let k = index(block);
-            let level = geomip::level_of_index(k, count);
+            let level = geomip::level_of_index(k, count) as u8;
             let glide = geomip::block_glide(block, k, hierarchy, view);
             let rect = block.patch_range(grid);
+            if glide > 0.0 {
+                morphed = rect_bounds(morphed.into_iter().chain([rect]));
+            }
             for row in rect_rows(cols, rect) {
-                levels[row.clone()].fill(level as u8);
-                // Every morph factor starts at none.
+                // Every patch starts at the coarsest level, with no morph.
+                if level != coarsest {
+                    levels[row.clone()].fill(level);
+                }
                 if glide > 0.0 {
                     morph[row.clone()].fill(glide);
                 }
@@ -306,7 +331,8 @@ impl ChosenPatches {
         // A block's patches share its level: only its sides can lower a
         // neighbour.
         let blocks = &frame_plan.blocks;
-        geomip::refine_and_balance_blocks(levels, grid, &self.drawn, &self.rects, |i| {
+        let (drawn, rects) = (&self.drawn, &self.rects);
+        self.balancing.blocks(levels, grid, (drawn, rects), |i| {
             geomip::stitchable_sides(
                 (&blocks[i], index(&blocks[i])),
                 (hierarchy, grid),
@@ -316,7 +342,7 @@ impl ChosenPatches {
         });
         let drawn = rect_bounds(self.rects.iter().copied());
         self.list_drawn(cols, drawn.unwrap_or_default());
-        self.wrote(grid, coarsest, drawn);
+        self.wrote(grid, coarsest, (drawn, morphed));
         frame_plan.predicted_over_share
     }
 }
@@ -399,17 +425,17 @@ mod tests {
                 chosen.levels.levels[p] = (dc + dr - 1) as u8;
             }
         }
-        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.wrote(&grid, coarsest, (Some(block), Some(block)));
         chosen.reset(&grid, coarsest);
         assert_eq!(chosen.levels.levels, fresh.levels.levels);
         assert_eq!(chosen.levels.morph, fresh.levels.morph);
         assert_eq!(chosen.drawn, fresh.drawn);
         // Another coarsest level, then another grid: everything anew.
-        chosen.wrote(&grid, coarsest, Some(block));
+        chosen.wrote(&grid, coarsest, (Some(block), Some(block)));
         chosen.reset(&grid, 3);
         assert!(chosen.levels.levels.iter().all(|&l| l == 3));
         let other = PatchGrid::for_size(257, 257, 16);
-        chosen.wrote(&grid, 3, None);
+        chosen.wrote(&grid, 3, (None, None));
         chosen.reset(&other, 3);
         assert_eq!(chosen.levels.levels.len(), other.patch_count());
         assert_eq!(chosen.drawn.len(), other.patch_count());
