@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use super::buffers::touched;
 use super::factors::box_distance;
-use super::geomip::{self, Balancing, PatchLevels, StitchErrors};
+use super::geomip::{self, Balancing, PatchLevels, PatchRect as Rect, StitchErrors};
 use super::hierarchy::{rect_bounds, rect_rows, Hierarchy, NodeId};
 use super::plan::{PlanInputs, PlannedBlock, Planner};
 use super::view::LodView;
@@ -40,9 +40,6 @@ pub struct ChosenPatches {
     /// None: anywhere.
     written: Option<Written>,
 }
-
-/// Patches of a grid as columns and rows, end exclusive.
-type Rect = ([usize; 2], [usize; 2]);
 
 /// The patches a choice may have changed from `ChosenPatches::reset`'s
 /// state, on the grid it was sized for (its columns, its coarsest level).
@@ -239,13 +236,8 @@ impl ChosenPatches {
                 continue;
             }
             let rect = hierarchy.patch_range(id);
-            for row in rect_rows(cols, rect) {
-                // Every patch starts at the coarsest.
-                if level != coarsest {
-                    levels[row.clone()].fill(level);
-                }
-                self.drawn[row].fill(true);
-            }
+            let at = (level, coarsest, 0.0);
+            draw_block((levels, morph, &mut self.drawn), cols, rect, at);
             self.rects.push(rect);
             self.decided.push((level, far));
         }
@@ -316,16 +308,8 @@ impl ChosenPatches {
             if glide > 0.0 {
                 morphed = rect_bounds(morphed.into_iter().chain([rect]));
             }
-            for row in rect_rows(cols, rect) {
-                // Every patch starts at the coarsest level, with no morph.
-                if level != coarsest {
-                    levels[row.clone()].fill(level);
-                }
-                if glide > 0.0 {
-                    morph[row.clone()].fill(glide);
-                }
-                self.drawn[row].fill(true);
-            }
+            let at = (level, coarsest, glide);
+            draw_block((levels, morph, &mut self.drawn), cols, rect, at);
             self.rects.push(rect);
         }
         // A block's patches share its level: only its sides can lower a
@@ -344,6 +328,28 @@ impl ChosenPatches {
         self.list_drawn(cols, drawn.unwrap_or_default());
         self.wrote(grid, coarsest, (drawn, morphed));
         frame_plan.predicted_over_share
+    }
+}
+
+/// Marks the patches of `rect` (of a grid `cols` patches wide) drawn at
+/// `level`, each gliding `glide` towards the next coarser level. Every
+/// patch starts at the `coarsest` level with no glide (`reset`), so a
+/// block at the coarsest level, or with no glide, leaves those as they
+/// are.
+fn draw_block(
+    (levels, morph, drawn): (&mut [u8], &mut [f32], &mut [bool]),
+    cols: usize,
+    rect: Rect,
+    (level, coarsest, glide): (u8, u8, f32),
+) {
+    for row in rect_rows(cols, rect) {
+        if level != coarsest {
+            levels[row.clone()].fill(level);
+        }
+        if glide > 0.0 {
+            morph[row.clone()].fill(glide);
+        }
+        drawn[row].fill(true);
     }
 }
 
